@@ -1,0 +1,16 @@
+//! crease-core: the runtime numerics of crease. No async, no network, nothing from the rest of
+//! the workspace.
+//!
+//! Layout:
+//! - [`mesh`]: [`mesh::Mesh`], readers/writers (OBJ, PLY, glTF/GLB), normals, edges, adjacency,
+//!   and example sets (a folder or a TOML manifest of meshes sharing one topology).
+//! - [`runtime`]: per-frame synthesis. Today: linear-blend and dual-quaternion skinning into
+//!   caller-provided buffers.
+//! - [`model`]: the on-disk container (versioned header, checksummed sections, atomic writes),
+//!   the [`model::Rig`] it stores, and the skinned-glTF export of a rig.
+
+pub mod mesh;
+pub mod model;
+pub mod runtime;
+
+pub use glam;
