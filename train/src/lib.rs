@@ -5,3 +5,4 @@
 //!   a smooth skinning decomposition with rigid bones.
 
 pub mod bones;
+mod par;

@@ -1,1 +1,58 @@
 //! The model file and what it stores.
+//!
+//! Layout:
+//! - [`file`](mod@file): the container every model kind is stored in: magic, format version,
+//!   kind, a checksummed section table, checksummed sections, atomic writes. Byte layout in its
+//!   docs.
+//! - [`rig`]: [`Rig`], a rest mesh with proxy bones, skin weights and one set of bone transforms
+//!   per example pose; saved as container kind 1.
+//! - [`gltf_export`]: [`export_rig_glb`], a rig as a skinned, animated glTF 2.0 binary for any
+//!   viewer.
+
+use std::io;
+use std::path::PathBuf;
+
+use crate::runtime::skin::SkinError;
+
+pub mod file;
+pub mod gltf_export;
+pub mod rig;
+
+pub use file::{FormatError, ModelKind};
+pub use gltf_export::export_rig_glb;
+pub use rig::{Rig, RigExample};
+
+/// Errors from loading, saving, validating or exporting models.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ModelError {
+    /// Reading or writing the file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: io::Error,
+    },
+    /// The bytes are not a valid container of the expected kind.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// The skin weights are malformed or name bones that do not exist.
+    #[error("skin weights: {0}")]
+    Skin(#[from] SkinError),
+    /// The model's parts disagree with each other or hold non-finite values.
+    #[error("invalid rig: {0}")]
+    InvalidRig(String),
+    /// An example index beyond the rig's examples.
+    #[error("example {index} requested, the rig has {count}")]
+    NoSuchExample {
+        /// The requested index.
+        index: usize,
+        /// Number of examples.
+        count: usize,
+    },
+    /// The model cannot be expressed in the export format.
+    #[error("glTF export: {0}")]
+    Export(String),
+}

@@ -1,0 +1,51 @@
+//! crease-cli: the `crease` command. Every subcommand is a module of [`commands`] with an
+//! options struct (clap derive) and a `run` function, so the logic is testable without
+//! spawning a process.
+//!
+//! Layout:
+//! - [`commands::fit`]: `crease fit` — proxy bones and skinning weights from example meshes.
+
+pub mod commands;
+
+use clap::{Parser, Subcommand};
+
+/// crease: learn how a mesh deforms from a few examples, then drive it live.
+#[derive(Debug, Parser)]
+#[command(name = "crease", version, about, long_about = None)]
+pub struct Cli {
+    /// More log output on stderr (-v: debug, -vv: trace). RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Fit proxy bones and skinning weights to example meshes and write a rig file.
+    Fit(commands::fit::FitArgs),
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Fit(args) => commands::fit::run(&args),
+    }
+}
+
+/// Logs to stderr; `RUST_LOG` wins over `-v`.
+pub fn init_tracing(verbose: u8) {
+    let default = match verbose {
+        0 => "warn",
+        1 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
