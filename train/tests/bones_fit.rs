@@ -302,3 +302,87 @@ fn rejects_bad_input() {
         .is_err()
     );
 }
+
+/// The real cactus set (19 poses, 5,261 vertices): a few seconds inside the suite.
+#[test]
+fn cactus_fits_well_in_seconds() {
+    let dir = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/cactus"
+    ));
+    if !dir.is_dir() {
+        eprintln!(
+            "skipping cactus_fits_well_in_seconds: {} is absent",
+            dir.display()
+        );
+        return;
+    }
+    let set = crease_core::mesh::examples::ExampleSet::load(dir).expect("cactus set loads");
+    let frames: Vec<&[Vec3]> = set
+        .examples
+        .iter()
+        .map(|e| e.mesh.positions.as_slice())
+        .collect();
+    assert_eq!(frames.len(), 19);
+    let options = FitOptions {
+        bones: 24,
+        max_influences: 4,
+        max_iterations: 20,
+        ..FitOptions::default()
+    };
+    let result = fit(
+        FitInput {
+            rest: &set.rest,
+            frames: &frames,
+            rest_frame: Some(0),
+        },
+        &options,
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(result.bone_count, 24, "{:?}", result.report.warnings);
+    check_weights(&result.skin, set.rest.vertex_count(), 4, 24);
+
+    // Independent evaluation, and a yardstick: the error of not deforming at all.
+    let scale = set.rest.bbox_diagonal_scale() as f64;
+    let (mut sse, mut sse_rest) = (0.0f64, 0.0f64);
+    for (t, frame) in frames.iter().enumerate().skip(1) {
+        let got = lbs(&set.rest.positions, &result.skin, &result.transforms[t]);
+        sse += got
+            .iter()
+            .zip(frame.iter())
+            .map(|(a, b)| (*a - *b).length_squared() as f64)
+            .sum::<f64>();
+        sse_rest += set
+            .rest
+            .positions
+            .iter()
+            .zip(frame.iter())
+            .map(|(a, b)| (*a - *b).length_squared() as f64)
+            .sum::<f64>();
+    }
+    let count = ((frames.len() - 1) * set.rest.vertex_count()) as f64;
+    let rms = (sse / count).sqrt() / scale;
+    let rms_rest = (sse_rest / count).sqrt() / scale;
+    eprintln!(
+        "cactus, 24 bones, K = 4: rms {rms:.3e} (rest pose {rms_rest:.3e}), {:.2} s",
+        result.report.seconds
+    );
+    assert!((rms - result.report.rms_normalized).abs() < 1e-3 * rms + 1e-7);
+    assert!(
+        rms < rms_rest / 20.0,
+        "24 bones should explain the motion: {rms} vs rest {rms_rest}"
+    );
+    // The alternation never makes the fit worse.
+    let fit_steps: Vec<f64> = result
+        .report
+        .history
+        .iter()
+        .filter(|s| s.phase == "fit")
+        .map(|s| s.rms_normalized)
+        .collect();
+    assert!(
+        fit_steps.windows(2).all(|w| w[1] <= w[0] * (1.0 + 1e-5)),
+        "{fit_steps:?}"
+    );
+}

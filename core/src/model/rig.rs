@@ -52,7 +52,8 @@ pub struct Rig {
     /// One entry per example pose.
     pub examples: Vec<RigExample>,
     /// RMS vertex error of the fit over the examples (LBS of the rest mesh vs the example
-    /// meshes), in the rest mesh's units; `None` when unknown.
+    /// meshes) with the largest bounding-box side scaled to 1 (the HZY11 Table 2 protocol);
+    /// `None` when unknown.
     pub fit_rms: Option<f32>,
 }
 
