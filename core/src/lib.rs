@@ -9,6 +9,7 @@
 //! - [`model`]: the on-disk container (versioned header, checksummed sections, atomic writes),
 //!   the [`model::Rig`] it stores, and the skinned-glTF export of a rig.
 
+mod atomic;
 pub mod mesh;
 pub mod model;
 pub mod runtime;

@@ -11,9 +11,8 @@
 //! Every reader keeps the file's vertex order (examples correspond by vertex index) and returns a
 //! mesh that passes [`Mesh::validate`]: indices in range, coordinates finite.
 
-use std::io::{self, BufWriter, Write};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::io::{self, Write};
+use std::path::Path;
 
 use glam::Vec3;
 
@@ -174,42 +173,13 @@ pub(crate) fn check_indices(
     Ok(())
 }
 
-/// Writes `path` through a temporary file in the same folder, renamed into place once complete.
-///
-/// The temporary file is named `.<name>.<pid>.<n>.tmp`, so it never has a mesh extension and a folder
-/// scan ([`ExampleSet::load`]) ignores it. No fsync: this protects readers from partial files,
-/// not against power loss.
+/// Writes `path` atomically (see [`crate::atomic::write_atomic_with`]), naming the path in the
+/// error.
 pub(crate) fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), MeshError> {
-    let file_name = path.file_name().ok_or_else(|| {
-        MeshError::io(
-            path,
-            io::Error::new(io::ErrorKind::InvalidInput, "not a file path"),
-        )
-    })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    // Process id and a per-process counter: concurrent writers never share a temporary file.
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    tmp_name.push(format!(".{}.{n}.tmp", std::process::id()));
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut out = BufWriter::new(file);
-        write(&mut out)?;
-        out.into_inner().map_err(io::IntoInnerError::into_error)?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        // Best effort: the temporary file may not exist if creating it failed.
-        let _ = std::fs::remove_file(&tmp);
-        return Err(MeshError::io(path, e));
-    }
-    Ok(())
+    crate::atomic::write_atomic_with(path, write).map_err(|e| MeshError::io(path, e))
 }
 
 #[cfg(test)]

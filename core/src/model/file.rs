@@ -38,10 +38,8 @@
 //! the old file or the new one, never half of one.
 
 use std::fmt;
-use std::fs;
-use std::io::{self, Write};
+use std::io;
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The eight bytes every crease file starts with.
 pub const MAGIC: [u8; 8] = *b"\x89CREASE\n";
@@ -543,48 +541,9 @@ fn truncated(what: &str, start: u64, end: u64, len: u64) -> FormatError {
     }
 }
 
-/// Distinguishes temp files of concurrent writers within one process.
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// Writes `bytes` to `path` atomically: a temporary file beside it (`.NAME.tmp-PID-N`), flushed
-/// with `fsync`, then renamed over `path`, then the directory flushed (best effort). On any error
-/// the temporary file is removed and `path` is left as it was.
+/// Writes `bytes` to `path` atomically (see [`crate::atomic::write_atomic_with`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path does not name a file"))?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}-{n}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        // The temp file may not exist (open failed); nothing more to do either way.
-        let _ = fs::remove_file(&tmp);
-        return result;
-    }
-    // Persist the rename itself. Some platforms and file systems refuse to fsync a directory;
-    // the new file is already in place, so that is not worth failing the write for.
-    #[cfg(unix)]
-    if let Ok(d) = fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
+    crate::atomic::write_atomic_with(path, |w| w.write_all(bytes))
 }
 
 #[cfg(test)]

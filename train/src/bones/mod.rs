@@ -37,7 +37,7 @@ mod weights;
 use std::time::Instant;
 
 use crease_core::glam::{Mat3A, Quat, Vec3, Vec3A};
-use crease_core::mesh::Mesh;
+use crease_core::mesh::{Adjacency, Mesh, MeshError};
 use crease_core::runtime::skin::{RigidTransform, SkinWeights};
 
 use kabsch::Rigid;
@@ -101,7 +101,7 @@ pub enum FitError {
     /// A non-finite coordinate in the input.
     #[error("frame {frame}, vertex {vertex}: non-finite coordinate")]
     NonFinite {
-        /// Frame index (`None` for the rest pose is reported as the rest frame index).
+        /// Frame index.
         frame: usize,
         /// Vertex index.
         vertex: usize,
@@ -109,6 +109,9 @@ pub enum FitError {
     /// Nothing to fit.
     #[error("need at least one frame and one vertex")]
     Empty,
+    /// The rest mesh itself is broken (an index out of range, a non-finite coordinate).
+    #[error("rest mesh is invalid")]
+    InvalidMesh(#[source] MeshError),
 }
 
 /// The examples to fit: a rest pose and frames that share its vertex order.
@@ -194,9 +197,8 @@ pub(crate) struct Problem {
     pub frames: Vec<Vec3A>,
     /// Frames, vertex-major: `[i * f + t]`.
     pub traj: Vec<Vec3A>,
-    /// One-ring neighbours, CSR.
-    pub ring_offsets: Vec<u32>,
-    pub ring: Vec<u32>,
+    /// One-ring neighbours.
+    pub ring: Adjacency,
     /// 1 / (largest bbox side)^2, to report normalised errors.
     pub inv_scale2: f64,
     /// Frame mask for the reported RMS.
@@ -205,7 +207,7 @@ pub(crate) struct Problem {
 
 impl Problem {
     fn neighbours(&self, i: usize) -> &[u32] {
-        &self.ring[self.ring_offsets[i] as usize..self.ring_offsets[i + 1] as usize]
+        self.ring.neighbors(i)
     }
 
     /// Normalised RMS from a per-frame sum of squared errors.
@@ -434,12 +436,6 @@ fn prepare(input: FitInput<'_>, options: &FitOptions) -> Result<Problem, FitErro
             });
         }
     }
-    if let Some(v) = input.rest.positions.iter().position(|p| !p.is_finite()) {
-        return Err(FitError::NonFinite {
-            frame: input.rest_frame.unwrap_or(usize::MAX),
-            vertex: v,
-        });
-    }
     let rest: Vec<Vec3A> = input.rest.positions.iter().map(|&p| p.into()).collect();
     let mut frames = Vec::with_capacity(n * f);
     for fr in input.frames {
@@ -451,7 +447,10 @@ fn prepare(input: FitInput<'_>, options: &FitOptions) -> Result<Problem, FitErro
             traj[i * f + t] = frames[t * n + i];
         }
     }
-    let (ring_offsets, ring) = one_ring(n, &input.rest.triangles);
+    if let Err(e) = input.rest.validate() {
+        return Err(FitError::InvalidMesh(e));
+    }
+    let ring = input.rest.vertex_adjacency();
     let scale = input.rest.bbox_diagonal_scale() as f64;
     let inv_scale2 = if scale > 0.0 {
         1.0 / (scale * scale)
@@ -467,35 +466,10 @@ fn prepare(input: FitInput<'_>, options: &FitOptions) -> Result<Problem, FitErro
         rest,
         frames,
         traj,
-        ring_offsets,
         ring,
         inv_scale2,
         counted,
     })
-}
-
-/// One-ring vertex neighbourhoods (CSR, sorted, unique) from triangles; out-of-range indices
-/// are ignored (mesh validation reports them elsewhere).
-fn one_ring(n: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, Vec<u32>) {
-    let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(triangles.len() * 6);
-    for t in triangles {
-        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-            if a != b && (a as usize) < n && (b as usize) < n {
-                pairs.push((a, b));
-                pairs.push((b, a));
-            }
-        }
-    }
-    pairs.sort_unstable();
-    pairs.dedup();
-    let mut offsets = vec![0u32; n + 1];
-    for &(a, _) in &pairs {
-        offsets[a as usize + 1] += 1;
-    }
-    for i in 0..n {
-        offsets[i + 1] += offsets[i];
-    }
-    (offsets, pairs.into_iter().map(|(_, b)| b).collect())
 }
 
 /// Converts the working state into the public types: weights sorted by decreasing weight and
