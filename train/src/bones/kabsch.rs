@@ -58,8 +58,8 @@ impl PairSums {
             self.sp[a] += wp * p[a];
             self.sq[a] += wq * q[a];
             let wpa = wq * p[a];
-            for b in 0..3 {
-                self.h[a][b] += wpa * q[b];
+            for (h, qb) in self.h[a].iter_mut().zip(q) {
+                *h += wpa * qb;
             }
         }
     }
@@ -68,7 +68,7 @@ impl PairSums {
     /// (one point, collinear points) still yields a proper rotation; `fallback` supplies the
     /// rotation when the covariance is numerically zero (a single point).
     pub fn solve(&self, fallback: Mat3A) -> Option<Rigid> {
-        if !(self.sw > 1e-300) || !self.sw.is_finite() {
+        if !self.sw.is_finite() || self.sw <= 1e-300 {
             return None;
         }
         let inv = 1.0 / self.sw;

@@ -410,7 +410,7 @@ fn prepare(input: FitInput<'_>, options: &FitOptions) -> Result<Problem, FitErro
             reason: "must be at least 1".into(),
         });
     }
-    if !(options.tolerance >= 0.0) {
+    if options.tolerance.is_nan() || options.tolerance < 0.0 {
         return Err(FitError::InvalidOption {
             field: "tolerance",
             reason: format!("must be >= 0, got {}", options.tolerance),

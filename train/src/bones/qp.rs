@@ -58,8 +58,8 @@ impl SimplexQp {
             w[best] = 1.0;
         }
         let ridge = 1e-12 * (0..n).map(|j| g_mat[j * n + j]).fold(0.0f64, f64::max) + 1e-300;
-        for j in 0..n {
-            self.is_free[j] = w[j] > 0.0;
+        for (free, &wj) in self.is_free.iter_mut().zip(&w[..n]) {
+            *free = wj > 0.0;
         }
         for _ in 0..(4 * n + 10) {
             self.free.clear();
@@ -144,7 +144,7 @@ impl SimplexQp {
                     s -= l[a * m + k] * l[b * m + k];
                 }
                 if a == b {
-                    if !(s > 0.0) {
+                    if s.is_nan() || s <= 0.0 {
                         return false;
                     }
                     l[a * m + a] = s.sqrt();
@@ -161,7 +161,7 @@ impl SimplexQp {
         cholesky_solve(l, m, &mut self.y);
         let sx: f64 = self.x[..m].iter().sum();
         let sy: f64 = self.y[..m].iter().sum();
-        if !(sy.abs() > 0.0) {
+        if sy.is_nan() || sy == 0.0 {
             return false;
         }
         self.mu = (sx - 1.0) / sy;
