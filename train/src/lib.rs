@@ -3,6 +3,14 @@
 //! Layout:
 //! - [`bones`]: proxy bones and skinning weights from examples (FKY08 §3, HZY11 §5.1), fitted as
 //!   a smooth skinning decomposition with rigid bones.
+//! - [`controls`]: automatic control points (PCA + varimax, FKY08 §3).
+//! - [`geodesic`]: geodesic distances on the mesh edge graph (HZY11 §5.1.1).
+//! - [`kcca`]: kernel CCA regression collapsed to one matrix (FKY08 §4), and the RBF baseline.
+//! - [`edges`]: edge skinning weights (FKY08 eq. 10) for the translation solver.
 
 pub mod bones;
+pub mod controls;
+pub mod edges;
+pub mod geodesic;
+pub mod kcca;
 mod par;

@@ -1,4 +1,12 @@
 //! Per-frame synthesis. Everything here writes into caller-provided buffers and allocates
 //! nothing per frame.
+//!
+//! Layout:
+//! - [`skin`]: linear-blend and dual-quaternion skinning.
+//! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
+//!   kernel vector `xi(c)` (FKY08 §4.2).
+//! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 
+pub mod kernel;
 pub mod skin;
+pub mod translations;

@@ -30,7 +30,7 @@
 
 mod cluster;
 mod kabsch;
-mod qp;
+pub(crate) mod qp;
 mod transforms;
 mod weights;
 

@@ -1,0 +1,1 @@
+//! Regression kernels (FKY08 §4.2).

@@ -1,0 +1,1 @@
+//! Poisson translation solver (FKY08 §5).
