@@ -7,6 +7,9 @@
 //! - [`geodesic`]: geodesic distances on the mesh edge graph (HZY11 §5.1.1).
 //! - [`kcca`]: kernel CCA regression collapsed to one matrix (FKY08 §4), and the RBF baseline.
 //! - [`edges`]: edge skinning weights (FKY08 eq. 10) for the translation solver.
+//! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
+//!   local, RBF baseline) as a runtime `RotationModel`.
+//! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
 
 pub mod bones;
 pub mod controls;
@@ -14,3 +17,5 @@ pub mod edges;
 pub mod geodesic;
 pub mod kcca;
 mod par;
+pub mod pipeline;
+pub mod regress;

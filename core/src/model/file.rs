@@ -66,6 +66,9 @@ pub const SECTION_ALIGN: usize = 8;
 pub enum ModelKind {
     /// A skinning rig: rest mesh, proxy bones, skin weights, example bone transforms.
     Rig,
+    /// A trained model: a rig plus control points, rotation regressors and the translation
+    /// solver's edge weights (see [`crate::model::trained`]).
+    Model,
 }
 
 impl ModelKind {
@@ -73,6 +76,7 @@ impl ModelKind {
     pub fn code(self) -> u32 {
         match self {
             ModelKind::Rig => 1,
+            ModelKind::Model => 2,
         }
     }
 
@@ -80,6 +84,7 @@ impl ModelKind {
     pub fn from_code(code: u32) -> Option<Self> {
         match code {
             1 => Some(ModelKind::Rig),
+            2 => Some(ModelKind::Model),
             _ => None,
         }
     }
@@ -89,6 +94,7 @@ impl fmt::Display for ModelKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             ModelKind::Rig => f.write_str("rig"),
+            ModelKind::Model => f.write_str("trained model"),
         }
     }
 }

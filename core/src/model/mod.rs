@@ -6,6 +6,8 @@
 //!   docs.
 //! - [`rig`]: [`Rig`], a rest mesh with proxy bones, skin weights and one set of bone transforms
 //!   per example pose; saved as container kind 1.
+//! - [`trained`]: [`TrainedModel`], a rig plus control points, rotation regressors and edge
+//!   weights: what `crease train` writes and the predictor loads; container kind 2.
 //! - [`gltf_export`]: [`export_rig_glb`], a rig as a skinned, animated glTF 2.0 binary for any
 //!   viewer.
 
@@ -17,10 +19,12 @@ use crate::runtime::skin::SkinError;
 pub mod file;
 pub mod gltf_export;
 pub mod rig;
+pub mod trained;
 
 pub use file::{FormatError, ModelKind};
 pub use gltf_export::export_rig_glb;
 pub use rig::{Rig, RigExample};
+pub use trained::{ControlPoint, TrainedModel};
 
 /// Errors from loading, saving, validating or exporting models.
 #[derive(Debug, thiserror::Error)]

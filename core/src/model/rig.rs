@@ -137,6 +137,14 @@ impl Rig {
 
     /// Serialises the rig (after [`Rig::validate`]) into a container.
     pub fn to_bytes(&self) -> Result<Vec<u8>, ModelError> {
+        let mut w = ContainerWriter::new(ModelKind::Rig);
+        self.write_sections(&mut w)?;
+        Ok(w.to_bytes())
+    }
+
+    /// Adds the rig's sections (META, VPOS, TRIS, SKBI, SKBW, XFRM) to a container, after
+    /// [`Rig::validate`]; other model kinds embed a rig this way.
+    pub fn write_sections(&self, w: &mut ContainerWriter) -> Result<(), ModelError> {
         self.validate()?;
         let meta = RigMeta {
             vertex_count: self.rest.vertex_count() as u64,
@@ -146,7 +154,6 @@ impl Rig {
             example_names: self.examples.iter().map(|e| e.name.clone()).collect(),
             fit_rms: self.fit_rms,
         };
-        let mut w = ContainerWriter::new(ModelKind::Rig);
         w.add_json(META, &meta)?;
         w.add_f32s(VPOS, bytemuck::cast_slice(&self.rest.positions));
         w.add_u32s(TRIS, bytemuck::cast_slice(&self.rest.triangles));
@@ -162,13 +169,18 @@ impl Rig {
             })
             .collect();
         w.add_f32s(XFRM, &xf);
-        Ok(w.to_bytes())
+        Ok(())
     }
 
     /// Parses and validates a rig from container bytes. Never panics on malformed input.
     pub fn from_bytes(bytes: &[u8]) -> Result<Rig, ModelError> {
         let c = Container::parse(bytes)?;
         c.expect_kind(ModelKind::Rig)?;
+        Rig::read_sections(&c)
+    }
+
+    /// Reads and validates the rig sections of a container (any kind that embeds a rig).
+    pub fn read_sections(c: &Container<'_>) -> Result<Rig, ModelError> {
         let meta: RigMeta = c.json(META)?;
         let bad_meta = |detail: String| FormatError::Metadata { tag: META, detail };
         let to_usize = |v: u64, what: &str| {

@@ -5,8 +5,10 @@
 //! - [`skin`]: linear-blend and dual-quaternion skinning.
 //! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
 //!   kernel vector `xi(c)` (FKY08 §4.2).
+//! - [`predict`]: bone rotations from control points (global and pose-local models).
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 
 pub mod kernel;
+pub mod predict;
 pub mod skin;
 pub mod translations;

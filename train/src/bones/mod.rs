@@ -544,3 +544,42 @@ fn evaluate(problem: &Problem, skin: &SkinWeights, transforms: &[Vec<RigidTransf
         .collect();
     problem.rms(&frame_sse)
 }
+
+/// Bone transforms fitted to one new frame with the rig's weights fixed: the SSDR transform
+/// update (Le & Deng 2012 eq. 7) alone, `passes` Gauss–Seidel sweeps from `init`. This is the
+/// "oracle" of the evaluation: the best the bone layer can do for a pose when the transforms
+/// are known. `frame` must have the rest mesh's vertex count.
+pub fn fit_frame_transforms(
+    rest: &Mesh,
+    skin: &SkinWeights,
+    init: &[RigidTransform],
+    frame: &[Vec3],
+    passes: usize,
+) -> Result<Vec<RigidTransform>, FitError> {
+    let n = rest.vertex_count();
+    if frame.len() != n {
+        return Err(FitError::VertexCount { frame: 0, expected: n, got: frame.len() });
+    }
+    if let Some(v) = frame.iter().position(|p| !p.is_finite()) {
+        return Err(FitError::NonFinite { frame: 0, vertex: v });
+    }
+    let bones = init.len();
+    let problem = Problem {
+        n,
+        f: 1,
+        rest: rest.positions.iter().map(|&p| p.into()).collect(),
+        frames: frame.iter().map(|&p| p.into()).collect(),
+        traj: frame.iter().map(|&p| p.into()).collect(),
+        ring: Adjacency::default(),
+        inv_scale2: 1.0,
+        counted: vec![true],
+    };
+    let weights = Weights { k: skin.k(), idx: skin.indices().to_vec(), w: skin.weights().to_vec() };
+    let mut xf: Vec<Rigid> =
+        init.iter().map(|t| Rigid { m: Mat3A::from_quat(t.rotation), t: t.translation.into() }).collect();
+    transforms::update(&problem, bones, &weights, &mut xf, passes);
+    Ok(xf
+        .iter()
+        .map(|r| RigidTransform { rotation: Quat::from_mat3a(&r.m).normalize(), translation: Vec3::from(r.t) })
+        .collect())
+}

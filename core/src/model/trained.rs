@@ -1,0 +1,165 @@
+//! A trained model: everything the run time needs to turn control points into a mesh.
+//!
+//! It embeds the [`Rig`] (rest mesh, bones, weights, the training examples' bone transforms)
+//! and adds the control points, the rotation regressors ([`RotationModel`]) and the edge
+//! weights of the translation solver (FKY08 eq. 10). Stored as container kind 2 with the rig's
+//! sections plus:
+//!
+//! | tag | content |
+//! |---|---|
+//! | `CTRL` | JSON: control points (vertex, name), method name, default beta |
+//! | `RREG` | JSON: the [`RotationModel`] (group structure and matrices) |
+//! | `EDGE` | edges, u32 x 2 per edge |
+//! | `EDBI` / `EDBW` | edge skin weights (indices u32, weights f32), stride from `CTRL` |
+//!
+//! `RREG` is JSON for now: the regressors are a few hundred thousand numbers at most for the
+//! models we train (serde_json writes shortest round-trip floats, so it is exact), and the
+//! nested group structure stays self-describing. A binary layout is the upgrade path if load
+//! time ever matters.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::ModelError;
+use super::file::{Container, ContainerWriter, ModelKind, Tag, write_atomic};
+use super::rig::Rig;
+use crate::runtime::predict::RotationModel;
+use crate::runtime::skin::SkinWeights;
+
+const CTRL: Tag = Tag(*b"CTRL");
+const RREG: Tag = Tag(*b"RREG");
+const EDGE: Tag = Tag(*b"EDGE");
+const EDBI: Tag = Tag(*b"EDBI");
+const EDBW: Tag = Tag(*b"EDBW");
+
+/// One control point: a mesh vertex the user moves (a marker on the surface).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ControlPoint {
+    /// Vertex index in the rest mesh.
+    pub vertex: u32,
+    /// Display name (`c0`, `c1`, ... unless the manifest or a marker map names it).
+    pub name: String,
+}
+
+/// Everything the predictor needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainedModel {
+    /// Rest mesh, bones, weights, training examples' transforms.
+    pub rig: Rig,
+    /// Control points, in the order frames carry them.
+    pub controls: Vec<ControlPoint>,
+    /// Predictor variant it was trained with (`global`, `local`, ...).
+    pub method: String,
+    /// Rotation regressors.
+    pub rotations: RotationModel,
+    /// Mesh edges used by the translation solver.
+    pub edges: Vec<[u32; 2]>,
+    /// Edge skin weights (FKY08 eq. 10), one row per edge.
+    pub edge_skin: SkinWeights,
+    /// Default control-point weight of the translation solve (FKY08 eq. 11).
+    pub beta: f32,
+}
+
+#[derive(Serialize, Deserialize)]
+struct CtrlMeta {
+    controls: Vec<ControlPoint>,
+    method: String,
+    beta: f32,
+    edge_count: u64,
+    edge_influences: u64,
+}
+
+impl TrainedModel {
+    /// Checks that the parts agree (sizes, indices, finiteness).
+    pub fn validate(&self) -> Result<(), ModelError> {
+        self.rig.validate()?;
+        let n = self.rig.rest.vertex_count();
+        let bad = |m: String| Err(ModelError::InvalidRig(m));
+        if let Some(c) = self.controls.iter().find(|c| c.vertex as usize >= n) {
+            return bad(format!("control point {:?} is vertex {}, the mesh has {n}", c.name, c.vertex));
+        }
+        if self.rotations.control_count != self.controls.len() {
+            return bad(format!(
+                "regressors expect {} control points, the model lists {}",
+                self.rotations.control_count,
+                self.controls.len()
+            ));
+        }
+        if self.rotations.bone_count != self.rig.bone_count {
+            return bad(format!(
+                "regressors predict {} bones, the rig has {}",
+                self.rotations.bone_count, self.rig.bone_count
+            ));
+        }
+        self.rotations.validate().map_err(|e| ModelError::InvalidRig(e.to_string()))?;
+        if let Some((k, e)) = self.edges.iter().enumerate().find(|(_, e)| e.iter().any(|&v| v as usize >= n)) {
+            return bad(format!("edge {k} is {e:?}, the mesh has {n} vertices"));
+        }
+        if self.edge_skin.vertex_count() != self.edges.len() {
+            return bad(format!("{} edge weight rows for {} edges", self.edge_skin.vertex_count(), self.edges.len()));
+        }
+        self.edge_skin.validate_bones(self.rig.bone_count)?;
+        if !(self.beta.is_finite() && self.beta >= 0.0) {
+            return bad(format!("beta is {}", self.beta));
+        }
+        Ok(())
+    }
+
+    /// Serialises the model (after [`TrainedModel::validate`]).
+    pub fn to_bytes(&self) -> Result<Vec<u8>, ModelError> {
+        self.validate()?;
+        let mut w = ContainerWriter::new(ModelKind::Model);
+        self.rig.write_sections(&mut w)?;
+        w.add_json(
+            CTRL,
+            &CtrlMeta {
+                controls: self.controls.clone(),
+                method: self.method.clone(),
+                beta: self.beta,
+                edge_count: self.edges.len() as u64,
+                edge_influences: self.edge_skin.k() as u64,
+            },
+        )?;
+        w.add_json(RREG, &self.rotations)?;
+        w.add_u32s(EDGE, bytemuck::cast_slice(&self.edges));
+        w.add_u32s(EDBI, self.edge_skin.indices());
+        w.add_f32s(EDBW, self.edge_skin.weights());
+        Ok(w.to_bytes())
+    }
+
+    /// Parses and validates a model. Never panics on malformed input.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ModelError> {
+        let c = Container::parse(bytes)?;
+        c.expect_kind(ModelKind::Model)?;
+        let rig = Rig::read_sections(&c)?;
+        let meta: CtrlMeta = c.json(CTRL)?;
+        let rotations: RotationModel = c.json(RREG)?;
+        let too_big = |what: &str| ModelError::InvalidRig(format!("{what} does not fit in memory"));
+        let ne = usize::try_from(meta.edge_count).map_err(|_| too_big("edge_count"))?;
+        let k = usize::try_from(meta.edge_influences).map_err(|_| too_big("edge_influences"))?;
+        let ek = ne.checked_mul(k).ok_or_else(|| too_big("edges x influences"))?;
+        let e2 = ne.checked_mul(2).ok_or_else(|| too_big("2 x edges"))?;
+        let edges = c.u32s(EDGE, e2, &format!("2 x {ne} edges"))?;
+        let edges = edges.chunks_exact(2).map(|e| [e[0], e[1]]).collect();
+        let what = format!("{k} influences x {ne} edges");
+        let edge_skin = SkinWeights::new(k, c.u32s(EDBI, ek, &what)?, c.f32s(EDBW, ek, &what)?)?;
+        let model = TrainedModel { rig, controls: meta.controls, method: meta.method, rotations, edges, edge_skin, beta: meta.beta };
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Writes the model atomically.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ModelError> {
+        let path = path.as_ref();
+        let bytes = self.to_bytes()?;
+        write_atomic(path, &bytes).map_err(|source| ModelError::Io { path: path.to_path_buf(), source })
+    }
+
+    /// Reads and validates a model file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ModelError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|source| ModelError::Io { path: path.to_path_buf(), source })?;
+        Self::from_bytes(&bytes)
+    }
+}

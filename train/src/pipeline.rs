@@ -1,0 +1,190 @@
+//! `crease train` as a function: examples in, [`TrainedModel`] out.
+//!
+//! 1. proxy bones and weights ([`crate::bones`]);
+//! 2. control points: given, or automatic ([`crate::controls`]);
+//! 3. rotation regressors of the chosen method ([`crate::regress`]);
+//! 4. edge weights for the translation solver ([`crate::edges`], FKY08 eq. 10).
+
+use std::time::Instant;
+
+use crease_core::glam::{Quat, Vec3};
+use crease_core::mesh::Mesh;
+use crease_core::model::{ControlPoint, Rig, RigExample, TrainedModel};
+
+use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
+use crate::controls;
+use crate::edges;
+use crate::regress::{self, RegressInput, RegressOptions};
+
+/// Where the control points come from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ControlSpec {
+    /// These vertex indices (from a manifest or the command line).
+    Vertices(Vec<u32>),
+    /// Chosen automatically: this many (PCA + varimax, FKY08 §3).
+    Auto(usize),
+}
+
+/// Options of [`train`].
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Proxy-bone fit.
+    pub fit: FitOptions,
+    /// Control points.
+    pub controls: ControlSpec,
+    /// Regression.
+    pub regress: RegressOptions,
+    /// Bones per edge in the edge weights (FKY08 eq. 10); defaults to the vertex K.
+    pub edge_influences: Option<usize>,
+    /// Default beta stored in the model (FKY08 eq. 11; HZY11 Fig. 11: about 3 for keyframing,
+    /// 0.3 for noisy mocap).
+    pub beta: f32,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            fit: FitOptions::default(),
+            controls: ControlSpec::Auto(8),
+            regress: RegressOptions::default(),
+            edge_influences: None,
+            beta: 1.0,
+        }
+    }
+}
+
+/// Errors of [`train`].
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The proxy-bone fit refused the input.
+    #[error(transparent)]
+    Fit(#[from] bones::FitError),
+    /// Control points could not be chosen or are invalid.
+    #[error("control points: {0}")]
+    Controls(String),
+    /// Too few examples.
+    #[error("need at least 2 examples (the rest pose and one more), got {0}")]
+    TooFewExamples(usize),
+}
+
+/// Timings and reports of a training run.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TrainReport {
+    /// The bone fit.
+    pub fit: FitReport,
+    /// Seconds choosing control points.
+    pub controls_seconds: f64,
+    /// Seconds fitting the rotation regressors.
+    pub regress_seconds: f64,
+    /// Seconds fitting edge weights.
+    pub edges_seconds: f64,
+    /// Total seconds.
+    pub seconds: f64,
+}
+
+/// Examples to train on: a rest mesh and frames (the rest pose among them, as frame 0).
+#[derive(Clone, Copy, Debug)]
+pub struct TrainInput<'a> {
+    /// Rest pose.
+    pub rest: &'a Mesh,
+    /// Example frames, rest pose first.
+    pub frames: &'a [&'a [Vec3]],
+    /// One name per frame.
+    pub names: &'a [String],
+}
+
+/// Trains a model. `progress` sees the bone fit's steps.
+pub fn train(
+    input: TrainInput<'_>,
+    options: &TrainOptions,
+    progress: &mut dyn FnMut(&IterationStat),
+) -> Result<(TrainedModel, TrainReport), TrainError> {
+    let start = Instant::now();
+    if input.frames.len() < 2 {
+        return Err(TrainError::TooFewExamples(input.frames.len()));
+    }
+    let fit = bones::fit(FitInput { rest: input.rest, frames: input.frames, rest_frame: Some(0) }, &options.fit, progress)?;
+
+    let t = Instant::now();
+    let control_vertices = match &options.controls {
+        ControlSpec::Vertices(v) => {
+            if let Some(&bad) = v.iter().find(|&&i| i as usize >= input.rest.vertex_count()) {
+                return Err(TrainError::Controls(format!(
+                    "vertex {bad} out of range (the mesh has {})",
+                    input.rest.vertex_count()
+                )));
+            }
+            v.clone()
+        }
+        ControlSpec::Auto(count) => controls::auto_control_points(input.rest, input.frames, *count)
+            .map_err(|e| TrainError::Controls(e.to_string()))?,
+    };
+    if control_vertices.is_empty() {
+        return Err(TrainError::Controls("none given".into()));
+    }
+    let controls_seconds = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let rotations: Vec<Vec<Quat>> =
+        fit.transforms.iter().map(|frame| frame.iter().map(|x| x.rotation).collect()).collect();
+    let example_controls: Vec<Vec<Vec3>> =
+        input.frames.iter().map(|f| control_vertices.iter().map(|&v| f[v as usize]).collect()).collect();
+    let rotation_model = regress::build_rotation_model(
+        RegressInput {
+            rest: input.rest,
+            skin: &fit.skin,
+            bone_count: fit.bone_count,
+            control_vertices: &control_vertices,
+            controls: &example_controls,
+            rotations: &rotations,
+        },
+        &options.regress,
+    );
+    let regress_seconds = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let mesh_edges = input.rest.edges();
+    let edge_skin = edges::fit_edge_weights(
+        input.rest,
+        &mesh_edges,
+        input.frames,
+        &rotations,
+        &fit.skin,
+        options.edge_influences.unwrap_or(options.fit.max_influences),
+    );
+    let edges_seconds = t.elapsed().as_secs_f64();
+
+    let rig = Rig {
+        rest: input.rest.clone(),
+        bone_count: fit.bone_count,
+        skin: fit.skin,
+        examples: input
+            .names
+            .iter()
+            .zip(fit.transforms)
+            .map(|(name, transforms)| RigExample { name: name.clone(), transforms })
+            .collect(),
+        fit_rms: Some(fit.report.rms_normalized as f32),
+    };
+    let model = TrainedModel {
+        rig,
+        controls: control_vertices
+            .iter()
+            .enumerate()
+            .map(|(i, &vertex)| ControlPoint { vertex, name: format!("c{i}") })
+            .collect(),
+        method: options.regress.method.name().to_string(),
+        rotations: rotation_model,
+        edges: mesh_edges,
+        edge_skin,
+        beta: options.beta,
+    };
+    let report = TrainReport {
+        fit: fit.report,
+        controls_seconds,
+        regress_seconds,
+        edges_seconds,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((model, report))
+}
