@@ -4,6 +4,10 @@
 //!
 //! Layout:
 //! - [`commands::fit`]: `crease fit` — proxy bones and skinning weights from example meshes.
+//! - [`commands::train`]: `crease train` — a whole model (bones, controls, regressors).
+//! - [`commands::synth`]: `crease synth` — control frames in, meshes out.
+//! - [`commands::eval`]: `crease eval` — leave-one-out and test tables of every method.
+//! - [`commands::common`]: example loading, control-point specs, progress display.
 
 pub mod commands;
 
@@ -26,12 +30,21 @@ pub struct Cli {
 pub enum Command {
     /// Fit proxy bones and skinning weights to example meshes and write a rig file.
     Fit(commands::fit::FitArgs),
+    /// Train a model: bones, control points, rotation regressors, edge weights.
+    Train(commands::train::TrainArgs),
+    /// Synthesize meshes from a file of control frames.
+    Synth(commands::synth::SynthArgs),
+    /// Compare methods by leave-one-out and on held-out test poses.
+    Eval(commands::eval::EvalArgs),
 }
 
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => commands::fit::run(&args),
+        Command::Train(args) => commands::train::run(&args),
+        Command::Synth(args) => commands::synth::run(&args),
+        Command::Eval(args) => commands::eval::run(&args),
     }
 }
 

@@ -9,11 +9,13 @@
 //! - [`edges`]: edge skinning weights (FKY08 eq. 10) for the translation solver.
 //! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
 //!   local, RBF baseline) as a runtime `RotationModel`.
+//! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
 //! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
 
 pub mod bones;
 pub mod controls;
 pub mod edges;
+pub mod eval;
 pub mod geodesic;
 pub mod kcca;
 mod par;

@@ -93,17 +93,93 @@ pub struct TrainInput<'a> {
     pub names: &'a [String],
 }
 
+/// Everything of a trained model but the rotation regressors: the part shared by all methods
+/// (evaluation fits it once and compares methods on it).
+#[derive(Clone, Debug)]
+pub struct TrainedBase {
+    /// The rig (rest, bones, weights, examples' transforms).
+    pub rig: Rig,
+    /// Control-point vertices.
+    pub control_vertices: Vec<u32>,
+    /// Per example, the control positions.
+    pub example_controls: Vec<Vec<Vec3>>,
+    /// Per example, per bone, rotations.
+    pub rotations: Vec<Vec<Quat>>,
+    /// Mesh edges and their weights (FKY08 eq. 10).
+    pub edges: Vec<[u32; 2]>,
+    /// Edge weights.
+    pub edge_skin: crease_core::runtime::skin::SkinWeights,
+    /// Timings so far.
+    pub report: TrainReport,
+}
+
+impl TrainedBase {
+    /// Fits the rotation regressors of `options.method` and assembles the model.
+    pub fn model(&self, options: &RegressOptions, beta: f32) -> TrainedModel {
+        let rotations = regress::build_rotation_model(
+            RegressInput {
+                rest: &self.rig.rest,
+                skin: &self.rig.skin,
+                bone_count: self.rig.bone_count,
+                control_vertices: &self.control_vertices,
+                controls: &self.example_controls,
+                rotations: &self.rotations,
+            },
+            options,
+        );
+        TrainedModel {
+            rig: self.rig.clone(),
+            controls: self
+                .control_vertices
+                .iter()
+                .enumerate()
+                .map(|(i, &vertex)| ControlPoint {
+                    vertex,
+                    name: format!("c{i}"),
+                })
+                .collect(),
+            method: options.method.name().to_string(),
+            rotations,
+            edges: self.edges.clone(),
+            edge_skin: self.edge_skin.clone(),
+            beta,
+        }
+    }
+}
+
 /// Trains a model. `progress` sees the bone fit's steps.
 pub fn train(
     input: TrainInput<'_>,
     options: &TrainOptions,
     progress: &mut dyn FnMut(&IterationStat),
 ) -> Result<(TrainedModel, TrainReport), TrainError> {
+    let mut base = train_base(input, options, progress)?;
+    let t = Instant::now();
+    let model = base.model(&options.regress, options.beta);
+    base.report.regress_seconds = t.elapsed().as_secs_f64();
+    base.report.seconds += base.report.regress_seconds;
+    Ok((model, base.report))
+}
+
+/// Fits everything but the regressors (see [`TrainedBase`]).
+pub fn train_base(
+    input: TrainInput<'_>,
+    options: &TrainOptions,
+    progress: &mut dyn FnMut(&IterationStat),
+) -> Result<TrainedBase, TrainError> {
     let start = Instant::now();
     if input.frames.len() < 2 {
         return Err(TrainError::TooFewExamples(input.frames.len()));
     }
-    let fit = bones::fit(FitInput { rest: input.rest, frames: input.frames, rest_frame: Some(0) }, &options.fit, progress)?;
+    let fit = bones::fit(
+        FitInput {
+            rest: input.rest,
+            frames: input.frames,
+            rest_frame: Some(0),
+        },
+        &options.fit,
+        progress,
+    )?;
 
     let t = Instant::now();
     let control_vertices = match &options.controls {
@@ -124,23 +200,16 @@ pub fn train(
     }
     let controls_seconds = t.elapsed().as_secs_f64();
 
-    let t = Instant::now();
-    let rotations: Vec<Vec<Quat>> =
-        fit.transforms.iter().map(|frame| frame.iter().map(|x| x.rotation).collect()).collect();
-    let example_controls: Vec<Vec<Vec3>> =
-        input.frames.iter().map(|f| control_vertices.iter().map(|&v| f[v as usize]).collect()).collect();
-    let rotation_model = regress::build_rotation_model(
-        RegressInput {
-            rest: input.rest,
-            skin: &fit.skin,
-            bone_count: fit.bone_count,
-            control_vertices: &control_vertices,
-            controls: &example_controls,
-            rotations: &rotations,
-        },
-        &options.regress,
-    );
-    let regress_seconds = t.elapsed().as_secs_f64();
+    let rotations: Vec<Vec<Quat>> = fit
+        .transforms
+        .iter()
+        .map(|frame| frame.iter().map(|x| x.rotation).collect())
+        .collect();
+    let example_controls: Vec<Vec<Vec3>> = input
+        .frames
+        .iter()
+        .map(|f| control_vertices.iter().map(|&v| f[v as usize]).collect())
+        .collect();
 
     let t = Instant::now();
     let mesh_edges = input.rest.edges();
@@ -150,7 +219,9 @@ pub fn train(
         input.frames,
         &rotations,
         &fit.skin,
-        options.edge_influences.unwrap_or(options.fit.max_influences),
+        options
+            .edge_influences
+            .unwrap_or(options.fit.max_influences),
     );
     let edges_seconds = t.elapsed().as_secs_f64();
 
@@ -162,29 +233,27 @@ pub fn train(
             .names
             .iter()
             .zip(fit.transforms)
-            .map(|(name, transforms)| RigExample { name: name.clone(), transforms })
+            .map(|(name, transforms)| RigExample {
+                name: name.clone(),
+                transforms,
+            })
             .collect(),
         fit_rms: Some(fit.report.rms_normalized as f32),
-    };
-    let model = TrainedModel {
-        rig,
-        controls: control_vertices
-            .iter()
-            .enumerate()
-            .map(|(i, &vertex)| ControlPoint { vertex, name: format!("c{i}") })
-            .collect(),
-        method: options.regress.method.name().to_string(),
-        rotations: rotation_model,
-        edges: mesh_edges,
-        edge_skin,
-        beta: options.beta,
     };
     let report = TrainReport {
         fit: fit.report,
         controls_seconds,
-        regress_seconds,
+        regress_seconds: 0.0,
         edges_seconds,
         seconds: start.elapsed().as_secs_f64(),
     };
-    Ok((model, report))
+    Ok(TrainedBase {
+        rig,
+        control_vertices,
+        example_controls,
+        rotations,
+        edges: mesh_edges,
+        edge_skin,
+        report,
+    })
 }

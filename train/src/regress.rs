@@ -12,7 +12,9 @@
 use crease_core::glam::{Quat, Vec3, Vec4};
 use crease_core::mesh::Mesh;
 use crease_core::runtime::kernel::Kernel;
-use crease_core::runtime::predict::{ControlGroup, GroupRegression, LinearOperator, PoseModel, RotationModel};
+use crease_core::runtime::predict::{
+    ControlGroup, GroupRegression, LinearOperator, PoseModel, RotationModel,
+};
 use crease_core::runtime::skin::SkinWeights;
 
 use crate::geodesic;
@@ -36,7 +38,13 @@ pub enum Method {
 
 impl Method {
     /// Every variant, in the order evaluation tables list them.
-    pub const ALL: [Method; 5] = [Method::Rbf, Method::Global, Method::LocalGeometry, Method::LocalPose, Method::Local];
+    pub const ALL: [Method; 5] = [
+        Method::Rbf,
+        Method::Global,
+        Method::LocalGeometry,
+        Method::LocalPose,
+        Method::Local,
+    ];
 
     /// The command-line / JSON name.
     pub fn name(self) -> &'static str {
@@ -137,7 +145,10 @@ pub fn build_rotation_model(input: RegressInput<'_>, options: &RegressOptions) -
     let groups = if options.method.geometry_local() {
         geometry_groups(input, options.kc)
     } else {
-        vec![((0..nc as u32).collect(), (0..input.bone_count as u32).collect())]
+        vec![(
+            (0..nc as u32).collect(),
+            (0..input.bone_count as u32).collect(),
+        )]
     };
     let groups = groups
         .into_iter()
@@ -160,7 +171,10 @@ fn geometry_groups(input: RegressInput<'_>, kc: usize) -> Vec<(Vec<u32>, Vec<u32
     let mut groups: Vec<(Vec<u32>, Vec<u32>)> = Vec::new();
     for (b, centre) in centres.iter().enumerate() {
         let mut set: Vec<u32> = match centre {
-            Some(v) => geodesic::nearest_sources(&dist, *v, kc).into_iter().map(|c| c as u32).collect(),
+            Some(v) => geodesic::nearest_sources(&dist, *v, kc)
+                .into_iter()
+                .map(|c| c as u32)
+                .collect(),
             None => (0..input.control_vertices.len().min(kc) as u32).collect(),
         };
         set.sort_unstable();
@@ -190,8 +204,13 @@ fn fit_group(
     }
     let sigma = kcca::default_sigma(&x, dim).max(1e-12);
     let kernel = match options.kernel {
-        KernelChoice::Gaussian { scale } => Kernel::Gaussian { sigma: sigma * scale },
-        KernelChoice::Polynomial { c, degree } => Kernel::Polynomial { c: c * sigma * sigma, degree },
+        KernelChoice::Gaussian { scale } => Kernel::Gaussian {
+            sigma: sigma * scale,
+        },
+        KernelChoice::Polynomial { c, degree } => Kernel::Polynomial {
+            c: c * sigma * sigma,
+            degree,
+        },
     };
     let quat_rows = |examples: &[usize], relative_to: Option<usize>| -> Vec<f32> {
         let mut y = Vec::with_capacity(examples.len() * 4 * bones.len());
@@ -216,7 +235,10 @@ fn fit_group(
         let poses = (0..n)
             .map(|i| {
                 let neighbours = nearest_examples(&x, dim, i, options.kp.clamp(1, n));
-                let xs: Vec<f32> = neighbours.iter().flat_map(|&l| x[l * dim..(l + 1) * dim].iter().copied()).collect();
+                let xs: Vec<f32> = neighbours
+                    .iter()
+                    .flat_map(|&l| x[l * dim..(l + 1) * dim].iter().copied())
+                    .collect();
                 let y = quat_rows(&neighbours, Some(i));
                 let model = kcca::fit_kcca_per_block(&xs, dim, &y, 4, kernel, &options.kcca);
                 PoseModel {
@@ -236,11 +258,23 @@ fn fit_group(
         };
         GroupRegression::Global(to_operator(model))
     };
-    ControlGroup { controls, bones, kernel, heat_sigma: sigma, inputs: x, regression }
+    ControlGroup {
+        controls,
+        bones,
+        kernel,
+        heat_sigma: sigma,
+        inputs: x,
+        regression,
+    }
 }
 
 fn to_operator(model: LinearModel) -> LinearOperator {
-    LinearOperator { rows: model.d_out, cols: model.n, m: model.m, b: model.b }
+    LinearOperator {
+        rows: model.d_out,
+        cols: model.n,
+        m: model.m,
+        b: model.b,
+    }
 }
 
 /// The `k` examples nearest to example `i` in input space (itself first).
@@ -248,9 +282,22 @@ fn nearest_examples(x: &[f32], dim: usize, i: usize, k: usize) -> Vec<usize> {
     let n = x.len() / dim;
     let xi = &x[i * dim..(i + 1) * dim];
     let mut d: Vec<(f32, usize)> = (0..n)
-        .map(|l| (x[l * dim..(l + 1) * dim].iter().zip(xi).map(|(a, b)| (a - b) * (a - b)).sum::<f32>(), l))
+        .map(|l| {
+            (
+                x[l * dim..(l + 1) * dim]
+                    .iter()
+                    .zip(xi)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f32>(),
+                l,
+            )
+        })
         .collect();
-    d.sort_by(|a, b| a.0.total_cmp(&b.0).then((a.1 != i).cmp(&(b.1 != i))).then(a.1.cmp(&b.1)));
+    d.sort_by(|a, b| {
+        a.0.total_cmp(&b.0)
+            .then((a.1 != i).cmp(&(b.1 != i)))
+            .then(a.1.cmp(&b.1))
+    });
     d.into_iter().take(k).map(|(_, l)| l).collect()
 }
 
@@ -267,9 +314,21 @@ pub fn align_signs(rotations: &[Vec<Quat>], bones: usize) -> Vec<Vec<Quat>> {
             s += v * v.transpose();
         }
         let eig = s.symmetric_eigen();
-        let (k, _) = eig.eigenvalues.iter().enumerate().fold((0, f64::NEG_INFINITY), |acc, (i, &l)| if l > acc.1 { (i, l) } else { acc });
+        let (k, _) =
+            eig.eigenvalues
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |acc, (i, &l)| if l > acc.1 { (i, l) } else { acc },
+                );
         let axis = eig.eigenvectors.column(k);
-        let mut axis = Vec4::new(axis[0] as f32, axis[1] as f32, axis[2] as f32, axis[3] as f32);
+        let mut axis = Vec4::new(
+            axis[0] as f32,
+            axis[1] as f32,
+            axis[2] as f32,
+            axis[3] as f32,
+        );
         // Prefer the identity's hemisphere for the axis itself (rest-relative rotations).
         if axis.w < 0.0 {
             axis = -axis;

@@ -1,14 +1,13 @@
 //! `crease fit`: proxy bones and skinning weights from example meshes (FKY08 §3, HZY11 §5.1).
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use crease_core::mesh::examples::ExampleSet;
 use crease_core::model::{Rig, RigExample};
 use crease_train::bones::{self, FitInput, FitOptions, IterationStat};
-use indicatif::{ProgressBar, ProgressStyle};
+
+use super::common::Progress;
 
 /// Options of `crease fit`.
 #[derive(Clone, Debug, clap::Args)]
@@ -66,8 +65,7 @@ struct FitSummary<'a> {
 /// Runs `crease fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let load_start = Instant::now();
-    let set = ExampleSet::load(&args.examples)
-        .with_context(|| format!("reading examples from {}", args.examples.display()))?;
+    let set = super::common::load_examples(&args.examples)?;
     let load_seconds = load_start.elapsed().as_secs_f64();
     let frames: Vec<&[crease_core::glam::Vec3]> = set
         .examples
@@ -160,49 +158,4 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// A progress bar on a terminal, plain lines otherwise.
-struct Progress {
-    bar: Option<ProgressBar>,
-}
-
-impl Progress {
-    fn new(iterations: u64) -> Self {
-        let bar = std::io::stderr().is_terminal().then(|| {
-            let bar = ProgressBar::new(iterations);
-            bar.set_style(
-                ProgressStyle::with_template("{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg}")
-                    .expect("static template")
-                    .progress_chars("=> "),
-            );
-            bar.set_prefix("cluster");
-            bar
-        });
-        Self { bar }
-    }
-
-    fn step(&self, stat: &IterationStat) {
-        let line = format!(
-            "{:>7} {:>3}: {:>4} bones, rms {:.4e}, {:.2} s",
-            stat.phase, stat.iteration, stat.bones, stat.rms_normalized, stat.seconds
-        );
-        match &self.bar {
-            Some(bar) => {
-                bar.set_prefix(stat.phase);
-                if stat.phase == "fit" {
-                    bar.set_position(stat.iteration as u64);
-                }
-                bar.set_message(format!("rms {:.4e}", stat.rms_normalized));
-                bar.println(line);
-            }
-            None => eprintln!("{line}"),
-        }
-    }
-
-    fn finish(&self) {
-        if let Some(bar) = &self.bar {
-            bar.finish_and_clear();
-        }
-    }
 }

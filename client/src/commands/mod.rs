@@ -1,3 +1,7 @@
-//! One module per subcommand.
+//! One module per subcommand, plus the pieces they share.
 
+pub mod common;
+pub mod eval;
 pub mod fit;
+pub mod synth;
+pub mod train;

@@ -77,7 +77,10 @@ impl TrainedModel {
         let n = self.rig.rest.vertex_count();
         let bad = |m: String| Err(ModelError::InvalidRig(m));
         if let Some(c) = self.controls.iter().find(|c| c.vertex as usize >= n) {
-            return bad(format!("control point {:?} is vertex {}, the mesh has {n}", c.name, c.vertex));
+            return bad(format!(
+                "control point {:?} is vertex {}, the mesh has {n}",
+                c.name, c.vertex
+            ));
         }
         if self.rotations.control_count != self.controls.len() {
             return bad(format!(
@@ -92,12 +95,23 @@ impl TrainedModel {
                 self.rotations.bone_count, self.rig.bone_count
             ));
         }
-        self.rotations.validate().map_err(|e| ModelError::InvalidRig(e.to_string()))?;
-        if let Some((k, e)) = self.edges.iter().enumerate().find(|(_, e)| e.iter().any(|&v| v as usize >= n)) {
+        self.rotations
+            .validate()
+            .map_err(|e| ModelError::InvalidRig(e.to_string()))?;
+        if let Some((k, e)) = self
+            .edges
+            .iter()
+            .enumerate()
+            .find(|(_, e)| e.iter().any(|&v| v as usize >= n))
+        {
             return bad(format!("edge {k} is {e:?}, the mesh has {n} vertices"));
         }
         if self.edge_skin.vertex_count() != self.edges.len() {
-            return bad(format!("{} edge weight rows for {} edges", self.edge_skin.vertex_count(), self.edges.len()));
+            return bad(format!(
+                "{} edge weight rows for {} edges",
+                self.edge_skin.vertex_count(),
+                self.edges.len()
+            ));
         }
         self.edge_skin.validate_bones(self.rig.bone_count)?;
         if !(self.beta.is_finite() && self.beta >= 0.0) {
@@ -138,13 +152,23 @@ impl TrainedModel {
         let too_big = |what: &str| ModelError::InvalidRig(format!("{what} does not fit in memory"));
         let ne = usize::try_from(meta.edge_count).map_err(|_| too_big("edge_count"))?;
         let k = usize::try_from(meta.edge_influences).map_err(|_| too_big("edge_influences"))?;
-        let ek = ne.checked_mul(k).ok_or_else(|| too_big("edges x influences"))?;
+        let ek = ne
+            .checked_mul(k)
+            .ok_or_else(|| too_big("edges x influences"))?;
         let e2 = ne.checked_mul(2).ok_or_else(|| too_big("2 x edges"))?;
         let edges = c.u32s(EDGE, e2, &format!("2 x {ne} edges"))?;
         let edges = edges.chunks_exact(2).map(|e| [e[0], e[1]]).collect();
         let what = format!("{k} influences x {ne} edges");
         let edge_skin = SkinWeights::new(k, c.u32s(EDBI, ek, &what)?, c.f32s(EDBW, ek, &what)?)?;
-        let model = TrainedModel { rig, controls: meta.controls, method: meta.method, rotations, edges, edge_skin, beta: meta.beta };
+        let model = TrainedModel {
+            rig,
+            controls: meta.controls,
+            method: meta.method,
+            rotations,
+            edges,
+            edge_skin,
+            beta: meta.beta,
+        };
         model.validate()?;
         Ok(model)
     }
@@ -153,13 +177,19 @@ impl TrainedModel {
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ModelError> {
         let path = path.as_ref();
         let bytes = self.to_bytes()?;
-        write_atomic(path, &bytes).map_err(|source| ModelError::Io { path: path.to_path_buf(), source })
+        write_atomic(path, &bytes).map_err(|source| ModelError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
     }
 
     /// Reads and validates a model file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ModelError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| ModelError::Io { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_bytes(&bytes)
     }
 }

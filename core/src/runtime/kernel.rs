@@ -178,7 +178,9 @@ mod tests {
         let v = k.eval(&[1.0, 0.0, 2.0], &[0.0, 2.0, 0.0]);
         assert!(close(v, (-9.0f32 / 8.0).exp()), "{v}");
         assert_eq!(k.eval(&[3.0, -1.0], &[3.0, -1.0]), 1.0);
-        assert!((k.eval_f64(&[1.0, 0.0, 2.0], &[0.0, 2.0, 0.0]) - (-9.0f64 / 8.0).exp()).abs() < 1e-15);
+        assert!(
+            (k.eval_f64(&[1.0, 0.0, 2.0], &[0.0, 2.0, 0.0]) - (-9.0f64 / 8.0).exp()).abs() < 1e-15
+        );
     }
 
     #[test]
@@ -239,7 +241,13 @@ mod tests {
         assert!(Kernel::Gaussian { sigma: 0.1 }.is_valid());
         assert!(!Kernel::Gaussian { sigma: 0.0 }.is_valid());
         assert!(!Kernel::Gaussian { sigma: f32::NAN }.is_valid());
-        assert!(!Kernel::Polynomial { c: f32::INFINITY, degree: 2 }.is_valid());
+        assert!(
+            !Kernel::Polynomial {
+                c: f32::INFINITY,
+                degree: 2
+            }
+            .is_valid()
+        );
         let k = Kernel::Polynomial { c: 0.25, degree: 5 };
         let json = serde_json::to_string(&k).unwrap();
         assert_eq!(json, r#"{"kind":"polynomial","c":0.25,"degree":5}"#);

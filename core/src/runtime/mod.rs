@@ -6,9 +6,12 @@
 //! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
+//! - [`predictor`]: the per-frame pipeline (controls -> transforms -> skinned mesh) and its
+//!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 
 pub mod kernel;
 pub mod predict;
+pub mod predictor;
 pub mod skin;
 pub mod translations;

@@ -57,7 +57,12 @@ impl LinearOperator {
     #[inline]
     pub fn apply(&self, xi: &[f32], out: &mut [f32]) {
         debug_assert_eq!(xi.len(), self.cols);
-        for ((row, o), b) in self.m.chunks_exact(self.cols).zip(out.iter_mut()).zip(&self.b) {
+        for ((row, o), b) in self
+            .m
+            .chunks_exact(self.cols)
+            .zip(out.iter_mut())
+            .zip(&self.b)
+        {
             *o = row.iter().zip(xi).map(|(a, x)| a * x).sum::<f32>() + b;
         }
     }
@@ -76,7 +81,10 @@ impl LinearOperator {
             ));
         }
         if !self.m.iter().chain(&self.b).all(|x| x.is_finite()) {
-            return Err(format!("operator {}x{} has non-finite entries", self.rows, self.cols));
+            return Err(format!(
+                "operator {}x{} has non-finite entries",
+                self.rows, self.cols
+            ));
         }
         Ok(())
     }
@@ -145,8 +153,15 @@ impl RotationModel {
             if group.controls.is_empty() {
                 return err(format!("group {g} has no control points"));
             }
-            if let Some(&c) = group.controls.iter().find(|&&c| c as usize >= self.control_count) {
-                return err(format!("group {g}: control {c} out of range (model has {})", self.control_count));
+            if let Some(&c) = group
+                .controls
+                .iter()
+                .find(|&&c| c as usize >= self.control_count)
+            {
+                return err(format!(
+                    "group {g}: control {c} out of range (model has {})",
+                    self.control_count
+                ));
             }
             let dim = 3 * group.controls.len();
             if group.inputs.len() != self.example_count * dim {
@@ -158,7 +173,10 @@ impl RotationModel {
             }
             for &b in &group.bones {
                 let Some(s) = seen.get_mut(b as usize) else {
-                    return err(format!("group {g}: bone {b} out of range (model has {})", self.bone_count));
+                    return err(format!(
+                        "group {g}: bone {b} out of range (model has {})",
+                        self.bone_count
+                    ));
                 };
                 if *s {
                     return err(format!("bone {b} belongs to two groups"));
@@ -168,7 +186,8 @@ impl RotationModel {
             let rows = 4 * group.bones.len();
             match &group.regression {
                 GroupRegression::Global(op) => {
-                    op.validate().map_err(|e| RotationModelError(format!("group {g}: {e}")))?;
+                    op.validate()
+                        .map_err(|e| RotationModelError(format!("group {g}: {e}")))?;
                     if op.rows != rows || op.cols != self.example_count {
                         return err(format!(
                             "group {g}: operator is {}x{}, expected {rows}x{}",
@@ -178,14 +197,26 @@ impl RotationModel {
                 }
                 GroupRegression::PoseLocal(poses) => {
                     if poses.len() != self.example_count {
-                        return err(format!("group {g}: {} pose models, expected {}", poses.len(), self.example_count));
+                        return err(format!(
+                            "group {g}: {} pose models, expected {}",
+                            poses.len(),
+                            self.example_count
+                        ));
                     }
                     for (i, p) in poses.iter().enumerate() {
-                        p.operator.validate().map_err(|e| RotationModelError(format!("group {g} pose {i}: {e}")))?;
-                        if p.operator.rows != rows || p.operator.cols != p.neighbours.len() || p.base.len() != group.bones.len() {
+                        p.operator
+                            .validate()
+                            .map_err(|e| RotationModelError(format!("group {g} pose {i}: {e}")))?;
+                        if p.operator.rows != rows
+                            || p.operator.cols != p.neighbours.len()
+                            || p.base.len() != group.bones.len()
+                        {
                             return err(format!("group {g} pose {i}: sizes disagree"));
                         }
-                        if p.neighbours.iter().any(|&n| n as usize >= self.example_count) {
+                        if p.neighbours
+                            .iter()
+                            .any(|&n| n as usize >= self.example_count)
+                        {
                             return err(format!("group {g} pose {i}: neighbour out of range"));
                         }
                     }
@@ -217,7 +248,13 @@ impl RotationModel {
                 let p = controls[c as usize];
                 scratch.input.extend_from_slice(&[p.x, p.y, p.z]);
             }
-            group.kernel.kernel_vector_with_dist2(&scratch.input, &group.inputs, scratch.input.len(), &mut scratch.xi, &mut scratch.dist2);
+            group.kernel.kernel_vector_with_dist2(
+                &scratch.input,
+                &group.inputs,
+                scratch.input.len(),
+                &mut scratch.xi,
+                &mut scratch.dist2,
+            );
             let rows = 4 * group.bones.len();
             scratch.rows.resize(rows, 0.0);
             match &group.regression {
@@ -235,16 +272,29 @@ impl RotationModel {
         }
     }
 
-    fn predict_pose_local(&self, group: &ControlGroup, poses: &[PoseModel], s: &mut RotationScratch, out: &mut [Quat]) {
+    fn predict_pose_local(
+        &self,
+        group: &ControlGroup,
+        poses: &[PoseModel],
+        s: &mut RotationScratch,
+        out: &mut [Quat],
+    ) {
         // The k_p example poses nearest to the input and their heat-kernel weights (HZY11 §6).
-        heat_weights(&s.dist2, self.blend_poses, group.heat_sigma, &mut s.order, &mut s.weights);
+        heat_weights(
+            &s.dist2,
+            self.blend_poses,
+            group.heat_sigma,
+            &mut s.order,
+            &mut s.weights,
+        );
         let nb = group.bones.len();
         s.blend.clear();
         s.blend.resize(nb, Vec4::ZERO);
         for (&i, &w) in s.order.iter().zip(&s.weights) {
             let pose = &poses[i as usize];
             s.sub_xi.clear();
-            s.sub_xi.extend(pose.neighbours.iter().map(|&l| s.xi[l as usize]));
+            s.sub_xi
+                .extend(pose.neighbours.iter().map(|&l| s.xi[l as usize]));
             pose.operator.apply(&s.sub_xi, &mut s.rows);
             for k in 0..nb {
                 let r = &s.rows[4 * k..4 * k + 4];
@@ -268,7 +318,13 @@ impl RotationModel {
 /// `exp(-d^2 / 2 sigma^2)` normalised to sum to one. The exponent is shifted by the smallest
 /// distance so the weights cannot all underflow (normalisation cancels the shift); non-finite
 /// distances get weight 0, and if every distance is non-finite the first example gets weight 1.
-pub fn heat_weights(dist2: &[f32], k: usize, sigma: f32, order: &mut Vec<u32>, weights: &mut Vec<f32>) {
+pub fn heat_weights(
+    dist2: &[f32],
+    k: usize,
+    sigma: f32,
+    order: &mut Vec<u32>,
+    weights: &mut Vec<f32>,
+) {
     order.clear();
     weights.clear();
     if dist2.is_empty() {
@@ -285,7 +341,11 @@ pub fn heat_weights(dist2: &[f32], k: usize, sigma: f32, order: &mut Vec<u32>, w
     let two_s2 = 2.0 * sigma * sigma;
     let mut total = 0.0;
     for &i in order.iter() {
-        let w = if d_min.is_finite() { (-(key(i) - d_min) / two_s2).exp() } else { 0.0 };
+        let w = if d_min.is_finite() {
+            (-(key(i) - d_min) / two_s2).exp()
+        } else {
+            0.0
+        };
         let w = if w.is_finite() { w } else { 0.0 };
         weights.push(w);
         total += w;

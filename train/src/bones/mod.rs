@@ -558,10 +558,17 @@ pub fn fit_frame_transforms(
 ) -> Result<Vec<RigidTransform>, FitError> {
     let n = rest.vertex_count();
     if frame.len() != n {
-        return Err(FitError::VertexCount { frame: 0, expected: n, got: frame.len() });
+        return Err(FitError::VertexCount {
+            frame: 0,
+            expected: n,
+            got: frame.len(),
+        });
     }
     if let Some(v) = frame.iter().position(|p| !p.is_finite()) {
-        return Err(FitError::NonFinite { frame: 0, vertex: v });
+        return Err(FitError::NonFinite {
+            frame: 0,
+            vertex: v,
+        });
     }
     let bones = init.len();
     let problem = Problem {
@@ -574,12 +581,53 @@ pub fn fit_frame_transforms(
         inv_scale2: 1.0,
         counted: vec![true],
     };
-    let weights = Weights { k: skin.k(), idx: skin.indices().to_vec(), w: skin.weights().to_vec() };
-    let mut xf: Vec<Rigid> =
-        init.iter().map(|t| Rigid { m: Mat3A::from_quat(t.rotation), t: t.translation.into() }).collect();
+    let weights = Weights {
+        k: skin.k(),
+        idx: skin.indices().to_vec(),
+        w: skin.weights().to_vec(),
+    };
+    let mut xf: Vec<Rigid> = init
+        .iter()
+        .map(|t| Rigid {
+            m: Mat3A::from_quat(t.rotation),
+            t: t.translation.into(),
+        })
+        .collect();
     transforms::update(&problem, bones, &weights, &mut xf, passes);
     Ok(xf
         .iter()
-        .map(|r| RigidTransform { rotation: Quat::from_mat3a(&r.m).normalize(), translation: Vec3::from(r.t) })
+        .map(|r| RigidTransform {
+            rotation: Quat::from_mat3a(&r.m).normalize(),
+            translation: Vec3::from(r.t),
+        })
         .collect())
+}
+
+/// Per bone, the rigid transform that best maps the rest positions of the vertices it
+/// influences onto `frame`, each vertex weighted by its skin weight (Kabsch). A cheap,
+/// independent-per-bone starting point for [`fit_frame_transforms`]; a bone without vertices
+/// gets the identity.
+pub fn weighted_kabsch_per_bone(
+    rest: &Mesh,
+    skin: &SkinWeights,
+    bone_count: usize,
+    frame: &[Vec3],
+) -> Vec<RigidTransform> {
+    let mut sums = vec![kabsch::PairSums::default(); bone_count];
+    for (v, (idx, w)) in skin.iter().enumerate() {
+        for (&b, &w) in idx.iter().zip(w) {
+            if w > 0.0 && (b as usize) < bone_count {
+                sums[b as usize].add(w as f64, rest.positions[v].into(), frame[v].into());
+            }
+        }
+    }
+    sums.iter()
+        .map(|s| match s.solve(Mat3A::IDENTITY) {
+            Some(r) => RigidTransform {
+                rotation: Quat::from_mat3a(&r.m).normalize(),
+                translation: Vec3::from(r.t),
+            },
+            None => RigidTransform::IDENTITY,
+        })
+        .collect()
 }

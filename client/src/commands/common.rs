@@ -1,0 +1,120 @@
+//! Pieces shared by the subcommands: loading example sets, parsing control-point specs,
+//! progress display.
+
+use std::io::IsTerminal;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use crease_core::mesh::examples::ExampleSet;
+use crease_train::bones::IterationStat;
+use crease_train::pipeline::ControlSpec;
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Loads an example set and says so on stderr.
+pub fn load_examples(path: &Path) -> anyhow::Result<ExampleSet> {
+    let start = Instant::now();
+    let set = ExampleSet::load(path)
+        .with_context(|| format!("reading examples from {}", path.display()))?;
+    eprintln!(
+        "read {} examples of {} vertices from {} in {:.2} s (rest pose: {})",
+        set.examples.len(),
+        set.rest.vertex_count(),
+        path.display(),
+        start.elapsed().as_secs_f64(),
+        set.rest_name
+    );
+    Ok(set)
+}
+
+/// Parses `--control-points`: `auto`, `auto:N`, or a comma-separated list of vertex indices.
+/// Without the option, the set's manifest list wins, else `auto:8`.
+pub fn control_spec(arg: Option<&str>, set: &ExampleSet) -> anyhow::Result<ControlSpec> {
+    match arg {
+        None => Ok(match &set.control_points {
+            Some(v) => ControlSpec::Vertices(v.clone()),
+            None => ControlSpec::Auto(8),
+        }),
+        Some("auto") => Ok(ControlSpec::Auto(8)),
+        Some(s) if s.starts_with("auto:") => {
+            let n: usize = s[5..]
+                .parse()
+                .with_context(|| format!("--control-points {s}: expected auto:N"))?;
+            if n == 0 {
+                bail!("--control-points {s}: need at least one control point");
+            }
+            Ok(ControlSpec::Auto(n))
+        }
+        Some(s) => {
+            let v: Result<Vec<u32>, _> = s.split(',').map(|x| x.trim().parse::<u32>()).collect();
+            let v = v.with_context(|| {
+                format!(
+                    "--control-points {s}: expected auto, auto:N or vertex indices like 12,400,7"
+                )
+            })?;
+            Ok(ControlSpec::Vertices(v))
+        }
+    }
+}
+
+/// A progress bar on a terminal, plain lines otherwise.
+#[derive(Debug)]
+pub struct Progress {
+    bar: Option<ProgressBar>,
+}
+
+impl Progress {
+    /// A bar of `len` steps (the fit's iteration cap).
+    pub fn new(len: u64) -> Self {
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let bar = ProgressBar::new(len);
+            bar.set_style(
+                ProgressStyle::with_template("{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg}")
+                    .expect("static template")
+                    .progress_chars("=> "),
+            );
+            bar
+        });
+        Self { bar }
+    }
+
+    /// Reports one fitting step.
+    pub fn step(&self, stat: &IterationStat) {
+        let line = format!(
+            "{:>7} {:>3}: {:>4} bones, rms {:.4e}, {:.2} s",
+            stat.phase, stat.iteration, stat.bones, stat.rms_normalized, stat.seconds
+        );
+        self.line(
+            stat.phase,
+            if stat.phase == "fit" {
+                Some(stat.iteration as u64)
+            } else {
+                None
+            },
+            &format!("rms {:.4e}", stat.rms_normalized),
+            &line,
+        );
+    }
+
+    /// Reports a step of anything: prefix, position, short message, full line.
+    pub fn line(&self, prefix: &str, pos: Option<u64>, msg: &str, line: &str) {
+        match &self.bar {
+            Some(bar) => {
+                bar.set_prefix(prefix.to_string());
+                if let Some(p) = pos {
+                    bar.set_position(p);
+                }
+                bar.set_message(msg.to_string());
+                bar.println(line);
+            }
+            None => eprintln!("{line}"),
+        }
+    }
+
+    /// Removes the bar.
+    pub fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}

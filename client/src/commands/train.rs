@@ -1,0 +1,155 @@
+//! `crease train`: bones, control points, rotation regressors and edge weights in one model
+//! file (FKY08 §3–5, HZY11 §5.1).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use crease_train::bones::FitOptions;
+use crease_train::pipeline::{self, TrainInput, TrainOptions};
+use crease_train::regress::{KernelChoice, Method, RegressOptions};
+
+use super::common::{self, Progress};
+
+/// Regression options shared by `train` and `eval`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct RegressArgs {
+    /// Number of proxy bones.
+    #[arg(long, default_value_t = FitOptions::default().bones)]
+    pub bones: usize,
+    /// Most bones per vertex (K, 1..=8).
+    #[arg(long, default_value_t = 8)]
+    pub max_influences: usize,
+    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), or vertex indices
+    /// `12,400,7`. Default: the manifest's list, else auto:8.
+    #[arg(long, value_name = "SPEC")]
+    pub control_points: Option<String>,
+    /// Control points per bone for the geometry-local methods (HZY11 k_c).
+    #[arg(long, default_value_t = 7)]
+    pub kc: usize,
+    /// Poses per local model and blended at run time (HZY11 k_p).
+    #[arg(long, default_value_t = 7)]
+    pub kp: usize,
+    /// Gaussian kernel width as a multiple of the RMS spread of the training control vectors.
+    #[arg(long, default_value_t = 1.0)]
+    pub sigma_scale: f32,
+    /// Control-point weight of the translation solve (FKY08 eq. 11; ~3 keyframing, ~0.3 mocap).
+    #[arg(long, default_value_t = 1.0)]
+    pub beta: f32,
+}
+
+impl RegressArgs {
+    /// Training options for `method`.
+    pub fn train_options(
+        &self,
+        method: Method,
+        set: &crease_core::mesh::ExampleSet,
+    ) -> anyhow::Result<TrainOptions> {
+        if !(self.beta.is_finite() && self.beta > 0.0) {
+            bail!("--beta must be > 0, got {}", self.beta);
+        }
+        if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
+            bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
+        }
+        Ok(TrainOptions {
+            fit: FitOptions {
+                bones: self.bones,
+                max_influences: self.max_influences,
+                ..FitOptions::default()
+            },
+            controls: common::control_spec(self.control_points.as_deref(), set)?,
+            regress: RegressOptions {
+                method,
+                kc: self.kc,
+                kp: self.kp,
+                kernel: KernelChoice::Gaussian {
+                    scale: self.sigma_scale,
+                },
+                ..RegressOptions::default()
+            },
+            edge_influences: None,
+            beta: self.beta,
+        })
+    }
+}
+
+/// Options of `crease train`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Example set: a folder of meshes or a TOML manifest (see `crease fit --help`).
+    #[arg(long, value_name = "DIR|MANIFEST")]
+    pub examples: PathBuf,
+    /// Predictor: global (FKY08), local-geometry, local-pose, local (HZY11), rbf.
+    #[arg(long, default_value = "global", value_parser = parse_method)]
+    pub method: Method,
+    /// Shared regression options.
+    #[command(flatten)]
+    pub regress: RegressArgs,
+    /// Where to write the model (atomically).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Print one JSON object with the training report on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// clap value parser for [`Method`].
+pub fn parse_method(s: &str) -> Result<Method, String> {
+    Method::parse(s).ok_or_else(|| {
+        format!(
+            "unknown method {s:?}; one of: {}",
+            Method::ALL.map(|m| m.name()).join(", ")
+        )
+    })
+}
+
+/// Runs `crease train`.
+pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
+    let set = common::load_examples(&args.examples)?;
+    let options = args.regress.train_options(args.method, &set)?;
+    let frames: Vec<&[crease_core::glam::Vec3]> = set
+        .examples
+        .iter()
+        .map(|e| e.mesh.positions.as_slice())
+        .collect();
+    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let progress = Progress::new(options.fit.max_iterations as u64);
+    let (model, report) = pipeline::train(
+        TrainInput {
+            rest: &set.rest,
+            frames: &frames,
+            names: &names,
+        },
+        &options,
+        &mut |s| progress.step(s),
+    )
+    .context("training")?;
+    progress.finish();
+    for w in &report.fit.warnings {
+        eprintln!("warning: {w}");
+    }
+    model
+        .save(&args.out)
+        .with_context(|| format!("writing model {}", args.out.display()))?;
+    eprintln!(
+        "wrote {}: {} bones, {} control points (vertices {:?}), method {}",
+        args.out.display(),
+        model.rig.bone_count,
+        model.controls.len(),
+        model.controls.iter().map(|c| c.vertex).collect::<Vec<_>>(),
+        model.method
+    );
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "trained in {:.2} s (bones {:.2} s, rms {:.4e}; controls {:.2} s; regressors {:.2} s; edge weights {:.2} s)",
+            report.seconds,
+            report.fit.seconds,
+            report.fit.rms_normalized,
+            report.controls_seconds,
+            report.regress_seconds,
+            report.edges_seconds
+        );
+    }
+    Ok(())
+}

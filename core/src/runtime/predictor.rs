@@ -1,0 +1,285 @@
+//! The per-frame pipeline: control points in, skinned vertices out.
+//!
+//! ```text
+//! controls (+ validity) -> hold last valid -> rotations (predict) -> translations (eq. 11)
+//!                       -> bone palette -> LBS into the context's vertex buffer
+//! ```
+//!
+//! A [`Predictor`] is shared, immutable state (an `Arc` of the model plus the translation
+//! system factored for one beta); a [`FrameContext`] holds everything one stream of frames
+//! needs and is reused frame after frame, so nothing is allocated per frame.
+//!
+//! **Occluded control points.** A frame may mark control points invalid (a hidden marker). The
+//! predictor then uses the last valid position of that point in this context (initially its
+//! rest-pose position). A control coordinate that is NaN or infinite counts as invalid too, so
+//! no frame ever produces a non-finite mesh.
+
+use std::sync::Arc;
+
+use glam::{Quat, Vec3};
+
+use super::predict::RotationScratch;
+use super::skin::{BonePalette, RigidTransform, SkinError, skin_lbs};
+use super::translations::{TranslationError, TranslationScratch, TranslationSolver};
+use crate::model::TrainedModel;
+
+/// What a frame got wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum PredictError {
+    /// The frame carries the wrong number of control points.
+    #[error("expected {expected} control points, got {got}")]
+    ControlCount {
+        /// The model's control-point count.
+        expected: usize,
+        /// What the frame carried.
+        got: usize,
+    },
+    /// The validity mask has the wrong length.
+    #[error("validity mask has {got} entries, expected {expected}")]
+    MaskLength {
+        /// The model's control-point count.
+        expected: usize,
+        /// The mask's length.
+        got: usize,
+    },
+    /// beta out of range.
+    #[error("beta must be finite and > 0, got {0}")]
+    Beta(f32),
+    /// The translation system could not be built.
+    #[error(transparent)]
+    Translations(#[from] TranslationError),
+    /// Skinning failed (model inconsistency; validated models cannot).
+    #[error(transparent)]
+    Skin(#[from] SkinError),
+}
+
+/// Shared per-model state of the per-frame pipeline.
+#[derive(Debug)]
+pub struct Predictor {
+    model: Arc<TrainedModel>,
+    solver: TranslationSolver,
+    beta: f32,
+}
+
+/// Reusable per-stream buffers; one per room or per synthesis job.
+#[derive(Clone, Debug)]
+pub struct FrameContext {
+    controls: Vec<Vec3>,
+    rotation_scratch: RotationScratch,
+    rotations: Vec<Quat>,
+    translations: Vec<Vec3>,
+    translation_scratch: TranslationScratch,
+    transforms: Vec<RigidTransform>,
+    palette: BonePalette,
+    positions: Vec<Vec3>,
+    held: usize,
+}
+
+impl FrameContext {
+    /// The bone transforms of the last frame.
+    pub fn transforms(&self) -> &[RigidTransform] {
+        &self.transforms
+    }
+
+    /// The skinned vertices of the last frame.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// The control positions the last frame used (occluded ones held).
+    pub fn controls(&self) -> &[Vec3] {
+        &self.controls
+    }
+
+    /// How many control values were held (occluded or non-finite) in the last frame.
+    pub fn held_controls(&self) -> usize {
+        self.held
+    }
+}
+
+impl Predictor {
+    /// Factors the translation system for `beta` (the model's default when `None`).
+    pub fn new(model: Arc<TrainedModel>, beta: Option<f32>) -> Result<Self, PredictError> {
+        let beta = beta.unwrap_or(model.beta);
+        check_beta(beta)?;
+        let control_vertices: Vec<u32> = model.controls.iter().map(|c| c.vertex).collect();
+        let solver = TranslationSolver::new(
+            &model.rig.rest.positions,
+            &model.edges,
+            &model.rig.skin,
+            &model.edge_skin,
+            &control_vertices,
+            model.rig.bone_count,
+            beta,
+        )?;
+        Ok(Self {
+            model,
+            solver,
+            beta,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Arc<TrainedModel> {
+        &self.model
+    }
+
+    /// Current control-point weight of the translation solve.
+    pub fn beta(&self) -> f32 {
+        self.beta
+    }
+
+    /// Changes beta (refactors the translation system; not a per-frame operation).
+    pub fn set_beta(&mut self, beta: f32) -> Result<(), PredictError> {
+        check_beta(beta)?;
+        self.solver.set_beta(beta)?;
+        self.beta = beta;
+        Ok(())
+    }
+
+    /// A context with every buffer sized for this model; control points start at rest.
+    pub fn new_context(&self) -> FrameContext {
+        let m = &self.model;
+        let bones = m.rig.bone_count;
+        FrameContext {
+            controls: m
+                .controls
+                .iter()
+                .map(|c| m.rig.rest.positions[c.vertex as usize])
+                .collect(),
+            rotation_scratch: RotationScratch::default(),
+            rotations: vec![Quat::IDENTITY; bones],
+            translations: vec![Vec3::ZERO; bones],
+            translation_scratch: self.solver.scratch(),
+            transforms: vec![RigidTransform::IDENTITY; bones],
+            palette: BonePalette::from_transforms(&vec![RigidTransform::IDENTITY; bones]),
+            positions: m.rig.rest.positions.clone(),
+            held: 0,
+        }
+    }
+
+    /// Control points -> bone transforms (rotations predicted, translations solved), into
+    /// `ctx.transforms()`.
+    pub fn predict_transforms(
+        &self,
+        ctx: &mut FrameContext,
+        controls: &[Vec3],
+        valid: Option<&[bool]>,
+    ) -> Result<(), PredictError> {
+        let n = self.model.controls.len();
+        if controls.len() != n {
+            return Err(PredictError::ControlCount {
+                expected: n,
+                got: controls.len(),
+            });
+        }
+        if let Some(mask) = valid {
+            if mask.len() != n {
+                return Err(PredictError::MaskLength {
+                    expected: n,
+                    got: mask.len(),
+                });
+            }
+        }
+        ctx.held = 0;
+        for (i, (&c, held)) in controls.iter().zip(ctx.controls.iter_mut()).enumerate() {
+            if c.is_finite() && valid.is_none_or(|m| m[i]) {
+                *held = c;
+            } else {
+                ctx.held += 1;
+            }
+        }
+        self.model
+            .rotations
+            .predict(&ctx.controls, &mut ctx.rotation_scratch, &mut ctx.rotations);
+        self.solve_translations_into(ctx);
+        Ok(())
+    }
+
+    /// Given rotations (one per bone) and the context's current controls, solves translations
+    /// (FKY08 eq. 11) and sets the context's transforms: the "oracle rotations" path of the
+    /// evaluation and the second half of [`Predictor::predict_transforms`].
+    pub fn solve_with_rotations(
+        &self,
+        ctx: &mut FrameContext,
+        rotations: &[Quat],
+        controls: &[Vec3],
+    ) -> Result<(), PredictError> {
+        let n = self.model.controls.len();
+        if controls.len() != n {
+            return Err(PredictError::ControlCount {
+                expected: n,
+                got: controls.len(),
+            });
+        }
+        ctx.rotations.copy_from_slice(rotations);
+        for (held, &c) in ctx.controls.iter_mut().zip(controls) {
+            if c.is_finite() {
+                *held = c;
+            }
+        }
+        self.solve_translations_into(ctx);
+        Ok(())
+    }
+
+    fn solve_translations_into(&self, ctx: &mut FrameContext) {
+        // On error (only non-finite rotations, which the regressors never emit) the previous
+        // translations stay: a frame never produces NaN.
+        let _ = self.solver.solve(
+            &ctx.rotations,
+            &ctx.controls,
+            &mut ctx.translation_scratch,
+            &mut ctx.translations,
+        );
+        for ((t, &q), &p) in ctx
+            .transforms
+            .iter_mut()
+            .zip(&ctx.rotations)
+            .zip(&ctx.translations)
+        {
+            *t = if p.is_finite() {
+                RigidTransform {
+                    rotation: q,
+                    translation: p,
+                }
+            } else {
+                RigidTransform {
+                    rotation: q,
+                    translation: Vec3::ZERO,
+                }
+            };
+        }
+    }
+
+    /// Skins the rest mesh with the context's current transforms into `ctx.positions()`.
+    pub fn skin(&self, ctx: &mut FrameContext) -> Result<(), PredictError> {
+        ctx.palette.update(&ctx.transforms);
+        skin_lbs(
+            &self.model.rig.rest.positions,
+            &self.model.rig.skin,
+            &ctx.palette,
+            &mut ctx.positions,
+        )?;
+        Ok(())
+    }
+
+    /// The whole frame: controls -> transforms -> skinned vertices.
+    pub fn predict<'c>(
+        &self,
+        ctx: &'c mut FrameContext,
+        controls: &[Vec3],
+        valid: Option<&[bool]>,
+    ) -> Result<&'c [Vec3], PredictError> {
+        self.predict_transforms(ctx, controls, valid)?;
+        self.skin(ctx)?;
+        Ok(&ctx.positions)
+    }
+}
+
+fn check_beta(beta: f32) -> Result<(), PredictError> {
+    if beta.is_finite() && beta > 0.0 {
+        Ok(())
+    } else {
+        Err(PredictError::Beta(beta))
+    }
+}
