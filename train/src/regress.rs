@@ -262,7 +262,7 @@ fn fit_group(
         controls,
         bones,
         kernel,
-        heat_sigma: sigma,
+        heat_sigma: heat_sigma(&x, dim, sigma),
         inputs: x,
         regression,
     }
@@ -340,4 +340,37 @@ pub fn align_signs(rotations: &[Vec<Quat>], bones: usize) -> Vec<Vec<Quat>> {
         }
     }
     out
+}
+
+/// Width of the pose-space heat kernel (HZY11 eq. 2, where sigma is left open): the RMS
+/// distance from each example to its nearest other example. On the scale of the gaps between
+/// poses, a frame equal to an example is dominated by that example's own model (which was
+/// trained on it), while frames between poses still blend their neighbours smoothly. The
+/// regression width `fallback` (spread of all examples) is used when examples coincide.
+fn heat_sigma(x: &[f32], dim: usize, fallback: f32) -> f32 {
+    let n = x.len() / dim;
+    if n < 2 {
+        return fallback;
+    }
+    let mut sum = 0.0f64;
+    for i in 0..n {
+        let xi = &x[i * dim..(i + 1) * dim];
+        let nearest = (0..n)
+            .filter(|&l| l != i)
+            .map(|l| {
+                x[l * dim..(l + 1) * dim]
+                    .iter()
+                    .zip(xi)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum::<f32>()
+            })
+            .fold(f32::INFINITY, f32::min);
+        sum += nearest as f64;
+    }
+    let s = (sum / n as f64).sqrt() as f32;
+    if s > 0.0 && s.is_finite() {
+        s
+    } else {
+        fallback
+    }
 }

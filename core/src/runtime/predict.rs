@@ -369,3 +369,36 @@ pub fn to_unit_quat(v: Vec4) -> Quat {
         Quat::IDENTITY
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heat_weights_sum_to_one_and_pick_the_nearest_pose() {
+        let (mut order, mut w) = (Vec::new(), Vec::new());
+        // Controls equal example 2 (distance 0): it must come first with the largest weight.
+        let d2 = [4.0, 1.0, 0.0, 9.0, 2.5];
+        heat_weights(&d2, 3, 1.0, &mut order, &mut w);
+        assert_eq!(order, vec![2, 1, 4]);
+        assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        assert!(w[0] > w[1] && w[1] > w[2]);
+        // Independent value: exp(-d/2) normalised.
+        let e: Vec<f32> = [0.0f32, 1.0, 2.5]
+            .iter()
+            .map(|d| (-d / 2.0).exp())
+            .collect();
+        let total: f32 = e.iter().sum();
+        for (a, b) in w.iter().zip(&e) {
+            assert!((a - b / total).abs() < 1e-6);
+        }
+        // Far away from everything: no underflow to all-zero, still sums to one.
+        heat_weights(&[1e6, 2e6], 2, 0.01, &mut order, &mut w);
+        assert_eq!(order[0], 0);
+        assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        // NaN distances never win and never produce NaN weights.
+        heat_weights(&[f32::NAN, 3.0], 2, 1.0, &mut order, &mut w);
+        assert_eq!(order[0], 1);
+        assert!(w.iter().all(|x| x.is_finite()));
+    }
+}

@@ -1,0 +1,187 @@
+//! Training, prediction, model files and evaluation on the real cactus set (19 poses).
+
+use std::sync::Arc;
+
+use crease_core::glam::Vec3;
+use crease_core::mesh::examples::ExampleSet;
+use crease_core::model::TrainedModel;
+use crease_core::runtime::predictor::Predictor;
+use crease_train::bones::FitOptions;
+use crease_train::eval::{self, EvalOptions, HeldOut};
+use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
+use crease_train::regress::{Method, RegressOptions};
+
+fn cactus() -> Option<ExampleSet> {
+    let dir = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/cactus"
+    ));
+    if !dir.is_dir() {
+        eprintln!("skipping: {} is absent", dir.display());
+        return None;
+    }
+    Some(ExampleSet::load(dir).unwrap())
+}
+
+fn options(method: Method) -> TrainOptions {
+    TrainOptions {
+        fit: FitOptions {
+            bones: 16,
+            max_influences: 4,
+            max_iterations: 15,
+            ..FitOptions::default()
+        },
+        controls: ControlSpec::Auto(6),
+        regress: RegressOptions {
+            method,
+            ..RegressOptions::default()
+        },
+        edge_influences: None,
+        beta: 1.0,
+    }
+}
+
+#[test]
+fn every_method_reproduces_training_poses_and_survives_occlusion() {
+    let Some(set) = cactus() else { return };
+    let frames: Vec<&[Vec3]> = set
+        .examples
+        .iter()
+        .map(|e| e.mesh.positions.as_slice())
+        .collect();
+    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let input = TrainInput {
+        rest: &set.rest,
+        frames: &frames,
+        names: &names,
+    };
+    let base = pipeline::train_base(input, &options(Method::Global), &mut |_| {}).unwrap();
+    let scale = set.rest.bbox_diagonal_scale();
+    for method in Method::ALL {
+        let model = base.model(
+            &RegressOptions {
+                method,
+                ..RegressOptions::default()
+            },
+            1.0,
+        );
+        // Model files round-trip exactly and reject corruption.
+        let bytes = model.to_bytes().unwrap();
+        assert_eq!(TrainedModel::from_bytes(&bytes).unwrap(), model);
+        for at in [40usize, bytes.len() / 2, bytes.len() - 3] {
+            let mut bad = bytes.clone();
+            bad[at] ^= 0x10;
+            assert!(
+                TrainedModel::from_bytes(&bad).is_err(),
+                "{method:?}: flipped byte {at} accepted"
+            );
+        }
+        let predictor = Predictor::new(Arc::new(model), None).unwrap();
+        let mut ctx = predictor.new_context();
+        // Predicting a training pose's own control points reproduces its rotations closely.
+        let mut worst_angle = 0.0f32;
+        let (mut sum_angle, mut count) = (0.0f32, 0usize);
+        for (e, f) in frames.iter().enumerate() {
+            let controls: Vec<Vec3> = base
+                .control_vertices
+                .iter()
+                .map(|&v| f[v as usize])
+                .collect();
+            predictor
+                .predict_transforms(&mut ctx, &controls, None)
+                .unwrap();
+            for (b, t) in ctx.transforms().iter().enumerate() {
+                let a = t.rotation.angle_between(base.rotations[e][b]);
+                worst_angle = worst_angle.max(a);
+                sum_angle += a;
+                count += 1;
+            }
+        }
+        let mean_angle = sum_angle / count as f32;
+        eprintln!(
+            "{method:?}: training rotations mean error {mean_angle:.4} rad, worst {worst_angle:.4} rad"
+        );
+        assert!(
+            mean_angle < 0.03 && worst_angle < 0.3,
+            "{method:?}: training rotations off: mean {mean_angle}, worst {worst_angle} rad"
+        );
+        // A frame with occluded (and NaN) markers still yields a finite mesh.
+        let f = frames[5];
+        let mut controls: Vec<Vec3> = base
+            .control_vertices
+            .iter()
+            .map(|&v| f[v as usize])
+            .collect();
+        controls[0] = Vec3::NAN;
+        let valid: Vec<bool> = (0..controls.len()).map(|i| i % 2 == 1).collect();
+        let got = predictor
+            .predict(&mut ctx, &controls, Some(&valid))
+            .unwrap();
+        assert!(
+            got.iter().all(|p| p.is_finite()),
+            "{method:?}: non-finite vertex"
+        );
+        assert_eq!(ctx.held_controls(), controls.len().div_ceil(2));
+        let rms = eval::rms_normalized(ctx.positions(), f, scale);
+        assert!(rms < 0.2, "{method:?}: occluded frame far off: {rms}");
+    }
+}
+
+#[test]
+fn cactus_leave_one_out_and_test_tables() {
+    let Some(set) = cactus() else { return };
+    let frames: Vec<&[Vec3]> = set
+        .examples
+        .iter()
+        .map(|e| e.mesh.positions.as_slice())
+        .collect();
+    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    // Train on the even poses, test on the odd ones; leave-one-out over the training poses.
+    let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
+        (0..frames.len()).partition(|i| i % 2 == 0);
+    let tf: Vec<&[Vec3]> = train_idx.iter().map(|&i| frames[i]).collect();
+    let tn: Vec<String> = train_idx.iter().map(|&i| names[i].clone()).collect();
+    let hf: Vec<&[Vec3]> = test_idx.iter().map(|&i| frames[i]).collect();
+    let hn: Vec<String> = test_idx.iter().map(|&i| names[i].clone()).collect();
+    let input = TrainInput {
+        rest: &set.rest,
+        frames: &tf,
+        names: &tn,
+    };
+    let opts = EvalOptions {
+        train: options(Method::Global),
+        methods: Method::ALL.to_vec(),
+        beta: 1.0,
+    };
+    let test = eval::evaluate_test(
+        input,
+        HeldOut {
+            names: &hn,
+            frames: &hf,
+        },
+        &opts,
+        &mut |_| {},
+    )
+    .unwrap();
+    let loo = eval::evaluate_loo(input, &opts, &mut |_, _| {}).unwrap();
+    for (name, table) in [("test", &test), ("loo", &loo)] {
+        for row in eval::ROWS {
+            let s = &table[row];
+            eprintln!(
+                "cactus {name} {row:<17} {:.4e} (max {:.4e})",
+                s.rms_mean, s.rms_max
+            );
+            assert!(s.rms_mean.is_finite());
+        }
+        // The floors are floors, well below not deforming at all.
+        assert!(table["oracle"].rms_mean <= table["oracle-rotations"].rms_mean);
+        assert!(table["oracle-rotations"].rms_mean < table["rest"].rms_mean / 2.0);
+    }
+    // Poses between training poses (the held-out odd ones) are predicted better than rest.
+    assert!(
+        test["global"].rms_mean < test["rest"].rms_mean,
+        "global no better than rest on test"
+    );
+    assert_eq!(test["rest"].frames.len(), hf.len());
+    assert_eq!(loo["rest"].frames.len(), tf.len() - 1);
+}
