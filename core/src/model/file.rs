@@ -547,7 +547,8 @@ fn truncated(what: &str, start: u64, end: u64, len: u64) -> FormatError {
     }
 }
 
-/// Writes `bytes` to `path` atomically (see [`crate::atomic::write_atomic_with`]).
+/// Writes `bytes` to `path` atomically: a temporary file beside it, fsync, rename, then the
+/// directory fsync (best effort); on error `path` is left as it was.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     crate::atomic::write_atomic_with(path, |w| w.write_all(bytes))
 }

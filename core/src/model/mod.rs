@@ -60,3 +60,19 @@ pub enum ModelError {
     #[error("glTF export: {0}")]
     Export(String),
 }
+
+/// Writes serialised model bytes to `path` atomically, naming the path on error.
+pub(crate) fn save_bytes(path: &std::path::Path, bytes: &[u8]) -> Result<(), ModelError> {
+    file::write_atomic(path, bytes).map_err(|source| ModelError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads a model file's bytes, naming the path on error.
+pub(crate) fn read_bytes(path: &std::path::Path) -> Result<Vec<u8>, ModelError> {
+    std::fs::read(path).map_err(|source| ModelError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}

@@ -20,7 +20,7 @@ use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::ModelError;
-use super::file::{Container, ContainerWriter, FormatError, ModelKind, Tag, write_atomic};
+use super::file::{Container, ContainerWriter, FormatError, ModelKind, Tag};
 use crate::mesh::Mesh;
 use crate::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
 
@@ -254,25 +254,15 @@ impl Rig {
         Ok(rig)
     }
 
-    /// Writes the rig to `path` atomically (see [`write_atomic`]). The rig is validated and
+    /// Writes the rig to `path` atomically (see [`super::file::write_atomic`]). The rig is validated and
     /// serialised in memory first, so an invalid rig leaves an existing file untouched.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ModelError> {
-        let path = path.as_ref();
-        let bytes = self.to_bytes()?;
-        write_atomic(path, &bytes).map_err(|source| ModelError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        super::save_bytes(path.as_ref(), &self.to_bytes()?)
     }
 
     /// Reads and validates a rig file.
     pub fn load(path: impl AsRef<Path>) -> Result<Rig, ModelError> {
-        let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Rig::from_bytes(&bytes)
+        Rig::from_bytes(&super::read_bytes(path.as_ref())?)
     }
 
     /// Skins the rest mesh into `out` with example `example`'s transforms (LBS). A convenience

@@ -22,7 +22,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::ModelError;
-use super::file::{Container, ContainerWriter, ModelKind, Tag, write_atomic};
+use super::file::{Container, ContainerWriter, ModelKind, Tag};
 use super::rig::Rig;
 use crate::runtime::predict::RotationModel;
 use crate::runtime::skin::SkinWeights;
@@ -175,21 +175,11 @@ impl TrainedModel {
 
     /// Writes the model atomically.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<(), ModelError> {
-        let path = path.as_ref();
-        let bytes = self.to_bytes()?;
-        write_atomic(path, &bytes).map_err(|source| ModelError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        super::save_bytes(path.as_ref(), &self.to_bytes()?)
     }
 
     /// Reads and validates a model file.
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ModelError> {
-        let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_bytes(&bytes)
+        Self::from_bytes(&super::read_bytes(path.as_ref())?)
     }
 }
