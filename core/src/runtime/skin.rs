@@ -529,8 +529,13 @@ fn lbs_kernel<const K: usize>(
     for ((o, &p), (ii, ww)) in out.iter_mut().zip(rest).zip(influences) {
         let (mut cx, mut cy, mut cz, mut ct) = (Vec3A::ZERO, Vec3A::ZERO, Vec3A::ZERO, Vec3A::ZERO);
         for j in 0..K {
-            let m = &mats[ii[j] as usize];
             let wj = ww[j];
+            // Slots are sorted heaviest first (SkinWeights::new), so the first zero ends the
+            // vertex's influences: fitted rigs use far fewer than K on most vertices.
+            if wj == 0.0 {
+                break;
+            }
+            let m = &mats[ii[j] as usize];
             cx += m.matrix3.x_axis * wj;
             cy += m.matrix3.y_axis * wj;
             cz += m.matrix3.z_axis * wj;
