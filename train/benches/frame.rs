@@ -27,12 +27,8 @@ fn bench(c: &mut Criterion) {
     }
     let train = ExampleSet::load(root.join("train.toml")).expect("train set");
     let test = ExampleSet::load(root.join("test.toml")).expect("test set");
-    let frames: Vec<&[Vec3]> = train
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
-    let names: Vec<String> = train.examples.iter().map(|e| e.name.clone()).collect();
+    let frames: Vec<&[Vec3]> = train.frames();
+    let names: Vec<String> = train.names();
     let options = TrainOptions {
         fit: FitOptions {
             bones: 150,

@@ -318,11 +318,7 @@ fn cactus_fits_well_in_seconds() {
         return;
     }
     let set = crease_core::mesh::examples::ExampleSet::load(dir).expect("cactus set loads");
-    let frames: Vec<&[Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
+    let frames: Vec<&[Vec3]> = set.frames();
     assert_eq!(frames.len(), 19);
     let options = FitOptions {
         bones: 24,

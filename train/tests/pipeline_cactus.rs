@@ -44,12 +44,8 @@ fn options(method: Method) -> TrainOptions {
 #[test]
 fn every_method_reproduces_training_poses_and_survives_occlusion() {
     let Some(set) = cactus() else { return };
-    let frames: Vec<&[Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
-    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let frames: Vec<&[Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
     let input = TrainInput {
         rest: &set.rest,
         frames: &frames,
@@ -130,12 +126,8 @@ fn every_method_reproduces_training_poses_and_survives_occlusion() {
 #[test]
 fn cactus_leave_one_out_and_test_tables() {
     let Some(set) = cactus() else { return };
-    let frames: Vec<&[Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
-    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let frames: Vec<&[Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
     // Train on the even poses, test on the odd ones; leave-one-out over the training poses.
     let (train_idx, test_idx): (Vec<usize>, Vec<usize>) =
         (0..frames.len()).partition(|i| i % 2 == 0);

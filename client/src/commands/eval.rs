@@ -55,12 +55,8 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         methods,
         beta: args.regress.beta,
     };
-    let frames: Vec<&[Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
-    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let frames: Vec<&[Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
     let input = TrainInput {
         rest: &set.rest,
         frames: &frames,
@@ -84,12 +80,8 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 set.rest.triangles.len()
             );
         }
-        let tf: Vec<&[Vec3]> = test
-            .examples
-            .iter()
-            .map(|e| e.mesh.positions.as_slice())
-            .collect();
-        let tn: Vec<String> = test.examples.iter().map(|e| e.name.clone()).collect();
+        let tf: Vec<&[Vec3]> = test.frames();
+        let tn: Vec<String> = test.names();
         let table = eval::evaluate_test(
             input,
             HeldOut {

@@ -67,11 +67,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let load_start = Instant::now();
     let set = super::common::load_examples(&args.examples)?;
     let load_seconds = load_start.elapsed().as_secs_f64();
-    let frames: Vec<&[crease_core::glam::Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
+    let frames: Vec<&[crease_core::glam::Vec3]> = set.frames();
     eprintln!(
         "read {} examples of {} vertices in {:.2} s (rest pose: {})",
         frames.len(),

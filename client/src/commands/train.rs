@@ -106,12 +106,8 @@ pub fn parse_method(s: &str) -> Result<Method, String> {
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let set = common::load_examples(&args.examples)?;
     let options = args.regress.train_options(args.method, &set)?;
-    let frames: Vec<&[crease_core::glam::Vec3]> = set
-        .examples
-        .iter()
-        .map(|e| e.mesh.positions.as_slice())
-        .collect();
-    let names: Vec<String> = set.examples.iter().map(|e| e.name.clone()).collect();
+    let frames: Vec<&[crease_core::glam::Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
     let progress = Progress::new(options.fit.max_iterations as u64);
     let (model, report) = pipeline::train(
         TrainInput {

@@ -27,6 +27,7 @@ use serde::Deserialize;
 
 use super::error::{Location, MeshError};
 use super::{Mesh, MeshFormat};
+use glam::Vec3;
 
 /// A mesh and its name: its path relative to the set's root, `/`-separated
 /// (e.g. `gallop/0001.obj`).
@@ -86,6 +87,19 @@ struct Entry {
 }
 
 impl ExampleSet {
+    /// Every example's positions, rest pose first: the frames the fitters take.
+    pub fn frames(&self) -> Vec<&[Vec3]> {
+        self.examples
+            .iter()
+            .map(|e| e.mesh.positions.as_slice())
+            .collect()
+    }
+
+    /// Every example's name, rest pose first.
+    pub fn names(&self) -> Vec<String> {
+        self.examples.iter().map(|e| e.name.clone()).collect()
+    }
+
     /// Loads a folder or a `.toml` manifest (see the module documentation).
     pub fn load(path: impl AsRef<Path>) -> Result<ExampleSet, MeshError> {
         Self::load_with_progress(path, |_| {})

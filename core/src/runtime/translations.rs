@@ -635,11 +635,13 @@ impl TranslationSolver {
         out: &mut [Vec3],
     ) -> Result<(), TranslationError> {
         self.check_sizes(rotations.len(), controls.len(), out.len())?;
-        scratch.prepare(self.bones, self.solve_req);
-        for (m, q) in scratch.rot.iter_mut().zip(rotations) {
-            *m = DMat3::from_quat(q.as_dquat().normalize());
-        }
-        self.solve_prepared(scratch, controls)?;
+        self.solve_rotations(
+            rotations
+                .iter()
+                .map(|q| DMat3::from_quat(q.as_dquat().normalize())),
+            controls,
+            scratch,
+        )?;
         self.write(scratch, out.iter_mut());
         Ok(())
     }
@@ -654,11 +656,7 @@ impl TranslationSolver {
         out: &mut [Vec3],
     ) -> Result<(), TranslationError> {
         self.check_sizes(rotations.len(), controls.len(), out.len())?;
-        scratch.prepare(self.bones, self.solve_req);
-        for (m, r) in scratch.rot.iter_mut().zip(rotations) {
-            *m = r.as_dmat3();
-        }
-        self.solve_prepared(scratch, controls)?;
+        self.solve_rotations(rotations.iter().map(|r| r.as_dmat3()), controls, scratch)?;
         self.write(scratch, out.iter_mut());
         Ok(())
     }
@@ -672,13 +670,30 @@ impl TranslationSolver {
         scratch: &mut TranslationScratch,
     ) -> Result<(), TranslationError> {
         self.check_sizes(bones.len(), controls.len(), bones.len())?;
-        scratch.prepare(self.bones, self.solve_req);
-        for (m, b) in scratch.rot.iter_mut().zip(bones.iter()) {
-            *m = DMat3::from_quat(b.rotation.as_dquat().normalize());
-        }
-        self.solve_prepared(scratch, controls)?;
+        self.solve_rotations(
+            bones
+                .iter()
+                .map(|b| DMat3::from_quat(b.rotation.as_dquat().normalize())),
+            controls,
+            scratch,
+        )?;
         self.write(scratch, bones.iter_mut().map(|b| &mut b.translation));
         Ok(())
+    }
+
+    /// The shared body of the public solves: sizes are checked by the caller; fills the
+    /// scratch's rotation matrices and solves into the scratch.
+    fn solve_rotations(
+        &self,
+        rotations: impl Iterator<Item = DMat3>,
+        controls: &[Vec3],
+        scratch: &mut TranslationScratch,
+    ) -> Result<(), TranslationError> {
+        scratch.prepare(self.bones, self.solve_req);
+        for (m, r) in scratch.rot.iter_mut().zip(rotations) {
+            *m = r;
+        }
+        self.solve_prepared(scratch, controls)
     }
 
     /// A scratch sized for this solver, so that even the first solve allocates nothing.
