@@ -14,8 +14,10 @@
 //! or `--no-default-features` for the build without rayon. After criterion's groups it prints
 //! one summary line per k with medians of its own timing loop.
 
+mod common;
+use common::timings;
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_dqs, skin_lbs};
@@ -114,23 +116,6 @@ fn frame(
     };
     r.expect("sizes checked at setup");
     black_box(out);
-}
-
-/// Median and minimum wall time of `f` over `iters` runs (after a warm-up). The minimum is the
-/// figure to trust on a machine shared with other work.
-fn timings(iters: usize, mut f: impl FnMut()) -> (Duration, Duration) {
-    for _ in 0..iters / 10 + 1 {
-        f();
-    }
-    let mut t: Vec<Duration> = (0..iters)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    (t[iters / 2], t[0])
 }
 
 fn threads() -> String {

@@ -14,8 +14,10 @@
 //! `RAYON_NUM_THREADS=1 cargo bench -p crease-core --bench translations -- --quick`. After
 //! criterion's groups it prints a summary line with medians of its own timing loop.
 
+mod common;
+use common::timings;
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
@@ -119,22 +121,6 @@ fn random_rotation(rng: &mut StdRng) -> Quat {
         rng.random_range(-1.0..1.0),
     );
     Quat::from_axis_angle(axis.normalize_or(Vec3::Z), rng.random_range(-1.0..1.0))
-}
-
-/// Median and minimum of `iters` timed runs of `f` after a warm-up.
-fn timings(iters: usize, mut f: impl FnMut()) -> (Duration, Duration) {
-    for _ in 0..iters / 10 + 1 {
-        f();
-    }
-    let mut t: Vec<Duration> = (0..iters)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    (t[iters / 2], t[0])
 }
 
 fn main() {
