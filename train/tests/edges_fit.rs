@@ -3,38 +3,12 @@
 //! weights (recovered), a zero-length edge (endpoint blend), and random data where the fit must
 //! beat the endpoints' averaged weights. The objective is recomputed here from its definition.
 
+mod common;
 use crease_core::glam::{DVec3, Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::runtime::skin::SkinWeights;
 use crease_train::edges::{EdgeWeightError, fit_edge_weights, try_fit_edge_weights};
 use rand::{Rng, SeedableRng, rngs::StdRng};
-
-/// A tube along z: `rings` rings of `around` vertices, triangulated.
-fn tube(rings: usize, around: usize) -> Mesh {
-    let mut positions = Vec::new();
-    for r in 0..rings {
-        let z = 2.0 * r as f32 / (rings - 1) as f32;
-        for a in 0..around {
-            let phi = std::f32::consts::TAU * a as f32 / around as f32;
-            positions.push(Vec3::new(phi.cos(), phi.sin(), z));
-        }
-    }
-    let mut triangles = Vec::new();
-    for r in 0..rings - 1 {
-        for a in 0..around {
-            let i0 = (r * around + a) as u32;
-            let i1 = (r * around + (a + 1) % around) as u32;
-            let j0 = i0 + around as u32;
-            let j1 = i1 + around as u32;
-            triangles.push([i0, i1, j1]);
-            triangles.push([i0, j1, j0]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
 
 fn random_rotation(rng: &mut StdRng) -> Quat {
     let axis = Vec3::new(
@@ -143,7 +117,7 @@ fn weighted(edge_skin: &SkinWeights, e: usize) -> (Vec<u32>, Vec<f64>) {
 #[test]
 fn shared_rotation_per_frame_is_fitted_exactly() {
     let mut rng = StdRng::seed_from_u64(1);
-    let mesh = tube(6, 8);
+    let mesh = common::tube(6, 8, 2.0);
     let edges = mesh.edges();
     let bones = 5;
     let skin = random_skin(&mut rng, mesh.vertex_count(), 2, bones);
@@ -215,7 +189,7 @@ fn weights_that_generated_an_edge_are_recovered() {
 #[test]
 fn fit_beats_the_endpoint_blend_on_random_data() {
     let mut rng = StdRng::seed_from_u64(3);
-    let mesh = tube(8, 10);
+    let mesh = common::tube(8, 10, 2.0);
     let edges = mesh.edges();
     let bones = 6u32;
     let skin = random_skin(&mut rng, mesh.vertex_count(), 2, bones);
@@ -263,7 +237,7 @@ fn fit_beats_the_endpoint_blend_on_random_data() {
 #[test]
 fn zero_length_edge_gets_the_endpoint_blend() {
     let mut rng = StdRng::seed_from_u64(4);
-    let mut mesh = tube(4, 6);
+    let mut mesh = common::tube(4, 6, 2.0);
     mesh.positions[1] = mesh.positions[0];
     let edges = vec![[0u32, 1], [1, 2]];
     let skin = random_skin(&mut rng, mesh.vertex_count(), 2, 4);
@@ -296,7 +270,7 @@ fn zero_length_edge_gets_the_endpoint_blend() {
 #[test]
 fn inconsistent_inputs_are_errors() {
     let mut rng = StdRng::seed_from_u64(5);
-    let mesh = tube(3, 4);
+    let mesh = common::tube(3, 4, 2.0);
     let n = mesh.vertex_count();
     let edges = mesh.edges();
     let skin = random_skin(&mut rng, n, 2, 3);
