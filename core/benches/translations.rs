@@ -21,6 +21,7 @@ use std::time::Duration;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
+use crease_core::runtime::edge_skin::EdgeSkin;
 use crease_core::runtime::skin::SkinWeights;
 use crease_core::runtime::translations::TranslationSolver;
 use criterion::Criterion;
@@ -73,7 +74,7 @@ fn mesh() -> (Mesh, String) {
 
 /// Vertex weights (K nearest of `BONES` centres, inverse distance), edge weights (endpoint
 /// average, stride 2K) and control vertices.
-fn rig(mesh: &Mesh, edges: &[[u32; 2]]) -> (SkinWeights, SkinWeights, Vec<u32>) {
+fn rig(mesh: &Mesh, edges: &[[u32; 2]]) -> (SkinWeights, EdgeSkin, Vec<u32>) {
     let mut rng = StdRng::seed_from_u64(7);
     let n = mesh.vertex_count();
     let centres: Vec<Vec3> = (0..BONES)
@@ -108,6 +109,8 @@ fn rig(mesh: &Mesh, edges: &[[u32; 2]]) -> (SkinWeights, SkinWeights, Vec<u32>) 
         }
     }
     let edge_skin = SkinWeights::new(2 * K, ei, ew).expect("averaged weights");
+    let edge_skin =
+        EdgeSkin::from_weights(&mesh.positions, edges, &edge_skin).expect("valid edge skin");
     let controls = (0..CONTROLS)
         .map(|_| rng.random_range(0..n as u32))
         .collect();

@@ -1,9 +1,11 @@
 //! The Poisson translation solver (FKY08 eq. 11) against an independent dense least-squares
 //! solve (the full `3 (n_e + n_c) x 3 n_b` system assembled edge by edge and solved by SVD in
-//! f64), an analytically known rigid case, and its input checks.
+//! f64), an analytically known rigid case, and its input checks. The edge skin is a general
+//! vector skin (`e_k^s = sum_b R_b a_kb`), not just FKY08's scalar weights.
 
 use crease_core::glam::{Mat3A, Quat, Vec3};
 use crease_core::mesh::Mesh;
+use crease_core::runtime::edge_skin::EdgeSkin;
 use crease_core::runtime::skin::{RigidTransform, SkinWeights};
 use crease_core::runtime::translations::{TranslationError, TranslationSolver};
 use nalgebra::{DMatrix, DVector};
@@ -107,7 +109,7 @@ struct Problem {
     mesh: Mesh,
     edges: Vec<[u32; 2]>,
     skin: SkinWeights,
-    edge_skin: SkinWeights,
+    edge_skin: EdgeSkin,
     controls: Vec<u32>,
     bones: usize,
 }
@@ -118,7 +120,18 @@ fn problem(seed: u64, bones: usize, used: u32) -> Problem {
     let mesh = tube(10, 10);
     let edges = mesh.edges();
     let skin = random_skin(&mut rng, mesh.vertex_count(), 3, used);
-    let edge_skin = random_skin(&mut rng, edges.len(), 2, used);
+    // Scalar eq. 10 weights as vectors, then a random vector moved from slot 1 to slot 0 of
+    // each edge: a general vector skin whose vectors still sum to the rest edge (so a motion
+    // shared by all bones leaves every residual zero, see the rigid test).
+    let scalar = random_skin(&mut rng, edges.len(), 2, used);
+    let base = EdgeSkin::from_weights(&mesh.positions, &edges, &scalar).unwrap();
+    let mut vectors = base.vectors().to_vec();
+    for pair in vectors.chunks_exact_mut(2) {
+        let d = random_point(&mut rng, 0.3);
+        pair[0] += d;
+        pair[1] -= d;
+    }
+    let edge_skin = EdgeSkin::new(2, base.indices().to_vec(), vectors).unwrap();
     Problem {
         mesh,
         edges,
@@ -155,12 +168,15 @@ impl Problem {
         for (k, &[i0, i1]) in self.edges.iter().enumerate() {
             let w0 = dense_weights(&self.skin, i0 as usize, nb);
             let w1 = dense_weights(&self.skin, i1 as usize, nb);
-            let we = dense_weights(&self.edge_skin, k, nb);
             let (v0, v1) = (v64(p[i0 as usize]), v64(p[i1 as usize]));
-            // (v0^s - v1^s) - e^s = sum_b (w0 - w1) t_b + [sum_b w0 R v0 - w1 R v1 - we R e]
+            // (v0^s - v1^s) - e^s = sum_b (w0 - w1) t_b + [sum_b R_b (w0 v0 - w1 v1) - R_b a_kb]
             let mut known = nalgebra::Vector3::zeros();
             for b in 0..nb {
-                known += rot[b] * (w0[b] * v0 - w1[b] * v1 - we[b] * (v0 - v1));
+                known += rot[b] * (w0[b] * v0 - w1[b] * v1);
+            }
+            let (eb, ea) = self.edge_skin.edge(k);
+            for (&b, &a) in eb.iter().zip(ea) {
+                known -= rot[b as usize] * v64(a);
             }
             for c in 0..3 {
                 for b in 0..nb {
@@ -464,16 +480,7 @@ fn construction_rejects_inconsistent_inputs() {
         3,
         1.0,
     ));
-    assert!(
-        matches!(
-            e,
-            TranslationError::Skin {
-                what: "vertex skin",
-                ..
-            }
-        ),
-        "{e}"
-    );
+    assert!(matches!(e, TranslationError::Skin(_)), "{e}");
 
     for beta in [-0.5, f32::NAN, f32::INFINITY] {
         let e = err(TranslationSolver::new(

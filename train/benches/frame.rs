@@ -37,8 +37,7 @@ fn bench(c: &mut Criterion) {
         },
         controls: ControlSpec::Auto(8),
         regress: RegressOptions::default(),
-        edge_influences: None,
-        beta: 1.0,
+        ..TrainOptions::default()
     };
     let base = pipeline::train_base(
         TrainInput {

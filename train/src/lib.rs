@@ -6,7 +6,8 @@
 //! - [`controls`]: automatic control points (PCA + varimax, FKY08 §3).
 //! - [`geodesic`]: geodesic distances on the mesh edge graph (HZY11 §5.1.1).
 //! - [`kcca`]: kernel CCA regression collapsed to one matrix (FKY08 §4), and the RBF baseline.
-//! - [`edges`]: edge skinning weights (FKY08 eq. 10) for the translation solver.
+//! - [`edges`]: the edge skin of the translation solver: FKY08 eq. 10 weights and the vector
+//!   edge skin fitted on top of them.
 //! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
 //!   local, RBF baseline) as a runtime `RotationModel`.
 //! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
@@ -18,6 +19,7 @@ pub mod edges;
 pub mod eval;
 pub mod geodesic;
 pub mod kcca;
+mod linalg;
 mod par;
 pub mod pipeline;
 pub mod regress;

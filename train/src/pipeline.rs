@@ -3,13 +3,15 @@
 //! 1. proxy bones and weights ([`crate::bones`]);
 //! 2. control points: given, or automatic ([`crate::controls`]);
 //! 3. rotation regressors of the chosen method ([`crate::regress`]);
-//! 4. edge weights for the translation solver ([`crate::edges`], FKY08 eq. 10).
+//! 4. the edge skin of the translation solver ([`crate::edges`]): by default the vector edge
+//!    skin (its ridge cross-validated), or FKY08 eq. 10's scalar weights.
 
 use std::time::Instant;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::model::{ControlPoint, Rig, RigExample, TrainedModel};
+use crease_core::runtime::edge_skin::EdgeSkin;
 
 use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
 use crate::controls;
@@ -34,8 +36,10 @@ pub struct TrainOptions {
     pub controls: ControlSpec,
     /// Regression.
     pub regress: RegressOptions,
-    /// Bones per edge in the edge weights (FKY08 eq. 10); defaults to the vertex K.
+    /// Bones per edge in the edge skin; defaults to the vertex K.
     pub edge_influences: Option<usize>,
+    /// The edge skin of the translation solver.
+    pub edge_model: EdgeModel,
     /// Default beta stored in the model (FKY08 eq. 11; HZY11 Fig. 11: about 3 for keyframing,
     /// 0.3 for noisy mocap).
     pub beta: f32,
@@ -48,8 +52,28 @@ impl Default for TrainOptions {
             controls: ControlSpec::Auto(8),
             regress: RegressOptions::default(),
             edge_influences: None,
+            edge_model: EdgeModel::default(),
             beta: 1.0,
         }
+    }
+}
+
+/// How the translation solver predicts edges (see `crease_core::runtime::edge_skin`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EdgeModel {
+    /// FKY08 eq. 10: scalar weights, `e^s = sum_b w^_b R_b e^0`.
+    Scalar,
+    /// Free rest-frame vectors per (edge, bone) on the endpoints' bones
+    /// ([`edges::fit_edge_vectors`]); `ridge: None` cross-validates it.
+    Vector {
+        /// Relative ridge (`lambda = ridge * frames`).
+        ridge: Option<f64>,
+    },
+}
+
+impl Default for EdgeModel {
+    fn default() -> Self {
+        Self::Vector { ridge: None }
     }
 }
 
@@ -62,6 +86,9 @@ pub enum TrainError {
     /// Control points could not be chosen or are invalid.
     #[error("control points: {0}")]
     Controls(String),
+    /// The edge skin could not be fitted.
+    #[error("edge skin: {0}")]
+    Edges(#[from] edges::EdgeWeightError),
     /// Too few examples.
     #[error("need at least 2 examples (the rest pose and one more), got {0}")]
     TooFewExamples(usize),
@@ -76,8 +103,10 @@ pub struct TrainReport {
     pub controls_seconds: f64,
     /// Seconds fitting the rotation regressors.
     pub regress_seconds: f64,
-    /// Seconds fitting edge weights.
+    /// Seconds fitting the edge skin.
     pub edges_seconds: f64,
+    /// The vector edge skin's ridge and its cross-validation (`None` for scalar weights).
+    pub edge_vectors: Option<edges::EdgeVectorReport>,
     /// Total seconds.
     pub seconds: f64,
 }
@@ -107,8 +136,8 @@ pub struct TrainedBase {
     pub rotations: Vec<Vec<Quat>>,
     /// Mesh edges and their weights (FKY08 eq. 10).
     pub edges: Vec<[u32; 2]>,
-    /// Edge weights.
-    pub edge_skin: crease_core::runtime::skin::SkinWeights,
+    /// The edge skin of the translation solver.
+    pub edge_skin: EdgeSkin,
     /// Timings so far.
     pub report: TrainReport,
 }
@@ -213,16 +242,36 @@ pub fn train_base(
 
     let t = Instant::now();
     let mesh_edges = input.rest.edges();
-    let edge_skin = edges::fit_edge_weights(
-        input.rest,
-        &mesh_edges,
-        input.frames,
-        &rotations,
-        &fit.skin,
-        options
-            .edge_influences
-            .unwrap_or(options.fit.max_influences),
-    );
+    let edge_k = options
+        .edge_influences
+        .unwrap_or(options.fit.max_influences);
+    let (edge_skin, edge_vectors) = match options.edge_model {
+        EdgeModel::Scalar => {
+            let weights = edges::try_fit_edge_weights(
+                &input.rest.positions,
+                &mesh_edges,
+                input.frames,
+                &rotations,
+                &fit.skin,
+                edge_k,
+            )?;
+            let skin = EdgeSkin::from_weights(&input.rest.positions, &mesh_edges, &weights)
+                .map_err(edges::EdgeWeightError::from)?;
+            (skin, None)
+        }
+        EdgeModel::Vector { ridge } => {
+            let (skin, report) = edges::fit_edge_vectors(
+                &input.rest.positions,
+                &mesh_edges,
+                input.frames,
+                &rotations,
+                &fit.skin,
+                edge_k,
+                ridge,
+            )?;
+            (skin, Some(report))
+        }
+    };
     let edges_seconds = t.elapsed().as_secs_f64();
 
     let rig = Rig {
@@ -245,6 +294,7 @@ pub fn train_base(
         controls_seconds,
         regress_seconds: 0.0,
         edges_seconds,
+        edge_vectors,
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok(TrainedBase {

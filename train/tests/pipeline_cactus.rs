@@ -37,6 +37,7 @@ fn options(method: Method) -> TrainOptions {
             ..RegressOptions::default()
         },
         edge_influences: None,
+        edge_model: Default::default(),
         beta: 1.0,
     }
 }

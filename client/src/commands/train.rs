@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use crease_train::bones::FitOptions;
-use crease_train::pipeline::{self, TrainInput, TrainOptions};
+use crease_train::pipeline::{self, EdgeModel, TrainInput, TrainOptions};
 use crease_train::regress::{KernelChoice, Method, RegressOptions};
 
 use super::common::{self, Progress};
@@ -35,6 +35,13 @@ pub struct RegressArgs {
     /// Control-point weight of the translation solve (FKY08 eq. 11; ~3 keyframing, ~0.3 mocap).
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
+    /// Edge skin of the translation solve: `vector` (per-bone edge vectors, ridge chosen by
+    /// cross-validation) or `scalar` (FKY08 eq. 10 weights).
+    #[arg(long, default_value = "vector", value_parser = ["vector", "scalar"])]
+    pub edge_skin: String,
+    /// Ridge of the vector edge skin instead of cross-validating it (`inf` = scalar weights).
+    #[arg(long, value_name = "RIDGE")]
+    pub edge_ridge: Option<f64>,
 }
 
 impl RegressArgs {
@@ -50,6 +57,20 @@ impl RegressArgs {
         if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
             bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
         }
+        if let Some(r) = self.edge_ridge.filter(|r| r.is_nan() || *r < 0.0) {
+            bail!("--edge-ridge must be >= 0, got {r}");
+        }
+        let edge_model = match self.edge_skin.as_str() {
+            "scalar" => {
+                if self.edge_ridge.is_some() {
+                    bail!("--edge-ridge applies to --edge-skin vector only");
+                }
+                EdgeModel::Scalar
+            }
+            _ => EdgeModel::Vector {
+                ridge: self.edge_ridge,
+            },
+        };
         Ok(TrainOptions {
             fit: FitOptions {
                 bones: self.bones,
@@ -67,6 +88,7 @@ impl RegressArgs {
                 ..RegressOptions::default()
             },
             edge_influences: None,
+            edge_model,
             beta: self.beta,
         })
     }
@@ -138,13 +160,17 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "trained in {:.2} s (bones {:.2} s, rms {:.4e}; controls {:.2} s; regressors {:.2} s; edge weights {:.2} s)",
+            "trained in {:.2} s (bones {:.2} s, rms {:.4e}; controls {:.2} s; regressors {:.2} s; edge skin {:.2} s{})",
             report.seconds,
             report.fit.seconds,
             report.fit.rms_normalized,
             report.controls_seconds,
             report.regress_seconds,
-            report.edges_seconds
+            report.edges_seconds,
+            report
+                .edge_vectors
+                .as_ref()
+                .map_or(String::new(), |v| format!(", vector ridge {:e}", v.ridge))
         );
     }
     Ok(())

@@ -2,7 +2,7 @@
 //!
 //! It embeds the [`Rig`] (rest mesh, bones, weights, the training examples' bone transforms)
 //! and adds the control points, the rotation regressors ([`RotationModel`]) and the edge
-//! weights of the translation solver (FKY08 eq. 10). Stored as container kind 2 with the rig's
+//! skin of the translation solver ([`EdgeSkin`]). Stored as container kind 2 with the rig's
 //! sections plus:
 //!
 //! | tag | content |
@@ -10,7 +10,10 @@
 //! | `CTRL` | JSON: control points (vertex, name), method name, default beta |
 //! | `RREG` | JSON: the [`RotationModel`] (group structure and matrices) |
 //! | `EDGE` | edges, u32 x 2 per edge |
-//! | `EDBI` / `EDBW` | edge skin weights (indices u32, weights f32), stride from `CTRL` |
+//! | `EDBI` / `EDVC` | edge skin: bone indices (u32) and rest-frame vectors (f32 x 3), stride from `CTRL` |
+//!
+//! Files written before the vector edge skin carry `EDBW` (scalar FKY08 eq. 10 weights, f32)
+//! instead of `EDVC`; they still load, as [`EdgeSkin::from_weights`].
 //!
 //! `RREG` is JSON for now: the regressors are a few hundred thousand numbers at most for the
 //! models we train (serde_json writes shortest round-trip floats, so it is exact), and the
@@ -19,11 +22,13 @@
 
 use std::path::Path;
 
+use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use super::ModelError;
 use super::file::{Container, ContainerWriter, ModelKind, Tag};
 use super::rig::Rig;
+use crate::runtime::edge_skin::EdgeSkin;
 use crate::runtime::predict::RotationModel;
 use crate::runtime::skin::SkinWeights;
 
@@ -32,6 +37,7 @@ const RREG: Tag = Tag(*b"RREG");
 const EDGE: Tag = Tag(*b"EDGE");
 const EDBI: Tag = Tag(*b"EDBI");
 const EDBW: Tag = Tag(*b"EDBW");
+const EDVC: Tag = Tag(*b"EDVC");
 
 /// One control point: a mesh vertex the user moves (a marker on the surface).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -55,8 +61,8 @@ pub struct TrainedModel {
     pub rotations: RotationModel,
     /// Mesh edges used by the translation solver.
     pub edges: Vec<[u32; 2]>,
-    /// Edge skin weights (FKY08 eq. 10), one row per edge.
-    pub edge_skin: SkinWeights,
+    /// Edge skin of the translation solver, one row per edge.
+    pub edge_skin: EdgeSkin,
     /// Default control-point weight of the translation solve (FKY08 eq. 11).
     pub beta: f32,
 }
@@ -106,14 +112,16 @@ impl TrainedModel {
         {
             return bad(format!("edge {k} is {e:?}, the mesh has {n} vertices"));
         }
-        if self.edge_skin.vertex_count() != self.edges.len() {
+        if self.edge_skin.edge_count() != self.edges.len() {
             return bad(format!(
-                "{} edge weight rows for {} edges",
-                self.edge_skin.vertex_count(),
+                "{} edge skin rows for {} edges",
+                self.edge_skin.edge_count(),
                 self.edges.len()
             ));
         }
-        self.edge_skin.validate_bones(self.rig.bone_count)?;
+        self.edge_skin
+            .validate_bones(self.rig.bone_count)
+            .map_err(|e| ModelError::InvalidRig(e.to_string()))?;
         if !(self.beta.is_finite() && self.beta >= 0.0) {
             return bad(format!("beta is {}", self.beta));
         }
@@ -138,7 +146,7 @@ impl TrainedModel {
         w.add_json(RREG, &self.rotations)?;
         w.add_u32s(EDGE, bytemuck::cast_slice(&self.edges));
         w.add_u32s(EDBI, self.edge_skin.indices());
-        w.add_f32s(EDBW, self.edge_skin.weights());
+        w.add_f32s(EDVC, bytemuck::cast_slice(self.edge_skin.vectors()));
         Ok(w.to_bytes())
     }
 
@@ -157,9 +165,24 @@ impl TrainedModel {
             .ok_or_else(|| too_big("edges x influences"))?;
         let e2 = ne.checked_mul(2).ok_or_else(|| too_big("2 x edges"))?;
         let edges = c.u32s(EDGE, e2, &format!("2 x {ne} edges"))?;
-        let edges = edges.chunks_exact(2).map(|e| [e[0], e[1]]).collect();
+        let edges: Vec<[u32; 2]> = edges.chunks_exact(2).map(|e| [e[0], e[1]]).collect();
         let what = format!("{k} influences x {ne} edges");
-        let edge_skin = SkinWeights::new(k, c.u32s(EDBI, ek, &what)?, c.f32s(EDBW, ek, &what)?)?;
+        let indices = c.u32s(EDBI, ek, &what)?;
+        let invalid = |e: crate::runtime::edge_skin::EdgeSkinError| {
+            ModelError::InvalidRig(format!("edge skin: {e}"))
+        };
+        let edge_skin = if c.section(EDVC).is_some() {
+            let e3 = ek.checked_mul(3).ok_or_else(|| too_big("3 x edge slots"))?;
+            let v = c.f32s(EDVC, e3, &format!("3 x {what}"))?;
+            let v = v
+                .chunks_exact(3)
+                .map(|p| Vec3::new(p[0], p[1], p[2]))
+                .collect();
+            EdgeSkin::new(k, indices, v).map_err(invalid)?
+        } else {
+            let weights = SkinWeights::new(k, indices, c.f32s(EDBW, ek, &what)?)?;
+            EdgeSkin::from_weights(&rig.rest.positions, &edges, &weights).map_err(invalid)?
+        };
         let model = TrainedModel {
             rig,
             controls: meta.controls,

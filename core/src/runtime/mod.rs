@@ -3,6 +3,7 @@
 //!
 //! Layout:
 //! - [`skin`]: linear-blend and dual-quaternion skinning.
+//! - [`edge_skin`]: how the translation solver predicts mesh edges from bone rotations.
 //! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
@@ -10,6 +11,7 @@
 //!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 
+pub mod edge_skin;
 pub mod kernel;
 pub mod predict;
 pub mod predictor;

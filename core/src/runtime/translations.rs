@@ -5,8 +5,11 @@
 //! ```text
 //! min_t  sum_k | (v_k0^s - v_k1^s) - e_k^s |^2  +  beta sum_l | v_{i_l}^s - c_l |^2   (FKY08 eq. 11)
 //!   v_i^s = sum_b w_ib (R_b v_i^0 + t_b)          vertex LBS
-//!   e_k^s = sum_b w^_kb R_b e_k^0                 edge LBS, e_k^0 = v_k0^0 - v_k1^0 (eq. 10)
+//!   e_k^s = sum_b R_b a_kb                        edge skin (super::edge_skin)
 //! ```
+//!
+//! FKY08's edge skin is `a_kb = w^_kb e_k^0` with scalar weights from eq. 10; crease fits free
+//! vectors `a_kb` instead (see [`super::edge_skin`] for why), which changes nothing below.
 //!
 //! # Structure used
 //!
@@ -18,7 +21,7 @@
 //! the solver is built and again, numerically only, in [`TranslationSolver::set_beta`].
 //!
 //! The right-hand side is linear in the rotations: with
-//! `q_kb = w^_kb e_k^0 - w_k0,b v_k0^0 + w_k1,b v_k1^0`,
+//! `q_kb = a_kb - w_k0,b v_k0^0 + w_k1,b v_k1^0`,
 //!
 //! ```text
 //! (A^T T)_a = sum_b R_b K_ab + beta sum_l w_{i_l},a c_l
@@ -61,6 +64,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use glam::{DMat3, DVec3, Mat3A, Quat, Vec3};
 
+use super::edge_skin::{EdgeSkin, EdgeSkinError};
 use super::skin::{RigidTransform, SkinError, SkinWeights};
 
 /// Ridge added to the diagonal of the normal matrix, relative to its largest diagonal entry.
@@ -96,15 +100,12 @@ pub enum TranslationError {
         /// How many there are (indices must be below this).
         limit: usize,
     },
-    /// A skin-weight table names a bone at or beyond `bone_count`.
-    #[error("{what}: {source}")]
-    Skin {
-        /// Which table ("vertex skin", "edge skin").
-        what: &'static str,
-        /// The check that failed.
-        #[source]
-        source: SkinError,
-    },
+    /// The vertex skin names a bone at or beyond `bone_count`.
+    #[error("vertex skin: {0}")]
+    Skin(#[source] SkinError),
+    /// The edge skin names a bone at or beyond `bone_count`.
+    #[error("edge skin: {0}")]
+    EdgeSkin(#[source] EdgeSkinError),
     /// `beta` is negative or not finite.
     #[error("beta = {beta}: must be finite and >= 0")]
     BadBeta {
@@ -371,7 +372,7 @@ impl TranslationSolver {
     /// - `rest`: rest positions `v_i^0`;
     /// - `edges`: the mesh edges `e_k = v_k0 - v_k1` (e.g. [`crate::mesh::Mesh::edges`]);
     /// - `vertex_skin`: vertex weights `w_ib`, one row per rest vertex;
-    /// - `edge_skin`: edge weights `w^_kb` (FKY08 eq. 10), one row per edge, same order;
+    /// - `edge_skin`: the edge skin `a_kb` ([`EdgeSkin`]), one row per edge, same order;
     /// - `control_vertices`: the vertex `i_l` of each control point, in the order the controls
     ///   will be passed to [`solve`](Self::solve);
     /// - `bone_count`: number of bones (every skin slot must name a bone below it);
@@ -381,7 +382,7 @@ impl TranslationSolver {
         rest: &[Vec3],
         edges: &[[u32; 2]],
         vertex_skin: &SkinWeights,
-        edge_skin: &SkinWeights,
+        edge_skin: &EdgeSkin,
         control_vertices: &[u32],
         bone_count: usize,
         beta: f32,
@@ -398,25 +399,19 @@ impl TranslationSolver {
                 got: vertex_skin.vertex_count(),
             });
         }
-        if edge_skin.vertex_count() != edges.len() {
+        if edge_skin.edge_count() != edges.len() {
             return Err(TranslationError::Size {
                 what: "edge skin rows (one per edge)",
                 expected: edges.len(),
-                got: edge_skin.vertex_count(),
+                got: edge_skin.edge_count(),
             });
         }
         vertex_skin
             .validate_bones(bone_count)
-            .map_err(|source| TranslationError::Skin {
-                what: "vertex skin",
-                source,
-            })?;
+            .map_err(TranslationError::Skin)?;
         edge_skin
             .validate_bones(bone_count)
-            .map_err(|source| TranslationError::Skin {
-                what: "edge skin",
-                source,
-            })?;
+            .map_err(TranslationError::EdgeSkin)?;
         if let Some(index) = rest.iter().position(|p| !p.is_finite()) {
             return Err(TranslationError::NonFinite {
                 what: "rest position",
@@ -467,8 +462,11 @@ impl TranslationSolver {
                 add_entry(&mut d, b, w, -1.0);
                 add_entry(&mut q, b, v1, w);
             }
-            for (b, w) in influences(edge_skin, k) {
-                add_entry(&mut q, b, v0 - v1, w);
+            let (bones, vectors) = edge_skin.edge(k);
+            for (&b, a) in bones.iter().zip(vectors) {
+                if *a != Vec3::ZERO {
+                    add_entry(&mut q, b, a.as_dvec3(), 1.0);
+                }
             }
             for &(b, x) in d.iter().filter(|(_, x)| *x != 0.0) {
                 a_rows.idx.push(b);

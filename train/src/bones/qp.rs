@@ -6,6 +6,8 @@
 //! Cholesky factor: `w_F = x - mu y`, `x = G_FF^-1 g_F`, `y = G_FF^-1 1`,
 //! `mu = (1^T x - 1) / 1^T y`. All buffers live in [`SimplexQp`] and are reused across vertices.
 
+use crate::linalg::cholesky_solve;
+
 /// Largest candidate set a vertex may have.
 pub(crate) const MAX_CANDIDATES: usize = 40;
 
@@ -169,23 +171,6 @@ impl SimplexQp {
             self.wf[a] = self.x[a] - self.mu * self.y[a];
         }
         self.wf[..m].iter().all(|v| v.is_finite())
-    }
-}
-
-fn cholesky_solve(l: &[f64], m: usize, b: &mut [f64]) {
-    for a in 0..m {
-        let mut s = b[a];
-        for k in 0..a {
-            s -= l[a * m + k] * b[k];
-        }
-        b[a] = s / l[a * m + a];
-    }
-    for a in (0..m).rev() {
-        let mut s = b[a];
-        for k in a + 1..m {
-            s -= l[k * m + a] * b[k];
-        }
-        b[a] = s / l[a * m + a];
     }
 }
 

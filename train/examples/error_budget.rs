@@ -1,0 +1,130 @@
+//! Probe of where the held-out error of a trained model comes from: rotation prediction versus
+//! the translation solve (FKY08 eq. 11). Prints, over the test frames, the mean rotation angle
+//! error of the global predictor against the oracle rotations (fitted to the truth), and the
+//! mesh error of eq. 11 with (a) the oracle rotations, (b) the predicted rotations, (c) the
+//! per-bone average of the two training examples nearest in control space.
+//!
+//! `cargo run --release -p crease-train --example error_budget -- TRAIN TEST [BONES] [K] [BETA]`
+
+use std::sync::Arc;
+
+use crease_core::glam::{Quat, Vec3, Vec4};
+use crease_core::mesh::examples::ExampleSet;
+use crease_core::runtime::predictor::Predictor;
+use crease_train::eval::{oracle_transforms, rms_normalized};
+use crease_train::pipeline::{self, TrainInput, TrainOptions};
+use crease_train::regress::{Method, RegressOptions};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let train = ExampleSet::load(&args[1]).expect("train");
+    let test = ExampleSet::load(&args[2]).expect("test");
+    let bones: usize = args.get(3).map_or(150, |s| s.parse().unwrap());
+    let k: usize = args.get(4).map_or(8, |s| s.parse().unwrap());
+    let beta: f32 = args.get(5).map_or(1.0, |s| s.parse().unwrap());
+    let mut options = TrainOptions::default();
+    options.fit.bones = bones;
+    options.fit.max_influences = k;
+    let frames = train.frames();
+    let names = train.names();
+    let base = pipeline::train_base(
+        TrainInput {
+            rest: &train.rest,
+            frames: &frames,
+            names: &names,
+        },
+        &options,
+        &mut |_| {},
+    )
+    .unwrap();
+    let rest = &base.rig.rest;
+    let scale = rest.bbox_diagonal_scale();
+    let nb = base.rig.bone_count;
+    let model = base.model(
+        &RegressOptions {
+            method: Method::Global,
+            ..RegressOptions::default()
+        },
+        beta,
+    );
+    let predictor = Predictor::new(Arc::new(model), Some(beta)).unwrap();
+    let mut ctx = predictor.new_context();
+    let mut scratch = Default::default();
+    let mut pred = vec![Quat::IDENTITY; nb];
+    let mut sums = [0.0f64; 4];
+    let n = test.examples.len() + 1;
+    for f in test.frames() {
+        let controls: Vec<Vec3> = base
+            .control_vertices
+            .iter()
+            .map(|&v| f[v as usize])
+            .collect();
+        let oracle: Vec<Quat> = oracle_transforms(rest, &base.rig.skin, nb, f)
+            .iter()
+            .map(|t| t.rotation)
+            .collect();
+        predictor
+            .model()
+            .rotations
+            .predict(&controls, &mut scratch, &mut pred);
+        let angle: f64 = oracle
+            .iter()
+            .zip(&pred)
+            .map(|(a, b)| a.angle_between(*b) as f64)
+            .sum::<f64>()
+            / nb as f64;
+        sums[0] += angle.to_degrees();
+        let mut mesh_err = |rot: &[Quat]| {
+            predictor
+                .solve_with_rotations(&mut ctx, rot, &controls)
+                .unwrap();
+            predictor.skin(&mut ctx).unwrap();
+            rms_normalized(ctx.positions(), f, scale)
+        };
+        let e_oracle = mesh_err(&oracle);
+        let e_pred = mesh_err(&pred);
+        // Two nearest training examples in control space, equal blend.
+        let mut d: Vec<(f32, usize)> = base
+            .example_controls
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                (
+                    c.iter()
+                        .zip(&controls)
+                        .map(|(a, b)| a.distance_squared(*b))
+                        .sum(),
+                    i,
+                )
+            })
+            .collect();
+        d.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (i, j) = (d[0].1, d[1].1);
+        let blend: Vec<Quat> = (0..nb)
+            .map(|b| {
+                let qa = Vec4::from(base.rotations[i][b]);
+                let mut qb = Vec4::from(base.rotations[j][b]);
+                if qa.dot(qb) < 0.0 {
+                    qb = -qb;
+                }
+                Quat::from_vec4(qa + qb).normalize()
+            })
+            .collect();
+        let e_blend = mesh_err(&blend);
+        sums[1] += e_oracle;
+        sums[2] += e_pred;
+        sums[3] += e_blend;
+        println!(
+            "angle err {angle:.4} rad; mesh: oracle-rot {e_oracle:.5} predicted {e_pred:.5} nearest-2 blend {e_blend:.5} ({}, {})",
+            names[i], names[j]
+        );
+    }
+    let n = n as f64;
+    println!(
+        "mean: angle {:.2} deg; oracle-rot {:.5}; predicted {:.5}; nearest-2 blend {:.5}",
+        sums[0] / n,
+        sums[1] / n,
+        sums[2] / n,
+        sums[3] / n
+    );
+}
