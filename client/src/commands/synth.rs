@@ -7,11 +7,14 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
-use crease_core::model::TrainedModel;
+use crease_core::model::{TrainedModel, gltf_export};
 use crease_core::runtime::predictor::Predictor;
 
 /// Options of `crease synth`.
 #[derive(Clone, Debug, clap::Args)]
+#[command(group(
+    clap::ArgGroup::new("output").required(true).multiple(true).args(["out", "gltf"])
+))]
 pub struct SynthArgs {
     /// Trained model (`crease train --out`).
     #[arg(long, value_name = "FILE")]
@@ -22,9 +25,17 @@ pub struct SynthArgs {
     /// or of 3 numbers per point).
     #[arg(long, value_name = "FILE")]
     pub controls: PathBuf,
-    /// Output folder (created); one mesh per frame, `frame_00000.obj` ...
+    /// Output folder (created); one mesh per frame, `frame_00000.obj` ... (`--out`, `--gltf`
+    /// or both).
     #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
+    pub out: Option<PathBuf>,
+    /// Also or instead write every frame into one animated glTF binary (.glb): the rest mesh
+    /// with one morph target per frame and an animation showing frame `i` at `i / fps` s.
+    #[arg(long, value_name = "FILE")]
+    pub gltf: Option<PathBuf>,
+    /// Frames per second of the `--gltf` animation.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
     /// Mesh format of the frames.
     #[arg(long, default_value = "obj", value_parser = ["obj", "ply"])]
     pub format: String,
@@ -44,18 +55,39 @@ pub struct ControlFrame {
 
 /// Runs `crease synth`.
 pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
+    if args.out.is_none() && args.gltf.is_none() {
+        bail!("nothing to write: give --out DIR (one mesh per frame), --gltf FILE, or both");
+    }
+    if args.gltf.is_some() && !(args.fps.is_finite() && args.fps > 0.0) {
+        bail!("--fps must be > 0, got {}", args.fps);
+    }
     let model = TrainedModel::load(&args.model)
         .with_context(|| format!("loading model {}", args.model.display()))?;
     let frames = read_control_frames(&args.controls, model.controls.len())?;
     let predictor =
         Predictor::new(Arc::new(model), args.beta).context("preparing the predictor")?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    if let Some(out) = &args.out {
+        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    }
+    let rest = &predictor.model().rig.rest;
+    // Every frame's positions, frame after frame, for the glTF; checked to fit one GLB before
+    // any frame is computed.
+    let mut animation = match &args.gltf {
+        Some(path) => {
+            gltf_export::check_animation_size(
+                rest.vertex_count(),
+                rest.triangles.len(),
+                frames.len(),
+            )
+            .with_context(|| format!("writing {}", path.display()))?;
+            Vec::with_capacity(frames.len() * rest.vertex_count())
+        }
+        None => Vec::new(),
+    };
     let mut ctx = predictor.new_context();
-    let triangles = predictor.model().rig.rest.triangles.clone();
     let mut mesh = Mesh {
         positions: Vec::new(),
-        triangles,
+        triangles: rest.triangles.clone(),
     };
     let start = Instant::now();
     let mut compute = 0.0;
@@ -65,16 +97,36 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         predictor.predict(&mut ctx, &f.positions, Some(&f.valid))?;
         compute += t.elapsed().as_secs_f64();
         held += ctx.held_controls();
-        mesh.positions.clear();
-        mesh.positions.extend_from_slice(ctx.positions());
-        let path = args.out.join(format!("frame_{i:05}.{}", args.format));
-        mesh.write(&path)
-            .with_context(|| format!("writing {}", path.display()))?;
+        if args.gltf.is_some() {
+            animation.extend_from_slice(ctx.positions());
+        }
+        if let Some(out) = &args.out {
+            mesh.positions.clear();
+            mesh.positions.extend_from_slice(ctx.positions());
+            let path = out.join(format!("frame_{i:05}.{}", args.format));
+            mesh.write(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
     }
+    if let Some(path) = &args.gltf {
+        gltf_export::export_animation_glb(
+            path,
+            &rest.triangles,
+            &rest.positions,
+            &animation,
+            args.fps,
+        )
+        .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let targets: Vec<String> = [args.out.as_ref(), args.gltf.as_ref()]
+        .into_iter()
+        .flatten()
+        .map(|p| p.display().to_string())
+        .collect();
     eprintln!(
         "wrote {} frames to {} in {:.2} s ({:.1} µs/frame synthesis; {held} occluded control values held)",
         frames.len(),
-        args.out.display(),
+        targets.join(" and "),
         start.elapsed().as_secs_f64(),
         1e6 * compute / frames.len().max(1) as f64
     );

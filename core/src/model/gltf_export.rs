@@ -1,5 +1,8 @@
-//! A [`Rig`] as a skinned, animated glTF 2.0 binary (`.glb`), so any glTF viewer (three.js,
-//! Blender) can show the proxy bones driving the rest mesh through the examples.
+//! Animated glTF 2.0 binaries (`.glb`) any viewer (three.js, Blender) can play: a [`Rig`] as a
+//! skinned mesh ([`export_rig_glb`]), and a sequence of synthesized meshes baked into morph
+//! targets ([`export_animation_glb`], what `crease synth --gltf` writes).
+//!
+//! # Skinned rig
 //!
 //! What is written:
 //! - one mesh (POSITION with min/max, u32 indices, `JOINTS_0`/`WEIGHTS_0` and, when k > 4,
@@ -18,8 +21,33 @@
 //! example), the skin matrix `G_i J_i⁻¹` must equal `T_i`, so the joint's animated global matrix
 //! is `G_i = T_i J_i`: `x -> q_i (x + c_i) + t_i`, i.e. rotation `q_i` and translation
 //! `q_i c_i + t_i`. The root is the identity, so these are also the joints' local transforms.
+//!
+//! # Baked vertex animation (morph targets)
+//!
+//! `F` frames of the same `n`-vertex, `t`-triangle mesh become one node `animation` holding one
+//! mesh `rest`:
+//! - base attribute POSITION = the rest positions (f32 VEC3, min/max), u32 indices; no NORMAL
+//!   (viewers compute flat normals from the morphed positions, which stay right in every frame,
+//!   where rest normals would not);
+//! - morph target `i` (`0..F`): POSITION = `frame_i - rest` per vertex (f32 VEC3, with the
+//!   min/max glTF 2.0 §3.7.2.2 requires of POSITION accessors), nothing else; mesh `weights` all
+//!   0, so without the animation the rest mesh shows;
+//! - one animation `frames` with one sampler and one channel (`weights` of the node): keyframe
+//!   `i` at `i / fps` seconds, output one weight per target per keyframe (`F × F` floats),
+//!   one-hot: at keyframe `i` target `i` has weight 1, all others 0, so the mesh is exactly
+//!   `rest + (frame_i - rest) = frame_i` (up to f32 rounding). LINEAR: between keyframes `i` and
+//!   `i + 1` the weights are `1 - s` and `s`, i.e. every vertex moves on the straight line
+//!   between its two frame positions.
+//!
+//! Binary chunk, in this order, each a buffer view starting where the previous ends (all sizes
+//! are multiples of 4, so no padding): rest positions (`12 n` bytes), indices (`12 t`), keyframe
+//! times (`4 F`), weights (`4 F²`), then the displacements of frame 0, 1, ... (`12 n` each). The
+//! GLB header stores the file length as a u32, so `12 n (F + 1) + 12 t + 4 F + 4 F²` plus the
+//! JSON must stay below 4 GiB ([`check_animation_size`]). The binary chunk is streamed from the
+//! caller's frames, never held in memory a second time by [`export_animation_glb`].
 
 use std::collections::BTreeMap;
+use std::io::{self, Write};
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
@@ -367,6 +395,359 @@ fn influences(rig: &Rig, slots: usize) -> (Vec<u16>, Vec<f32>) {
     (joints, weights)
 }
 
+/// Largest GLB the format can describe: the header stores the file length as a u32.
+pub const GLB_MAX_BYTES: u64 = u32::MAX as u64;
+
+/// GLB header (12 bytes) plus the JSON and BIN chunk headers (8 each).
+const GLB_FIXED_BYTES: u64 = 28;
+
+/// Bytes of the binary chunk of a baked animation (layout in the module docs); `None` when that
+/// does not even fit a u64.
+fn animation_bin_bytes(vertices: usize, triangles: usize, frames: usize) -> Option<u64> {
+    let (n, t, f) = (vertices as u64, triangles as u64, frames as u64);
+    let mesh = n.checked_mul(12)?;
+    let weights = f.checked_mul(f)?.checked_mul(4)?;
+    mesh.checked_mul(f.checked_add(1)?)?
+        .checked_add(t.checked_mul(12)?)?
+        .checked_add(f.checked_mul(4)?)?
+        .checked_add(weights)
+}
+
+/// Fails with [`ModelError::Export`] when `frames` frames of a mesh with `vertices` vertices and
+/// `triangles` triangles cannot fit one GLB (see the module docs); call it before computing the
+/// frames. Passing does not guarantee the JSON also fits, which [`animation_to_glb`] checks.
+pub fn check_animation_size(
+    vertices: usize,
+    triangles: usize,
+    frames: usize,
+) -> Result<(), ModelError> {
+    match animation_bin_bytes(vertices, triangles, frames) {
+        Some(bytes) if bytes <= GLB_MAX_BYTES - GLB_FIXED_BYTES => Ok(()),
+        bytes => Err(ModelError::Export(format!(
+            "{frames} frames of a {vertices}-vertex mesh need {} of morph-target data (12 bytes \
+             per vertex per frame plus 4 × frames² of weights); a GLB holds at most 4 GiB (its \
+             header stores the length as a u32): split the frames over several files",
+            bytes.map_or_else(|| "more than 2^64 bytes".into(), |b| format!("{b} bytes"))
+        ))),
+    }
+}
+
+/// Writes `F = frames.len() / rest.len()` frames of one mesh to `path` as a GLB whose animation
+/// plays them through morph targets (layout in the module docs), atomically, streaming the
+/// binary chunk from `frames`.
+///
+/// `triangles` index `rest`; `frames` holds frame 0's positions, then frame 1's, ...; keyframe
+/// `i` is at `i / fps` seconds.
+pub fn export_animation_glb(
+    path: impl AsRef<Path>,
+    triangles: &[[u32; 3]],
+    rest: &[Vec3],
+    frames: &[Vec3],
+    fps: f32,
+) -> Result<(), ModelError> {
+    let path = path.as_ref();
+    let glb = AnimationGlb::new(triangles, rest, frames, fps)?;
+    crate::atomic::write_atomic_with(path, |out| glb.write(out)).map_err(|source| ModelError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The GLB bytes [`export_animation_glb`] writes.
+pub fn animation_to_glb(
+    triangles: &[[u32; 3]],
+    rest: &[Vec3],
+    frames: &[Vec3],
+    fps: f32,
+) -> Result<Vec<u8>, ModelError> {
+    let glb = AnimationGlb::new(triangles, rest, frames, fps)?;
+    // The total was checked against GLB_MAX_BYTES, so it fits in memory's address range.
+    let mut bytes = Vec::with_capacity(glb.total_bytes() as usize);
+    glb.write(&mut bytes)
+        .map_err(|e| ModelError::Export(e.to_string()))?;
+    Ok(bytes)
+}
+
+/// A baked vertex animation ready to write: the JSON chunk is built, the binary chunk is
+/// produced from the borrowed positions while writing.
+struct AnimationGlb<'a> {
+    /// JSON chunk, padded with spaces to a multiple of 4.
+    json: Vec<u8>,
+    /// Binary chunk length (a multiple of 4: every value is 4 bytes).
+    bin_bytes: u64,
+    triangles: &'a [[u32; 3]],
+    rest: &'a [Vec3],
+    frames: &'a [Vec3],
+    /// Keyframe times in seconds, strictly increasing.
+    times: Vec<f32>,
+}
+
+impl<'a> AnimationGlb<'a> {
+    fn new(
+        triangles: &'a [[u32; 3]],
+        rest: &'a [Vec3],
+        frames: &'a [Vec3],
+        fps: f32,
+    ) -> Result<Self, ModelError> {
+        let export = |m: String| Err(ModelError::Export(m));
+        let n = rest.len();
+        if n == 0 || triangles.is_empty() {
+            return export("the rest mesh has no triangles".into());
+        }
+        if frames.is_empty() || frames.len() % n != 0 {
+            return export(format!(
+                "{} frame positions are not a positive multiple of the {n} rest vertices",
+                frames.len()
+            ));
+        }
+        let f = frames.len() / n;
+        if let Some(t) = triangles
+            .iter()
+            .position(|t| t.iter().any(|&i| i as usize >= n))
+        {
+            return export(format!(
+                "triangle {t} {:?} indexes beyond the {n} vertices",
+                triangles[t]
+            ));
+        }
+        if !(fps.is_finite() && fps > 0.0) {
+            return export(format!("fps must be a positive number, got {fps}"));
+        }
+        check_animation_size(n, triangles.len(), f)?;
+        let times: Vec<f32> = (0..f).map(|i| i as f32 / fps).collect();
+        if !times.windows(2).all(|w| w[0] < w[1]) || !times[f - 1].is_finite() {
+            return export(format!(
+                "{f} keyframes at {fps} fps do not give strictly increasing finite f32 times"
+            ));
+        }
+        if let Some(v) = rest.iter().position(|p| !p.is_finite()) {
+            return export(format!("rest vertex {v} is not finite: {}", rest[v]));
+        }
+
+        let mut root = json::Root::default();
+        let mut offset = 0u64;
+        let mut reserve = |bytes: u64| {
+            let at = offset;
+            offset += bytes;
+            at
+        };
+        let (lo, hi) = min_max(rest.iter().copied());
+        let vec3 = json::accessor::Type::Vec3;
+        let scalar = json::accessor::Type::Scalar;
+        let mesh_bytes = 12 * n as u64;
+        let position = accessor_at(
+            &mut root,
+            reserve(mesh_bytes),
+            mesh_bytes,
+            n,
+            F32,
+            vec3,
+            Some(VERTEX),
+            Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
+        );
+        let index_bytes = 12 * triangles.len() as u64;
+        let indices = accessor_at(
+            &mut root,
+            reserve(index_bytes),
+            index_bytes,
+            3 * triangles.len(),
+            U32,
+            scalar,
+            Some(INDEX),
+            None,
+        );
+        let input = accessor_at(
+            &mut root,
+            reserve(4 * f as u64),
+            4 * f as u64,
+            f,
+            F32,
+            scalar,
+            None,
+            Some((vec![times[0]], vec![times[f - 1]])),
+        );
+        let weight_bytes = 4 * (f as u64) * (f as u64);
+        let output = accessor_at(
+            &mut root,
+            reserve(weight_bytes),
+            weight_bytes,
+            f * f,
+            F32,
+            scalar,
+            None,
+            None,
+        );
+        let mut targets = Vec::with_capacity(f);
+        for (i, frame) in frames.chunks_exact(n).enumerate() {
+            // The same f32 subtraction as in `write`, so min/max bound the written values.
+            let displacements = frame.iter().zip(rest).map(|(&p, &r)| p - r);
+            if let Some(v) = displacements.clone().position(|d| !d.is_finite()) {
+                return export(format!(
+                    "frame {i}, vertex {v}: position {} is not finite or too far from the rest \
+                     position {}",
+                    frame[v], rest[v]
+                ));
+            }
+            let (lo, hi) = min_max(displacements);
+            let positions = accessor_at(
+                &mut root,
+                reserve(mesh_bytes),
+                mesh_bytes,
+                n,
+                F32,
+                vec3,
+                Some(VERTEX),
+                Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
+            );
+            targets.push(json::mesh::MorphTarget {
+                positions: Some(positions),
+                normals: None,
+                tangents: None,
+            });
+        }
+        let bin_bytes = offset;
+        debug_assert_eq!(Some(bin_bytes), animation_bin_bytes(n, triangles.len(), f));
+
+        let mut attributes = BTreeMap::new();
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), position);
+        let mesh = root.push(json::Mesh {
+            extensions: None,
+            extras: Default::default(),
+            name: Some("rest".into()),
+            primitives: vec![json::mesh::Primitive {
+                attributes,
+                extensions: None,
+                extras: Default::default(),
+                indices: Some(indices),
+                material: None,
+                mode: Checked::Valid(json::mesh::Mode::Triangles),
+                targets: Some(targets),
+            }],
+            weights: Some(vec![0.0; f]),
+        });
+        let node = root.push(json::Node {
+            name: Some("animation".into()),
+            mesh: Some(mesh),
+            ..Default::default()
+        });
+        let scene = root.push(json::Scene {
+            extensions: None,
+            extras: Default::default(),
+            name: Some("animation".into()),
+            nodes: vec![node],
+        });
+        root.scene = Some(scene);
+        root.push(json::Animation {
+            extensions: None,
+            extras: Default::default(),
+            channels: vec![json::animation::Channel {
+                sampler: json::Index::new(0),
+                target: json::animation::Target {
+                    extensions: None,
+                    extras: Default::default(),
+                    node,
+                    path: Checked::Valid(json::animation::Property::MorphTargetWeights),
+                },
+                extensions: None,
+                extras: Default::default(),
+            }],
+            name: Some("frames".into()),
+            samplers: vec![json::animation::Sampler {
+                extensions: None,
+                extras: Default::default(),
+                input,
+                interpolation: Checked::Valid(json::animation::Interpolation::Linear),
+                output,
+            }],
+        });
+        root.asset = json::Asset {
+            generator: Some(format!("crease {}", env!("CARGO_PKG_VERSION"))),
+            version: "2.0".into(),
+            ..Default::default()
+        };
+        root.push(json::Buffer {
+            byte_length: USize64::from(bin_bytes),
+            name: None,
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        });
+        let mut json = root
+            .to_vec()
+            .map_err(|e| ModelError::Export(e.to_string()))?;
+        json.resize(json.len().next_multiple_of(4), b' ');
+        let glb = AnimationGlb {
+            json,
+            bin_bytes,
+            triangles,
+            rest,
+            frames,
+            times,
+        };
+        if glb.total_bytes() > GLB_MAX_BYTES {
+            return export(format!(
+                "the GLB would take {} bytes; at most 4 GiB fit (its header stores the length as \
+                 a u32): split the frames over several files",
+                glb.total_bytes()
+            ));
+        }
+        Ok(glb)
+    }
+
+    /// Length of the whole GLB.
+    fn total_bytes(&self) -> u64 {
+        GLB_FIXED_BYTES + self.json.len() as u64 + self.bin_bytes
+    }
+
+    /// Writes the GLB: header, JSON chunk, BIN chunk in the layout of the module docs. Every
+    /// length fits a u32: [`Self::new`] checked the total against [`GLB_MAX_BYTES`].
+    fn write(&self, out: &mut dyn Write) -> io::Result<()> {
+        out.write_all(b"glTF")?;
+        out.write_all(&2u32.to_le_bytes())?;
+        out.write_all(&(self.total_bytes() as u32).to_le_bytes())?;
+        out.write_all(&(self.json.len() as u32).to_le_bytes())?;
+        out.write_all(b"JSON")?;
+        out.write_all(&self.json)?;
+        out.write_all(&(self.bin_bytes as u32).to_le_bytes())?;
+        out.write_all(b"BIN\0")?;
+        let n = self.rest.len();
+        let f = self.times.len();
+        let mut buf = Vec::with_capacity(12 * n.max(f));
+        let mut put_vec3s = |out: &mut dyn Write, values: &mut dyn Iterator<Item = Vec3>| {
+            buf.clear();
+            buf.extend(values.flat_map(|v| v.to_array()).flat_map(f32::to_le_bytes));
+            out.write_all(&buf)
+        };
+        put_vec3s(out, &mut self.rest.iter().copied())?;
+        let indices: Vec<u8> = self
+            .triangles
+            .iter()
+            .flatten()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
+        out.write_all(&indices)?;
+        out.write_all(&flat_f32(self.times.iter().copied()))?;
+        let mut row = vec![0u8; 4 * f];
+        for k in 0..f {
+            // One-hot keyframe k: only target k is shown.
+            row.fill(0);
+            row[4 * k..4 * k + 4].copy_from_slice(&1.0f32.to_le_bytes());
+            out.write_all(&row)?;
+        }
+        for frame in self.frames.chunks_exact(n) {
+            put_vec3s(out, &mut frame.iter().zip(self.rest).map(|(&p, &r)| p - r))?;
+        }
+        Ok(())
+    }
+}
+
+/// Component-wise minimum and maximum (glTF accessor `min`/`max`) of a non-empty sequence.
+fn min_max(values: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
+    values.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+        (lo.min(p), hi.max(p))
+    })
+}
+
 /// Little-endian bytes of f32 values.
 fn flat_f32(values: impl IntoIterator<Item = f32>) -> Vec<u8> {
     values.into_iter().flat_map(f32::to_le_bytes).collect()
@@ -392,17 +773,43 @@ fn push_accessor(
     min_max: Option<(Vec<f32>, Vec<f32>)>,
 ) -> json::Index<json::Accessor> {
     bin.resize(bin.len().next_multiple_of(4), 0);
+    let accessor = accessor_at(
+        root,
+        bin.len() as u64,
+        bytes.len() as u64,
+        count,
+        component,
+        ty,
+        target,
+        min_max,
+    );
+    bin.extend_from_slice(bytes);
+    accessor
+}
+
+/// A new buffer view of `byte_length` bytes at `offset` in buffer 0 and an accessor over all of
+/// it; the caller puts the bytes there.
+#[allow(clippy::too_many_arguments)]
+fn accessor_at(
+    root: &mut json::Root,
+    offset: u64,
+    byte_length: u64,
+    count: usize,
+    component: json::accessor::ComponentType,
+    ty: json::accessor::Type,
+    target: Option<json::buffer::Target>,
+    min_max: Option<(Vec<f32>, Vec<f32>)>,
+) -> json::Index<json::Accessor> {
     let view = root.push(json::buffer::View {
         buffer: json::Index::new(0),
-        byte_length: USize64::from(bytes.len()),
-        byte_offset: Some(USize64::from(bin.len())),
+        byte_length: USize64::from(byte_length),
+        byte_offset: Some(USize64::from(offset)),
         byte_stride: None,
         name: None,
         target: target.map(Checked::Valid),
         extensions: None,
         extras: Default::default(),
     });
-    bin.extend_from_slice(bytes);
     let (min, max) = match min_max {
         Some((lo, hi)) => (Some(json::Value::from(lo)), Some(json::Value::from(hi))),
         None => (None, None),
@@ -421,4 +828,135 @@ fn push_accessor(
         normalized: false,
         sparse: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two triangles over four vertices, three frames: frame 0 is the rest pose (all-zero
+    /// displacements), the others move every vertex differently.
+    fn quad() -> (Vec<[u32; 3]>, Vec<Vec3>, Vec<Vec3>) {
+        let rest = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let mut frames = rest.clone();
+        for k in 1..3 {
+            frames.extend(rest.iter().enumerate().map(|(v, &p)| {
+                p + Vec3::new(0.1 * k as f32, -0.25 * v as f32, 0.5 * (k * v) as f32)
+            }));
+        }
+        (vec![[0, 1, 2], [0, 2, 3]], rest, frames)
+    }
+
+    #[test]
+    fn animation_reads_back_as_one_hot_morph_targets() {
+        let (triangles, rest, frames) = quad();
+        let bytes = animation_to_glb(&triangles, &rest, &frames, 4.0).unwrap();
+        assert_eq!(
+            u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize,
+            bytes.len(),
+            "header length"
+        );
+        let doc = gltf::Gltf::from_slice(&bytes).unwrap();
+        let blob = doc.blob.as_deref().unwrap();
+        let mesh = doc.meshes().next().unwrap();
+        let prim = mesh.primitives().next().unwrap();
+        let reader = prim.reader(|_| Some(blob));
+        let base: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+        assert_eq!(base, rest.iter().map(|p| p.to_array()).collect::<Vec<_>>());
+        let idx: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+        assert_eq!(idx, vec![0, 1, 2, 0, 2, 3]);
+        assert_eq!(prim.morph_targets().count(), 3);
+        for (i, ((pos, _, _), target)) in reader
+            .read_morph_targets()
+            .zip(prim.morph_targets())
+            .enumerate()
+        {
+            let d: Vec<[f32; 3]> = pos.unwrap().collect();
+            let want = &frames[4 * i..4 * i + 4];
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for ((b, d), w) in base.iter().zip(&d).zip(want) {
+                for c in 0..3 {
+                    assert!(
+                        (b[c] + d[c] - w[c]).abs() <= 1e-6,
+                        "frame {i}: {b:?}+{d:?}!={w}"
+                    );
+                    lo[c] = lo[c].min(d[c]);
+                    hi[c] = hi[c].max(d[c]);
+                }
+            }
+            let acc = target.positions().unwrap();
+            // As f32: the JSON reader may round the f64 text by one f64 ulp.
+            let f32s = |v: json::Value| -> Vec<f32> {
+                v.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap() as f32)
+                    .collect()
+            };
+            assert_eq!(f32s(acc.min().unwrap()), lo, "frame {i} min");
+            assert_eq!(f32s(acc.max().unwrap()), hi, "frame {i} max");
+        }
+        let anim = doc.animations().next().unwrap();
+        let channel = anim.channels().next().unwrap();
+        assert_eq!(channel.target().node().index(), 0);
+        let sampler = channel.sampler();
+        assert_eq!(
+            sampler.interpolation(),
+            gltf::animation::Interpolation::Linear
+        );
+        let r = channel.reader(|_| Some(blob));
+        let times: Vec<f32> = r.read_inputs().unwrap().collect();
+        assert_eq!(times, vec![0.0, 0.25, 0.5]);
+        let Some(gltf::animation::util::ReadOutputs::MorphTargetWeights(w)) = r.read_outputs()
+        else {
+            panic!("weights channel")
+        };
+        let w: Vec<f32> = w.into_f32().collect();
+        let eye: Vec<f32> = (0..9).map(|i| f32::from(i % 4 == 0)).collect();
+        assert_eq!(w, eye);
+    }
+
+    #[test]
+    fn animation_rejects_malformed_input() {
+        let (triangles, rest, frames) = quad();
+        let err = |t: &[[u32; 3]], r: &[Vec3], f: &[Vec3], fps: f32| {
+            animation_to_glb(t, r, f, fps).unwrap_err().to_string()
+        };
+        assert!(err(&triangles, &rest, &frames[..5], 30.0).contains("multiple"));
+        assert!(err(&triangles, &rest, &[], 30.0).contains("multiple"));
+        assert!(err(&[[0, 1, 4]], &rest, &frames, 30.0).contains("triangle 0"));
+        assert!(err(&[], &rest, &frames, 30.0).contains("no triangles"));
+        for fps in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert!(
+                err(&triangles, &rest, &frames, fps).contains("fps"),
+                "{fps}"
+            );
+        }
+        let mut bad = frames.clone();
+        bad[9].y = f32::NAN;
+        assert!(err(&triangles, &rest, &bad, 30.0).contains("frame 2, vertex 1"));
+        bad[9] = Vec3::splat(f32::MAX);
+        let mut far_rest = rest.clone();
+        far_rest[1] = Vec3::splat(-f32::MAX);
+        assert!(err(&triangles, &far_rest, &bad, 30.0).contains("vertex 1"));
+    }
+
+    #[test]
+    fn animation_size_limit_is_4_gib() {
+        assert!(check_animation_size(5_000, 10_000, 1_000).is_ok());
+        // 12 * 1e6 * 401 bytes of positions alone: 4.8 GB.
+        let e = check_animation_size(1_000_000, 0, 400)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("4 GiB") && e.contains("400 frames"), "{e}");
+        // F² weights alone overflow the limit; usize::MAX must not overflow the arithmetic.
+        assert!(check_animation_size(1, 1, 40_000).is_err());
+        assert!(check_animation_size(usize::MAX, usize::MAX, usize::MAX).is_err());
+    }
 }
