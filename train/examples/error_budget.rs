@@ -52,8 +52,10 @@ fn main() {
     let mut scratch = Default::default();
     let mut pred = vec![Quat::IDENTITY; nb];
     let mut sums = [0.0f64; 4];
-    let n = test.examples.len() + 1;
-    for f in test.frames() {
+    let mut per_bone = vec![0.0f64; nb];
+    let n = test.examples.len();
+    let test_names = test.names();
+    for (fi, f) in test.frames().into_iter().enumerate() {
         let controls: Vec<Vec3> = base
             .control_vertices
             .iter()
@@ -74,6 +76,9 @@ fn main() {
             .sum::<f64>()
             / nb as f64;
         sums[0] += angle.to_degrees();
+        for (b, (a, p)) in oracle.iter().zip(&pred).enumerate() {
+            per_bone[b] += a.angle_between(*p) as f64;
+        }
         let mut mesh_err = |rot: &[Quat]| {
             predictor
                 .solve_with_rotations(&mut ctx, rot, &controls)
@@ -99,7 +104,20 @@ fn main() {
             })
             .collect();
         d.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (i, j) = (d[0].1, d[1].1);
+        let (mut i, mut j) = (d[0].1, d[1].1);
+        if let Ok(fname) = std::env::var("TIME_NEIGHBOURS") {
+            // gallop/00KK.obj: neighbours KK-1, KK+1 (mod 24) among the training names.
+            let _ = fname;
+            let k: usize = test_names[fi][test_names[fi].len() - 8..test_names[fi].len() - 4]
+                .parse()
+                .unwrap();
+            let find = |t: usize| {
+                let want = format!("gallop/{:04}.obj", t);
+                names.iter().position(|n| n.ends_with(&want)).unwrap()
+            };
+            i = find(k - 1);
+            j = find(if k == 24 { 1 } else { k + 1 });
+        }
         let blend: Vec<Quat> = (0..nb)
             .map(|b| {
                 let qa = Vec4::from(base.rotations[i][b]);
@@ -120,6 +138,25 @@ fn main() {
         );
     }
     let n = n as f64;
+    // Per bone: mean angle error, weight mass, weighted centre.
+    let mut mass = vec![0.0f64; nb];
+    let mut centre = vec![Vec3::ZERO; nb];
+    for (v, (idx, w)) in base.rig.skin.iter().enumerate() {
+        for (&b, &x) in idx.iter().zip(w) {
+            mass[b as usize] += x as f64;
+            centre[b as usize] += rest.positions[v] * x;
+        }
+    }
+    let mut order: Vec<usize> = (0..nb).collect();
+    order.sort_by(|&a, &b| per_bone[b].total_cmp(&per_bone[a]));
+    for &b in order.iter().take(25) {
+        println!(
+            "bone {b:3}: angle err {:.1} deg, mass {:.0}, centre {:.2?}",
+            (per_bone[b] / n).to_degrees(),
+            mass[b],
+            centre[b] / mass[b].max(1e-9) as f32
+        );
+    }
     println!(
         "mean: angle {:.2} deg; oracle-rot {:.5}; predicted {:.5}; nearest-2 blend {:.5}",
         sums[0] / n,

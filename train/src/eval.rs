@@ -27,6 +27,7 @@ use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_
 use crate::bones::{self, IterationStat};
 use crate::pipeline::{self, TrainError, TrainInput, TrainOptions, TrainedBase};
 use crate::regress::{Method, RegressOptions};
+use crate::select::{self, Candidate};
 
 /// Gauss–Seidel sweeps of the oracle's transform fit.
 const ORACLE_PASSES: usize = 12;
@@ -42,6 +43,9 @@ pub struct MethodStats {
     pub us_per_frame: f64,
     /// Per-frame RMS errors, in frame order.
     pub frames: Vec<f64>,
+    /// With model selection, the candidate chosen for each training run (one per fold).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub selected: Vec<Candidate>,
 }
 
 /// One table: method name -> statistics.
@@ -66,7 +70,8 @@ pub struct EvalOptions {
     pub train: TrainOptions,
     /// Methods to compare.
     pub methods: Vec<Method>,
-    /// Translation-solve beta (FKY08 eq. 11).
+    /// Translation-solve beta (FKY08 eq. 11) of the oracle rows, and of the methods unless
+    /// `train.select` chooses it.
     pub beta: f32,
 }
 
@@ -98,7 +103,7 @@ pub fn evaluate_test(
 ) -> Result<EvalTable, TrainError> {
     let base = pipeline::train_base(train, &options.train, progress)?;
     let mut table = EvalTable::new();
-    evaluate_frames(&base, test.frames, options, &mut table)?;
+    evaluate_frames(&base, train.frames, test.frames, options, &mut table)?;
     Ok(table)
 }
 
@@ -127,7 +132,7 @@ pub fn evaluate_loo(
             names: &names,
         };
         let base = pipeline::train_base(input, &options.train, &mut |_| {})?;
-        evaluate_frames(&base, &[train.frames[held]], options, &mut table)?;
+        evaluate_frames(&base, &frames, &[train.frames[held]], options, &mut table)?;
     }
     Ok(table)
 }
@@ -135,6 +140,7 @@ pub fn evaluate_loo(
 /// Appends the errors of `frames` under every row to `table` (statistics recomputed).
 fn evaluate_frames(
     base: &TrainedBase,
+    train_frames: &[&[Vec3]],
     frames: &[&[Vec3]],
     options: &EvalOptions,
     table: &mut EvalTable,
@@ -191,14 +197,24 @@ fn evaluate_frames(
 
     // the predictors
     for &method in &options.methods {
-        let model = base.model(
-            &RegressOptions {
-                method,
-                ..options.train.regress.clone()
-            },
-            options.beta,
-        );
-        let predictor = Predictor::new(Arc::new(model), Some(options.beta))
+        let regress = RegressOptions {
+            method,
+            ..options.train.regress.clone()
+        };
+        let (regress, beta) = match &options.train.select {
+            Some(grid) => {
+                let s = select::select(base, train_frames, &regress, grid)?;
+                table
+                    .entry(method.name().to_string())
+                    .or_default()
+                    .selected
+                    .push(s.best.clone());
+                (s.apply(&regress), s.best.beta)
+            }
+            None => (regress, options.beta),
+        };
+        let model = base.model(&regress, beta);
+        let predictor = Predictor::new(Arc::new(model), Some(beta))
             .map_err(|e| TrainError::Controls(e.to_string()))?;
         let mut ctx = predictor.new_context();
         for f in frames {

@@ -10,6 +10,8 @@
 //!   edge skin fitted on top of them.
 //! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
 //!   local, RBF baseline) as a runtime `RotationModel`.
+//! - [`select`]: kernel, width, regularisation and beta chosen by leave-one-out inside the
+//!   training set.
 //! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
 //! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
 
@@ -23,3 +25,4 @@ mod linalg;
 mod par;
 pub mod pipeline;
 pub mod regress;
+pub mod select;

@@ -17,6 +17,7 @@ use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
 use crate::controls;
 use crate::edges;
 use crate::regress::{self, RegressInput, RegressOptions};
+use crate::select::{self, SelectGrid, Selection};
 
 /// Where the control points come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,6 +44,10 @@ pub struct TrainOptions {
     /// Default beta stored in the model (FKY08 eq. 11; HZY11 Fig. 11: about 3 for keyframing,
     /// 0.3 for noisy mocap).
     pub beta: f32,
+    /// Choose the kernel, its regularisation and beta by leave-one-out inside the training set
+    /// over this grid ([`crate::select`]), overriding `regress.kernel`, the KCCA `kappa` (RBF
+    /// ridge) and `beta`.
+    pub select: Option<SelectGrid>,
 }
 
 impl Default for TrainOptions {
@@ -54,6 +59,7 @@ impl Default for TrainOptions {
             edge_influences: None,
             edge_model: EdgeModel::default(),
             beta: 1.0,
+            select: None,
         }
     }
 }
@@ -89,6 +95,9 @@ pub enum TrainError {
     /// The edge skin could not be fitted.
     #[error("edge skin: {0}")]
     Edges(#[from] edges::EdgeWeightError),
+    /// Model selection failed.
+    #[error("model selection: {0}")]
+    Select(String),
     /// Too few examples.
     #[error("need at least 2 examples (the rest pose and one more), got {0}")]
     TooFewExamples(usize),
@@ -107,6 +116,8 @@ pub struct TrainReport {
     pub edges_seconds: f64,
     /// The vector edge skin's ridge and its cross-validation (`None` for scalar weights).
     pub edge_vectors: Option<edges::EdgeVectorReport>,
+    /// Model selection, when asked for (its time is part of `regress_seconds`).
+    pub selection: Option<Selection>,
     /// Total seconds.
     pub seconds: f64,
 }
@@ -184,7 +195,16 @@ pub fn train(
 ) -> Result<(TrainedModel, TrainReport), TrainError> {
     let mut base = train_base(input, options, progress)?;
     let t = Instant::now();
-    let model = base.model(&options.regress, options.beta);
+    let (regress, beta) = match &options.select {
+        Some(grid) => {
+            let s = select::select(&base, input.frames, &options.regress, grid)?;
+            let chosen = (s.apply(&options.regress), s.best.beta);
+            base.report.selection = Some(s);
+            chosen
+        }
+        None => (options.regress.clone(), options.beta),
+    };
+    let model = base.model(&regress, beta);
     base.report.regress_seconds = t.elapsed().as_secs_f64();
     base.report.seconds += base.report.regress_seconds;
     Ok((model, base.report))
@@ -295,6 +315,7 @@ pub fn train_base(
         regress_seconds: 0.0,
         edges_seconds,
         edge_vectors,
+        selection: None,
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok(TrainedBase {

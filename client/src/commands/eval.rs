@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 use crease_train::eval::{self, EvalOptions, EvalTable, HeldOut, ROWS};
 use crease_train::pipeline::TrainInput;
-use crease_train::regress::Method;
+use crease_train::regress::{KernelChoice, Method};
 
 use super::common::{self, Progress};
 use super::train::RegressArgs;
@@ -114,10 +114,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         let mut obj = serde_json::Map::new();
         for row in ROWS {
             if let Some(s) = table.get(row) {
-                obj.insert(
-                    row.to_string(),
-                    serde_json::json!({"rms_mean": s.rms_mean, "rms_max": s.rms_max, "us_per_frame": s.us_per_frame, "frames": s.frames}),
-                );
+                obj.insert(row.to_string(), serde_json::to_value(s)?);
                 csv.push_str(&format!(
                     "{protocol},{row},{:.6e},{:.6e},{:.1},{}\n",
                     s.rms_mean,
@@ -167,9 +164,35 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
             ));
         }
     }
+    for row in ROWS {
+        if let Some(s) = table.get(row).filter(|s| !s.selected.is_empty()) {
+            let picks: Vec<String> = s
+                .selected
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} kappa {:e} beta {} (loo {:.4e})",
+                        kernel_name(&c.kernel),
+                        c.kappa,
+                        c.beta,
+                        c.rms
+                    )
+                })
+                .collect();
+            text.push_str(&format!("  selected for {row}: {}\n", picks.join("; ")));
+        }
+    }
     if to_stderr {
         eprint!("{text}");
     } else {
         print!("{text}");
+    }
+}
+
+/// `gaussian*1.4`, `poly:2`: how a selected kernel is printed.
+pub fn kernel_name(k: &KernelChoice) -> String {
+    match k {
+        KernelChoice::Gaussian { scale } => format!("gaussian*{scale}"),
+        KernelChoice::Polynomial { degree, .. } => format!("poly:{degree}"),
     }
 }

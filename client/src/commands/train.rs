@@ -5,8 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use crease_train::bones::FitOptions;
+use crease_train::kcca::KccaOptions;
 use crease_train::pipeline::{self, EdgeModel, TrainInput, TrainOptions};
 use crease_train::regress::{KernelChoice, Method, RegressOptions};
+use crease_train::select::SelectGrid;
 
 use super::common::{self, Progress};
 
@@ -29,9 +31,20 @@ pub struct RegressArgs {
     /// Poses per local model and blended at run time (HZY11 k_p).
     #[arg(long, default_value_t = 7)]
     pub kp: usize,
+    /// Regression kernel: `gaussian` (width from --sigma-scale) or `poly:D` (inhomogeneous
+    /// polynomial of degree D, FKY08 §7).
+    #[arg(long, default_value = "gaussian", value_name = "KERNEL")]
+    pub kernel: String,
     /// Gaussian kernel width as a multiple of the RMS spread of the training control vectors.
     #[arg(long, default_value_t = 1.0)]
     pub sigma_scale: f32,
+    /// KCCA regularisation kappa, relative to the kernel matrix's largest eigenvalue.
+    #[arg(long, default_value_t = 1e-3)]
+    pub kappa: f64,
+    /// Choose kernel, width, kappa and beta by leave-one-out inside the training examples
+    /// (overrides --kernel, --sigma-scale, --kappa and --beta).
+    #[arg(long)]
+    pub select: bool,
     /// Control-point weight of the translation solve (FKY08 eq. 11; ~3 keyframing, ~0.3 mocap).
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
@@ -57,6 +70,20 @@ impl RegressArgs {
         if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
             bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
         }
+        if !(self.kappa.is_finite() && self.kappa >= 0.0) {
+            bail!("--kappa must be >= 0, got {}", self.kappa);
+        }
+        let kernel = match self.kernel.as_str() {
+            "gaussian" => KernelChoice::Gaussian {
+                scale: self.sigma_scale,
+            },
+            k => match k.strip_prefix("poly:").map(str::parse::<u32>) {
+                Some(Ok(degree)) if (1..=8).contains(&degree) => {
+                    KernelChoice::Polynomial { c: 1.0, degree }
+                }
+                _ => bail!("--kernel {k}: expected gaussian or poly:D with D in 1..=8"),
+            },
+        };
         if let Some(r) = self.edge_ridge.filter(|r| r.is_nan() || *r < 0.0) {
             bail!("--edge-ridge must be >= 0, got {r}");
         }
@@ -82,14 +109,17 @@ impl RegressArgs {
                 method,
                 kc: self.kc,
                 kp: self.kp,
-                kernel: KernelChoice::Gaussian {
-                    scale: self.sigma_scale,
+                kernel,
+                kcca: KccaOptions {
+                    kappa: self.kappa,
+                    ..KccaOptions::default()
                 },
                 ..RegressOptions::default()
             },
             edge_influences: None,
             edge_model,
             beta: self.beta,
+            select: self.select.then(SelectGrid::default),
         })
     }
 }

@@ -1,0 +1,273 @@
+//! Model selection inside the training set: the regression kernel and its width, the KCCA
+//! regularisation `kappa` (or the RBF ridge) and the translation weight `beta` (FKY08 eq. 11),
+//! chosen by leave-one-out over the training examples, never by looking at a test set.
+//!
+//! Each candidate is scored by the quantity the user sees: the RMS vertex error of the whole
+//! predicted mesh (rotations regressed without the held-out example, translations solved by
+//! eq. 11 from its control points, LBS), normalised like [`crate::eval`]. The rig (bones,
+//! weights, edge skin) is the one fitted on all training examples, held-out one included: the
+//! selection is about the regression, and refitting the bones per fold (as `crease eval --loo`
+//! does) would multiply its cost by the bone fit's. The rest pose (example 0) is never held
+//! out: every model keeps it as its anchor.
+//!
+//! Cost: `kernels x kappas` regressions per fold (the betas share them: one factorisation per
+//! beta, then a triangular solve per fold), folds in parallel.
+
+use std::time::Instant;
+
+use crease_core::glam::{Quat, Vec3};
+use crease_core::runtime::predict::RotationScratch;
+use crease_core::runtime::skin::{BonePalette, RigidTransform, skin_lbs};
+use crease_core::runtime::translations::{TranslationScratch, TranslationSolver};
+
+use crate::eval::rms_normalized;
+use crate::par;
+use crate::pipeline::{TrainError, TrainedBase};
+use crate::regress::{self, KernelChoice, Method, RegressInput, RegressOptions};
+
+/// The candidates: every combination of `kernels x kappas x betas` is scored.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SelectGrid {
+    /// Regression kernels (Gaussian widths as multiples of the data's spread, polynomials).
+    pub kernels: Vec<KernelChoice>,
+    /// KCCA `kappa` ([`crate::kcca::KccaOptions::kappa`]); the RBF baseline uses it as its
+    /// ridge.
+    pub kappas: Vec<f64>,
+    /// Translation weights `beta`.
+    pub betas: Vec<f32>,
+}
+
+impl Default for SelectGrid {
+    /// Gaussian widths 0.5–2 of the default, the quadratic and cubic polynomial kernels
+    /// (FKY08 §7 uses both kinds), `kappa` 1e-4–1e-1, `beta` 0.3–10 (HZY11 Fig. 11's range).
+    fn default() -> Self {
+        let mut kernels: Vec<KernelChoice> = [0.5f32, 0.7, 1.0, 1.4, 2.0]
+            .into_iter()
+            .map(|scale| KernelChoice::Gaussian { scale })
+            .collect();
+        kernels.extend([2u32, 3].map(|degree| KernelChoice::Polynomial { c: 1.0, degree }));
+        Self {
+            kernels,
+            kappas: vec![1e-4, 1e-3, 1e-2, 1e-1],
+            betas: vec![0.3, 1.0, 3.0, 10.0],
+        }
+    }
+}
+
+/// One scored candidate.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Candidate {
+    /// Kernel.
+    pub kernel: KernelChoice,
+    /// KCCA `kappa` (RBF ridge).
+    pub kappa: f64,
+    /// Translation weight.
+    pub beta: f32,
+    /// Mean over the held-out examples of the normalised RMS vertex error.
+    pub rms: f64,
+}
+
+/// The outcome of [`select`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Selection {
+    /// The candidate with the lowest held-out error.
+    pub best: Candidate,
+    /// Every candidate, in grid order (kernel-major, then kappa, then beta).
+    pub table: Vec<Candidate>,
+    /// Wall time.
+    pub seconds: f64,
+}
+
+impl Selection {
+    /// `options` with the selected kernel and regularisation.
+    pub fn apply(&self, options: &RegressOptions) -> RegressOptions {
+        with_choice(options, self.best.kernel, self.best.kappa)
+    }
+}
+
+/// `options` with `kernel` and `kappa` (the RBF ridge for [`Method::Rbf`]).
+fn with_choice(options: &RegressOptions, kernel: KernelChoice, kappa: f64) -> RegressOptions {
+    let mut o = options.clone();
+    o.kernel = kernel;
+    if o.method == Method::Rbf {
+        o.rbf_ridge = kappa;
+    } else {
+        o.kcca.kappa = kappa;
+    }
+    o
+}
+
+/// Scores every candidate of `grid` for `options.method` by leave-one-out over `base`'s
+/// examples (see the module docs). `frames` are the training meshes, rest pose first, as given
+/// to [`crate::pipeline::train_base`].
+pub fn select(
+    base: &TrainedBase,
+    frames: &[&[Vec3]],
+    options: &RegressOptions,
+    grid: &SelectGrid,
+) -> Result<Selection, TrainError> {
+    let start = Instant::now();
+    let n = frames.len();
+    if n < 3 {
+        return Err(TrainError::Select(format!(
+            "leave-one-out selection needs at least 3 examples, got {n}"
+        )));
+    }
+    if grid.kernels.is_empty() || grid.kappas.is_empty() || grid.betas.is_empty() {
+        return Err(TrainError::Select("the candidate grid is empty".into()));
+    }
+    if let Some(b) = grid.betas.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
+        return Err(TrainError::Select(format!(
+            "beta {b}: must be finite and >= 0"
+        )));
+    }
+    let rig = &base.rig;
+    let solvers = grid
+        .betas
+        .iter()
+        .map(|&beta| {
+            TranslationSolver::new(
+                &rig.rest.positions,
+                &base.edges,
+                &rig.skin,
+                &base.edge_skin,
+                &base.control_vertices,
+                rig.bone_count,
+                beta,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| TrainError::Select(format!("translation solver: {e}")))?;
+    let scale = rig.rest.bbox_diagonal_scale();
+    let candidates: Vec<(KernelChoice, f64)> = grid
+        .kernels
+        .iter()
+        .flat_map(|&k| grid.kappas.iter().map(move |&kappa| (k, kappa)))
+        .collect();
+
+    // Per fold (held-out example i >= 1): per (kernel, kappa), per beta, the error.
+    let per_fold: Vec<Vec<f64>> = par::map_range(
+        n - 1,
+        || FoldScratch::new(rig.bone_count, rig.rest.vertex_count()),
+        |s, f| {
+            let held = f + 1;
+            let keep: Vec<usize> = (0..n).filter(|&i| i != held).collect();
+            let controls: Vec<Vec<Vec3>> = keep
+                .iter()
+                .map(|&i| base.example_controls[i].clone())
+                .collect();
+            let rotations: Vec<Vec<Quat>> =
+                keep.iter().map(|&i| base.rotations[i].clone()).collect();
+            let input = RegressInput {
+                rest: &rig.rest,
+                skin: &rig.skin,
+                bone_count: rig.bone_count,
+                control_vertices: &base.control_vertices,
+                controls: &controls,
+                rotations: &rotations,
+            };
+            let target = frames[held];
+            let ctl = &base.example_controls[held];
+            let mut errors = Vec::with_capacity(candidates.len() * solvers.len());
+            for &(kernel, kappa) in &candidates {
+                let o = with_choice(options, kernel, kappa);
+                let model = regress::build_rotation_model(input, &o);
+                model.predict(ctl, &mut s.rot_scratch, &mut s.rotations);
+                for solver in &solvers {
+                    errors.push(s.mesh_error(solver, rig, ctl, target, scale));
+                }
+            }
+            errors
+        },
+    );
+    let folds = per_fold.len() as f64;
+    let mut table = Vec::with_capacity(candidates.len() * solvers.len());
+    for (c, &(kernel, kappa)) in candidates.iter().enumerate() {
+        for (b, &beta) in grid.betas.iter().enumerate() {
+            let idx = c * solvers.len() + b;
+            let rms = per_fold.iter().map(|e| e[idx]).sum::<f64>() / folds;
+            table.push(Candidate {
+                kernel,
+                kappa,
+                beta,
+                rms,
+            });
+        }
+    }
+    let best = table
+        .iter()
+        .filter(|c| c.rms.is_finite())
+        .min_by(|a, b| a.rms.total_cmp(&b.rms))
+        .cloned()
+        .ok_or_else(|| TrainError::Select("no candidate gave a finite error".into()))?;
+    Ok(Selection {
+        best,
+        table,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Per-worker buffers of one fold.
+struct FoldScratch {
+    rot_scratch: RotationScratch,
+    rotations: Vec<Quat>,
+    translations: Vec<Vec3>,
+    transforms: Vec<RigidTransform>,
+    palette: BonePalette,
+    solve: TranslationScratch,
+    mesh: Vec<Vec3>,
+}
+
+impl FoldScratch {
+    fn new(bones: usize, vertices: usize) -> Self {
+        Self {
+            rot_scratch: RotationScratch::default(),
+            rotations: vec![Quat::IDENTITY; bones],
+            translations: vec![Vec3::ZERO; bones],
+            transforms: vec![RigidTransform::IDENTITY; bones],
+            palette: BonePalette::default(),
+            solve: TranslationScratch::default(),
+            mesh: vec![Vec3::ZERO; vertices],
+        }
+    }
+
+    /// Translations by eq. 11 for the predicted rotations, LBS, RMS against `target`.
+    fn mesh_error(
+        &mut self,
+        solver: &TranslationSolver,
+        rig: &crease_core::model::Rig,
+        controls: &[Vec3],
+        target: &[Vec3],
+        scale: f32,
+    ) -> f64 {
+        if solver
+            .solve(
+                &self.rotations,
+                controls,
+                &mut self.solve,
+                &mut self.translations,
+            )
+            .is_err()
+        {
+            return f64::INFINITY;
+        }
+        for ((t, &r), &x) in self
+            .transforms
+            .iter_mut()
+            .zip(&self.rotations)
+            .zip(&self.translations)
+        {
+            *t = RigidTransform::new(r, x);
+        }
+        self.palette.update(&self.transforms);
+        match skin_lbs(
+            &rig.rest.positions,
+            &rig.skin,
+            &self.palette,
+            &mut self.mesh,
+        ) {
+            Ok(()) => rms_normalized(&self.mesh, target, scale),
+            Err(_) => f64::INFINITY,
+        }
+    }
+}
