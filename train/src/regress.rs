@@ -80,6 +80,14 @@ pub enum KernelChoice {
         /// Multiplier of the data-derived width.
         scale: f32,
     },
+    /// Gaussian plus a linear part of weight `gamma` (`Kernel::GaussianLinear`), width as for
+    /// `Gaussian`.
+    GaussianLinear {
+        /// Multiplier of the data-derived width.
+        scale: f32,
+        /// Weight of the linear part.
+        gamma: f32,
+    },
     /// Inhomogeneous polynomial `(x.y + c)^degree` (FKY08 §7, faces), on inputs scaled by the
     /// data-derived width so `c` is dimensionless.
     Polynomial {
@@ -206,6 +214,10 @@ fn fit_group(
     let kernel = match options.kernel {
         KernelChoice::Gaussian { scale } => Kernel::Gaussian {
             sigma: sigma * scale,
+        },
+        KernelChoice::GaussianLinear { scale, gamma } => Kernel::GaussianLinear {
+            sigma: sigma * scale,
+            gamma,
         },
         KernelChoice::Polynomial { c, degree } => Kernel::Polynomial {
             c: c * sigma * sigma,

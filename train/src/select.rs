@@ -38,13 +38,17 @@ pub struct SelectGrid {
 }
 
 impl Default for SelectGrid {
-    /// Gaussian widths 0.5–2 of the default, the quadratic and cubic polynomial kernels
-    /// (FKY08 §7 uses both kinds), `kappa` 1e-4–1e-1, `beta` 0.3–10 (HZY11 Fig. 11's range).
+    /// Gaussian widths 0.5–2 of the default, Gaussian plus linear (widths 1 and 2, linear
+    /// weights 0.1 and 1), the quadratic and cubic polynomial kernels (FKY08 §7 uses both
+    /// kinds), `kappa` 1e-4–1e-1, `beta` 0.3–10 (HZY11 Fig. 11's range).
     fn default() -> Self {
         let mut kernels: Vec<KernelChoice> = [0.5f32, 0.7, 1.0, 1.4, 2.0]
             .into_iter()
             .map(|scale| KernelChoice::Gaussian { scale })
             .collect();
+        for scale in [1.0, 2.0] {
+            kernels.extend([0.1, 1.0].map(|gamma| KernelChoice::GaussianLinear { scale, gamma }));
+        }
         kernels.extend([2u32, 3].map(|degree| KernelChoice::Polynomial { c: 1.0, degree }));
         Self {
             kernels,

@@ -189,10 +189,11 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
     }
 }
 
-/// `gaussian*1.4`, `poly:2`: how a selected kernel is printed.
+/// `gaussian*1.4`, `gaussian*1+linear:0.1`, `poly:2`: how a selected kernel is printed.
 pub fn kernel_name(k: &KernelChoice) -> String {
     match k {
         KernelChoice::Gaussian { scale } => format!("gaussian*{scale}"),
+        KernelChoice::GaussianLinear { scale, gamma } => format!("gaussian*{scale}+linear:{gamma}"),
         KernelChoice::Polynomial { degree, .. } => format!("poly:{degree}"),
     }
 }

@@ -31,8 +31,8 @@ pub struct RegressArgs {
     /// Poses per local model and blended at run time (HZY11 k_p).
     #[arg(long, default_value_t = 7)]
     pub kp: usize,
-    /// Regression kernel: `gaussian` (width from --sigma-scale) or `poly:D` (inhomogeneous
-    /// polynomial of degree D, FKY08 §7).
+    /// Regression kernel: `gaussian` (width from --sigma-scale), `gaussian+linear:G` (plus a
+    /// linear part of weight G) or `poly:D` (inhomogeneous polynomial of degree D, FKY08 §7).
     #[arg(long, default_value = "gaussian", value_name = "KERNEL")]
     pub kernel: String,
     /// Gaussian kernel width as a multiple of the RMS spread of the training control vectors.
@@ -77,11 +77,22 @@ impl RegressArgs {
             "gaussian" => KernelChoice::Gaussian {
                 scale: self.sigma_scale,
             },
-            k => match k.strip_prefix("poly:").map(str::parse::<u32>) {
-                Some(Ok(degree)) if (1..=8).contains(&degree) => {
+            k => match (
+                k.strip_prefix("poly:").map(str::parse::<u32>),
+                k.strip_prefix("gaussian+linear:").map(str::parse::<f32>),
+            ) {
+                (Some(Ok(degree)), _) if (1..=8).contains(&degree) => {
                     KernelChoice::Polynomial { c: 1.0, degree }
                 }
-                _ => bail!("--kernel {k}: expected gaussian or poly:D with D in 1..=8"),
+                (_, Some(Ok(gamma))) if gamma.is_finite() && gamma >= 0.0 => {
+                    KernelChoice::GaussianLinear {
+                        scale: self.sigma_scale,
+                        gamma,
+                    }
+                }
+                _ => bail!(
+                    "--kernel {k}: expected gaussian, gaussian+linear:G (G >= 0) or poly:D (D in 1..=8)"
+                ),
             },
         };
         if let Some(r) = self.edge_ridge.filter(|r| r.is_nan() || *r < 0.0) {

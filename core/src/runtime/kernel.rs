@@ -17,6 +17,16 @@ pub enum Kernel {
         /// Width, in the units of the control vectors; must be finite and `> 0`.
         sigma: f32,
     },
+    /// `exp(-|x - y|^2 / (2 sigma^2)) + gamma (x . y) / sigma^2`: the Gaussian plus a linear
+    /// part. A Gaussian interpolant sags toward the mean between and beyond its examples; the
+    /// linear part carries the global trend of the map (how rotations follow the control points
+    /// to first order), and the Gaussian the rest. Not in FKY08, which uses one kernel at a time.
+    GaussianLinear {
+        /// Width, finite and `> 0`.
+        sigma: f32,
+        /// Weight of the linear part, finite and `>= 0`.
+        gamma: f32,
+    },
     /// The inhomogeneous polynomial kernel `(x . y + c)^degree` (FKY08 §7: degree 5 for faces).
     Polynomial {
         /// Offset; FKY08 §7 sets it to 0.1 times the average control-vector norm. Must be finite.
@@ -31,6 +41,9 @@ impl Kernel {
     pub fn is_valid(&self) -> bool {
         match *self {
             Kernel::Gaussian { sigma } => sigma.is_finite() && sigma > 0.0,
+            Kernel::GaussianLinear { sigma, gamma } => {
+                sigma.is_finite() && sigma > 0.0 && gamma.is_finite() && gamma >= 0.0
+            }
             Kernel::Polynomial { c, .. } => c.is_finite(),
         }
     }
@@ -44,6 +57,9 @@ impl Kernel {
         assert_eq!(x.len(), y.len(), "kernel arguments differ in length");
         match *self {
             Kernel::Gaussian { sigma } => gaussian(dist2(x, y), sigma),
+            Kernel::GaussianLinear { sigma, gamma } => {
+                gaussian_linear(dist2(x, y), dot(x, y), sigma, gamma)
+            }
             Kernel::Polynomial { c, degree } => polynomial(dot(x, y), c, degree),
         }
     }
@@ -65,6 +81,16 @@ impl Kernel {
                     .sum();
                 let s = f64::from(sigma);
                 (-d2 / (2.0 * s * s)).exp()
+            }
+            Kernel::GaussianLinear { sigma, gamma } => {
+                let (mut d2, mut d) = (0.0f64, 0.0f64);
+                for (&a, &b) in x.iter().zip(y) {
+                    let (a, b) = (f64::from(a), f64::from(b));
+                    d2 += (a - b).powi(2);
+                    d += a * b;
+                }
+                let s2 = f64::from(sigma).powi(2);
+                (-d2 / (2.0 * s2)).exp() + f64::from(gamma) * d / s2
             }
             Kernel::Polynomial { c, degree } => {
                 let d: f64 = x
@@ -89,6 +115,12 @@ impl Kernel {
             Kernel::Gaussian { sigma } => {
                 for (l, o) in out.iter_mut().enumerate() {
                     *o = gaussian(dist2(x, &examples[l * dim..(l + 1) * dim]), sigma);
+                }
+            }
+            Kernel::GaussianLinear { sigma, gamma } => {
+                for (l, o) in out.iter_mut().enumerate() {
+                    let e = &examples[l * dim..(l + 1) * dim];
+                    *o = gaussian_linear(dist2(x, e), dot(x, e), sigma, gamma);
                 }
             }
             Kernel::Polynomial { c, degree } => {
@@ -121,6 +153,9 @@ impl Kernel {
             *d2 = dist2(x, e);
             *k = match *self {
                 Kernel::Gaussian { sigma } => gaussian(*d2, sigma),
+                Kernel::GaussianLinear { sigma, gamma } => {
+                    gaussian_linear(*d2, dot(x, e), sigma, gamma)
+                }
                 Kernel::Polynomial { c, degree } => polynomial(dot(x, e), c, degree),
             };
         }
@@ -150,6 +185,11 @@ fn dot(x: &[f32], y: &[f32]) -> f32 {
 #[inline]
 fn gaussian(d2: f32, sigma: f32) -> f32 {
     (-d2 / (2.0 * sigma * sigma)).exp()
+}
+
+#[inline]
+fn gaussian_linear(d2: f32, dot: f32, sigma: f32, gamma: f32) -> f32 {
+    gaussian(d2, sigma) + gamma * dot / (sigma * sigma)
 }
 
 #[inline]
@@ -184,6 +224,27 @@ mod tests {
     }
 
     #[test]
+    fn gaussian_linear_matches_closed_form() {
+        let k = Kernel::GaussianLinear {
+            sigma: 2.0,
+            gamma: 0.5,
+        };
+        // |x - y|^2 = 9, x . y = 0: exp(-9 / 8) + 0.
+        let (x, y) = ([1.0f32, 0.0, 2.0], [0.0f32, 2.0, 0.0]);
+        assert!(close(k.eval(&x, &y), (-9.0f32 / 8.0).exp()));
+        // x = y = (1, 1): exp(0) + 0.5 * 2 / 4.
+        assert!(close(k.eval(&[1.0, 1.0], &[1.0, 1.0]), 1.25));
+        assert!((k.eval_f64(&[1.0, 1.0], &[1.0, 1.0]) - 1.25).abs() < 1e-15);
+        assert!(
+            !Kernel::GaussianLinear {
+                sigma: 1.0,
+                gamma: -1.0
+            }
+            .is_valid()
+        );
+    }
+
+    #[test]
     fn polynomial_matches_closed_form() {
         let k = Kernel::Polynomial { c: 0.5, degree: 3 };
         // x . y = 2 - 3 = -1; (-1 + 0.5)^3 = -0.125.
@@ -204,6 +265,10 @@ mod tests {
         let x = [0.5f32, 0.5];
         for kernel in [
             Kernel::Gaussian { sigma: 0.7 },
+            Kernel::GaussianLinear {
+                sigma: 0.7,
+                gamma: 0.3,
+            },
             Kernel::Polynomial { c: 1.0, degree: 5 },
         ] {
             let mut k = [f32::NAN; 4];
