@@ -2,14 +2,21 @@
 //! the translation solve (FKY08 eq. 11). Prints, over the test frames, the mean rotation angle
 //! error of the global predictor against the oracle rotations (fitted to the truth), and the
 //! mesh error of eq. 11 with (a) the oracle rotations, (b) the predicted rotations, (c) the
-//! per-bone average of the two training examples nearest in control space.
+//! per-bone average of the two training examples nearest in control space (or, with
+//! `TIME_NEIGHBOURS=1` on the horse gallop split, of the test frame's two time neighbours).
+//!
+//! First it reports how well edge models reproduce the mesh edges (relative error
+//! `sqrt(sum |e^s - e|^2 / sum |e|^2)`) on the training frames: no rotation, the best rotation
+//! per vertex (one-ring Kabsch, edge = mean of its endpoints' rotations), FKY08 eq. 10 scalar
+//! weights, and the model's vector edge skin (also on the test frames, with fitted rotations).
 //!
 //! `cargo run --release -p crease-train --example error_budget -- TRAIN TEST [BONES] [K] [BETA]`
 
 use std::sync::Arc;
 
-use crease_core::glam::{Quat, Vec3, Vec4};
+use crease_core::glam::{Mat3, Quat, Vec3, Vec4};
 use crease_core::mesh::examples::ExampleSet;
+use crease_core::runtime::edge_skin::EdgeSkin;
 use crease_core::runtime::predictor::Predictor;
 use crease_train::eval::{oracle_transforms, rms_normalized};
 use crease_train::pipeline::{self, TrainInput, TrainOptions};
@@ -54,6 +61,7 @@ fn main() {
     let mut sums = [0.0f64; 4];
     let mut per_bone = vec![0.0f64; nb];
     let n = test.examples.len();
+    edge_report(&base, &frames, &test.frames(), k);
     let test_names = test.names();
     for (fi, f) in test.frames().into_iter().enumerate() {
         let controls: Vec<Vec3> = base
@@ -164,4 +172,124 @@ fn main() {
         sums[2] / n,
         sums[3] / n
     );
+}
+
+/// Relative edge errors of several edge models (see the module docs).
+fn edge_report(base: &pipeline::TrainedBase, frames: &[&[Vec3]], test: &[&[Vec3]], k: usize) {
+    let rest = &base.rig.rest.positions;
+    let edges = &base.edges;
+    let rel = |pred: &dyn Fn(usize, usize) -> Vec3, fr: &[&[Vec3]]| -> f64 {
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for (j, f) in fr.iter().enumerate() {
+            for (e, &[a, b]) in edges.iter().enumerate() {
+                let t = f[a as usize] - f[b as usize];
+                num += (pred(j, e) - t).length_squared() as f64;
+                den += t.length_squared() as f64;
+            }
+        }
+        (num / den).sqrt()
+    };
+    let e0 = |e: usize| rest[edges[e][0] as usize] - rest[edges[e][1] as usize];
+    let adj = base.rig.rest.vertex_adjacency();
+    let field: Vec<Vec<Quat>> = frames
+        .iter()
+        .map(|f| {
+            (0..rest.len())
+                .map(|v| {
+                    let ring: Vec<usize> = std::iter::once(v)
+                        .chain(adj.neighbors(v).iter().map(|&x| x as usize))
+                        .collect();
+                    kabsch(
+                        &ring.iter().map(|&i| rest[i]).collect::<Vec<_>>(),
+                        &ring.iter().map(|&i| f[i]).collect::<Vec<_>>(),
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    let scalar = crease_train::edges::try_fit_edge_weights(
+        rest,
+        edges,
+        frames,
+        &base.rotations,
+        &base.rig.skin,
+        k,
+    )
+    .and_then(|w| Ok(EdgeSkin::from_weights(rest, edges, &w)?))
+    .expect("scalar edge weights");
+    let test_rot: Vec<Vec<Quat>> = test
+        .iter()
+        .map(|f| {
+            oracle_transforms(&base.rig.rest, &base.rig.skin, base.rig.bone_count, f)
+                .iter()
+                .map(|t| t.rotation)
+                .collect()
+        })
+        .collect();
+    println!("relative edge error on the training frames:");
+    println!(
+        "  no rotation                  {:.4}",
+        rel(&|_, e| e0(e), frames)
+    );
+    println!(
+        "  one-ring rotation per vertex {:.4}",
+        rel(
+            &|j, e| {
+                let [a, b] = edges[e].map(|v| v as usize);
+                ((Mat3::from_quat(field[j][a]) + Mat3::from_quat(field[j][b])) * 0.5) * e0(e)
+            },
+            frames
+        )
+    );
+    println!(
+        "  eq. 10 scalar weights        {:.4}",
+        rel(&|j, e| scalar.predict(e, &base.rotations[j]), frames)
+    );
+    println!(
+        "  vector edge skin (model)     {:.4}",
+        rel(
+            &|j, e| base.edge_skin.predict(e, &base.rotations[j]),
+            frames
+        )
+    );
+    println!("on the test frames, rotations fitted to the truth:");
+    println!(
+        "  eq. 10 scalar weights        {:.4}",
+        rel(&|j, e| scalar.predict(e, &test_rot[j]), test)
+    );
+    println!(
+        "  vector edge skin (model)     {:.4}",
+        rel(&|j, e| base.edge_skin.predict(e, &test_rot[j]), test)
+    );
+}
+
+/// The rotation best mapping `p` onto `q` (centred Kabsch via nalgebra's SVD).
+fn kabsch(p: &[Vec3], q: &[Vec3]) -> Quat {
+    let n = p.len() as f32;
+    let (cp, cq) = (p.iter().sum::<Vec3>() / n, q.iter().sum::<Vec3>() / n);
+    let mut h = nalgebra::Matrix3::<f64>::zeros();
+    for (a, b) in p.iter().zip(q) {
+        let (a, b) = (*a - cp, *b - cq);
+        h += nalgebra::Vector3::new(b.x as f64, b.y as f64, b.z as f64)
+            * nalgebra::Vector3::new(a.x as f64, a.y as f64, a.z as f64).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
+    let mut d = nalgebra::Matrix3::identity();
+    if (u * vt).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = u * d * vt;
+    let m = Mat3::from_cols_array(&[
+        r[(0, 0)] as f32,
+        r[(1, 0)] as f32,
+        r[(2, 0)] as f32,
+        r[(0, 1)] as f32,
+        r[(1, 1)] as f32,
+        r[(2, 1)] as f32,
+        r[(0, 2)] as f32,
+        r[(1, 2)] as f32,
+        r[(2, 2)] as f32,
+    ]);
+    Quat::from_mat3(&m).normalize()
 }
