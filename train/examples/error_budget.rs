@@ -60,6 +60,7 @@ fn main() {
     let mut pred = vec![Quat::IDENTITY; nb];
     let mut sums = [0.0f64; 4];
     let mut per_bone = vec![0.0f64; nb];
+    let mut region_sums = [0.0f64; 5];
     let n = test.examples.len();
     edge_report(&base, &frames, &test.frames(), k);
     let test_names = test.names();
@@ -96,6 +97,7 @@ fn main() {
         };
         let e_oracle = mesh_err(&oracle);
         let e_pred = mesh_err(&pred);
+
         // Two nearest training examples in control space, equal blend.
         let mut d: Vec<(f32, usize)> = base
             .example_controls
@@ -137,6 +139,36 @@ fn main() {
             })
             .collect();
         let e_blend = mesh_err(&blend);
+        {
+            // Where the predicted mesh's squared error sits (rest-pose regions).
+            predictor
+                .solve_with_rotations(&mut ctx, &pred, &controls)
+                .unwrap();
+            predictor.skin(&mut ctx).unwrap();
+            let got = ctx.positions();
+            let mut parts = [0.0f64; 5];
+            for (v, (g, t)) in got.iter().zip(f.iter()).enumerate() {
+                let p = rest.positions[v];
+                let e = (*g - *t).length_squared() as f64;
+                let r = if p.y < 0.15 {
+                    0 // hooves
+                } else if p.y < 0.6 {
+                    1 // legs
+                } else if p.z < -0.6 {
+                    2 // tail
+                } else if p.z > 0.45 {
+                    3 // neck and head
+                } else {
+                    4 // body
+                };
+                parts[r] += e;
+            }
+            let tot: f64 = parts.iter().sum();
+            region_sums
+                .iter_mut()
+                .zip(parts)
+                .for_each(|(a, b)| *a += b / tot);
+        }
         sums[1] += e_oracle;
         sums[2] += e_pred;
         sums[3] += e_blend;
@@ -146,6 +178,14 @@ fn main() {
         );
     }
     let n = n as f64;
+    println!(
+        "share of squared error: hooves {:.2} legs {:.2} tail {:.2} neck+head {:.2} body {:.2}",
+        region_sums[0] / n,
+        region_sums[1] / n,
+        region_sums[2] / n,
+        region_sums[3] / n,
+        region_sums[4] / n
+    );
     // Per bone: mean angle error, weight mass, weighted centre.
     let mut mass = vec![0.0f64; nb];
     let mut centre = vec![Vec3::ZERO; nb];

@@ -27,7 +27,8 @@ pub fn load_examples(path: &Path) -> anyhow::Result<ExampleSet> {
     Ok(set)
 }
 
-/// Parses `--control-points`: `auto`, `auto:N`, or a comma-separated list of vertex indices.
+/// Parses `--control-points`: `auto`, `auto:N`, `select:N`, or a comma-separated list of vertex
+/// indices.
 /// Without the option, the set's manifest list wins, else `auto:8`.
 pub fn control_spec(arg: Option<&str>, set: &ExampleSet) -> anyhow::Result<ControlSpec> {
     match arg {
@@ -36,6 +37,15 @@ pub fn control_spec(arg: Option<&str>, set: &ExampleSet) -> anyhow::Result<Contr
             None => ControlSpec::Auto(8),
         }),
         Some("auto") => Ok(ControlSpec::Auto(8)),
+        Some(s) if s.starts_with("select:") => {
+            let n: usize = s[7..]
+                .parse()
+                .with_context(|| format!("--control-points {s}: expected select:N"))?;
+            if n == 0 {
+                bail!("--control-points {s}: need at least one control point");
+            }
+            Ok(ControlSpec::Select(n))
+        }
         Some(s) if s.starts_with("auto:") => {
             let n: usize = s[5..]
                 .parse()

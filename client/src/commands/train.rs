@@ -21,8 +21,9 @@ pub struct RegressArgs {
     /// Most bones per vertex (K, 1..=8).
     #[arg(long, default_value_t = 8)]
     pub max_influences: usize,
-    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), or vertex indices
-    /// `12,400,7`. Default: the manifest's list, else auto:8.
+    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), `select:N` (N of 2N PCA +
+    /// varimax representatives, chosen by leave-one-out inside the training set), or vertex
+    /// indices `12,400,7`. Default: the manifest's list, else auto:8.
     #[arg(long, value_name = "SPEC")]
     pub control_points: Option<String>,
     /// Control points per bone for the geometry-local methods (HZY11 k_c).
