@@ -271,3 +271,62 @@ fn selection_scores_equal_an_independent_leave_one_out() {
         );
     }
 }
+
+#[test]
+fn control_swap_search_never_gets_worse_and_stays_in_the_pool() {
+    use crease_train::select;
+
+    let Some(set) = cactus() else { return };
+    let frames: Vec<&[Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
+    let input = TrainInput {
+        rest: &set.rest,
+        frames: &frames,
+        names: &names,
+    };
+    let mut options = options(Method::Global);
+    options.controls = ControlSpec::Select(3);
+    let base = pipeline::train_base(input, &options, &mut |_| {}).unwrap();
+    let sel = base
+        .report
+        .control_selection
+        .clone()
+        .expect("selection report");
+    let start = crease_train::controls::auto_control_points(&set.rest, &frames, 3).unwrap();
+    assert_eq!(sel.pool.len(), 6);
+    assert_eq!(base.control_vertices, sel.chosen);
+    assert_eq!(sel.chosen.len(), 3);
+    eprintln!("control selection on the cactus: {sel:?}");
+    // Replaying the accepted swaps on the PCA + varimax start gives the result.
+    let mut replay = start.clone();
+    for &(out, inn) in &sel.swaps {
+        let slot = replay
+            .iter()
+            .position(|&v| v == out)
+            .expect("swapped-out member");
+        assert!(sel.pool.contains(&inn) && !replay.contains(&inn));
+        replay[slot] = inn;
+    }
+    assert_eq!(replay, sel.chosen);
+    // Each accepted swap lowered the leave-one-out error.
+    assert_eq!(sel.errors.len(), sel.swaps.len() + 1);
+    assert!(
+        sel.errors.windows(2).all(|w| w[1] < w[0]),
+        "{:?}",
+        sel.errors
+    );
+    // The example controls follow the chosen vertices.
+    for (f, c) in frames.iter().zip(&base.example_controls) {
+        for (&v, p) in sel.chosen.iter().zip(c) {
+            assert_eq!(f[v as usize], *p);
+        }
+    }
+    // The reported final error is the selection's score of the chosen set.
+    let grid = select::SelectGrid {
+        kernels: vec![options.regress.kernel],
+        kappas: vec![options.regress.kcca.kappa],
+        betas: vec![options.beta],
+    };
+    let again = select::select(&base, &frames, &options.regress, &grid).unwrap();
+    assert!((again.best.rms - sel.errors.last().unwrap()).abs() < 1e-12);
+}
