@@ -1,18 +1,27 @@
 //! Per-frame skinning cost on the horse (8,431 vertices, 150 proxy bones as in FKY08 Table 1),
 //! k = 4 and k = 8, next to a plain memory copy of the same number of bytes in the same run.
 //!
-//! The rig is synthetic until the fitter exists: 150 random rigid transforms, each vertex bound
-//! to k distinct random bones with random normalised weights (seeded). Only the vertex positions
-//! come from the data set; without it, 8,431 random points are used (the bench says which).
+//! The rig is synthetic: 150 random rigid transforms, each vertex bound to k distinct random
+//! bones with random normalised weights (seeded), so every slot is used (the worst case; the
+//! fitted horse uses all 8 on 80% of its vertices). Only the vertex positions come from the data
+//! set; without it, 8,431 random points are used (the bench says which). Set `CREASE_LBS_MODEL`
+//! to a trained `.crease` model to add a case with its rig (rest mesh, weights, and the first
+//! example's bone transforms).
 //!
-//! Bytes per frame (what `Throughput::Bytes` and the copy use): rest positions read (12 B per
-//! vertex) + bone indices and weights read (8k B per vertex) + output written (12 B per vertex).
-//! The 150-bone palette (~14 KB) stays in L1 and is not counted. The copy moves that many bytes
-//! (reading them once and writing them once).
+//! Functions per case: `lbs` ([`skin_lbs`]), `lbs_packed` ([`skin_lbs_packed`] on a
+//! [`PackedSkin`] built once), `dqs`, and `memcpy` / `memcpy_packed`: a copy of as many bytes as
+//! the reference / packed layout reads and writes per frame.
+//!
+//! Bytes per frame (what `Throughput::Bytes` and the copies use): rest positions read (12 B per
+//! vertex) + output written (12 B per vertex) + the influences read: bone indices and weights,
+//! 8 B per slot for `SkinWeights` (k slots per vertex), 5 B per slot plus 1 B per vertex of block
+//! offsets for a `PackedSkin` with `u8` indices. The 150-bone palette (~14 KB, ~16 KB of rows)
+//! stays in L1 and is not counted. A copy moves that many bytes (reading them once and writing
+//! them once).
 //!
 //! `cargo bench -p crease-core --bench lbs -- --quick`; single-threaded: `RAYON_NUM_THREADS=1`,
 //! or `--no-default-features` for the build without rayon. After criterion's groups it prints
-//! one summary line per k with medians of its own timing loop.
+//! one summary line per case and function with medians of its own timing loop.
 
 mod common;
 use common::timings;
@@ -20,7 +29,10 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use crease_core::glam::{Quat, Vec3};
-use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_dqs, skin_lbs};
+use crease_core::model::TrainedModel;
+use crease_core::runtime::skin::{
+    BonePalette, PackedSkin, RigidTransform, SkinWeights, skin_dqs, skin_lbs, skin_lbs_packed,
+};
 use criterion::{Criterion, Throughput};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -94,25 +106,39 @@ fn synthetic(n: usize, k: usize) -> (SkinWeights, Vec<RigidTransform>) {
     (skin, bones)
 }
 
-/// Bytes a frame reads and writes (see the module docs).
+/// Bytes a frame reads and writes with `SkinWeights` (see the module docs).
 fn bytes_per_frame(n: usize, k: usize) -> usize {
     n * (12 + 8 * k + 12)
 }
 
+/// Bytes a frame reads and writes with a `PackedSkin` (`u8` indices; see the module docs).
+fn packed_bytes_per_frame(n: usize, packed: &PackedSkin) -> usize {
+    n * (12 + 1 + 12) + 5 * packed.slot_count()
+}
+
+/// Which skinning a frame runs.
+#[derive(Clone, Copy)]
+enum Method {
+    Lbs,
+    LbsPacked,
+    Dqs,
+}
+
 /// One frame: palette from the bones, then skinning (both are per-frame work).
 fn frame(
-    dqs: bool,
+    method: Method,
     rest: &[Vec3],
     skin: &SkinWeights,
+    packed: &PackedSkin,
     bones: &[RigidTransform],
     palette: &mut BonePalette,
     out: &mut [Vec3],
 ) {
     palette.update(black_box(bones));
-    let r = if dqs {
-        skin_dqs(black_box(rest), skin, palette, out)
-    } else {
-        skin_lbs(black_box(rest), skin, palette, out)
+    let r = match method {
+        Method::Lbs => skin_lbs(black_box(rest), skin, palette, out),
+        Method::LbsPacked => skin_lbs_packed(black_box(rest), packed, palette, out),
+        Method::Dqs => skin_dqs(black_box(rest), skin, palette, out),
     };
     r.expect("sizes checked at setup");
     black_box(out);
@@ -128,6 +154,29 @@ fn threads() -> String {
     return "parallel feature off".to_string();
 }
 
+/// The trained model's rig named by `CREASE_LBS_MODEL`, if set: rest positions, weights and
+/// the first example's transforms.
+fn model_case() -> Option<(Vec<Vec3>, SkinWeights, Vec<RigidTransform>, String)> {
+    let path = std::env::var("CREASE_LBS_MODEL").ok()?;
+    let model =
+        TrainedModel::load(&path).unwrap_or_else(|e| panic!("CREASE_LBS_MODEL={path}: {e}"));
+    let rig = model.rig;
+    let bones = rig.examples.first()?.transforms.clone();
+    let used: usize = rig
+        .skin
+        .iter()
+        .map(|(_, w)| w.iter().filter(|&&x| x != 0.0).count())
+        .sum();
+    let label = format!(
+        "model {path}: {} vertices, k = {}, {} bones, {:.2} non-zero influences per vertex",
+        rig.skin.vertex_count(),
+        rig.skin.k(),
+        rig.bone_count,
+        used as f64 / rig.skin.vertex_count() as f64
+    );
+    Some((rig.rest.positions, rig.skin, bones, label))
+}
+
 fn main() {
     let mut c = Criterion::default().configure_from_args();
     let (rest, source) = rest_positions();
@@ -136,57 +185,73 @@ fn main() {
         "lbs bench: {n} vertices from {source}, {BONES} bones, {}",
         threads()
     );
+    let mut cases: Vec<(String, Vec<Vec3>, SkinWeights, Vec<RigidTransform>)> = [4, 8]
+        .into_iter()
+        .map(|k| {
+            let (skin, bones) = synthetic(n, k);
+            (format!("k{k}"), rest.clone(), skin, bones)
+        })
+        .collect();
+    if let Some((rest, skin, bones, label)) = model_case() {
+        println!("{label}");
+        cases.push(("model".into(), rest, skin, bones));
+    }
     let mut summary = Vec::new();
-    for k in [4, 8] {
-        let (skin, bones) = synthetic(n, k);
+    for (name, rest, skin, bones) in &cases {
+        let (n, k) = (rest.len(), skin.k());
+        let packed = PackedSkin::new(skin).expect("bone indices fit");
         let mut palette = BonePalette::new();
         let mut out = vec![Vec3::ZERO; n];
         let bytes = bytes_per_frame(n, k);
+        let packed_bytes = packed_bytes_per_frame(n, &packed);
         let src = vec![1u8; bytes];
         let mut dst = vec![0u8; bytes];
+        let methods = [
+            ("lbs", Method::Lbs, bytes),
+            ("lbs_packed", Method::LbsPacked, packed_bytes),
+            ("dqs", Method::Dqs, bytes),
+        ];
 
-        let mut g = c.benchmark_group(format!("skin_k{k}"));
-        g.throughput(Throughput::Bytes(bytes as u64));
-        g.bench_function("lbs", |b| {
-            b.iter(|| frame(false, &rest, &skin, &bones, &mut palette, &mut out))
-        });
-        g.bench_function("dqs", |b| {
-            b.iter(|| frame(true, &rest, &skin, &bones, &mut palette, &mut out))
-        });
-        g.bench_function("memcpy", |b| {
-            b.iter(|| dst.copy_from_slice(black_box(&src)));
-            black_box(&dst);
-        });
+        let mut g = c.benchmark_group(format!("skin_{name}"));
+        for (label, method, b) in methods {
+            g.throughput(Throughput::Bytes(b as u64));
+            g.bench_function(label, |bch| {
+                bch.iter(|| frame(method, rest, skin, &packed, bones, &mut palette, &mut out))
+            });
+        }
+        for (label, b) in [("memcpy", bytes), ("memcpy_packed", packed_bytes)] {
+            g.throughput(Throughput::Bytes(b as u64));
+            g.bench_function(label, |bch| {
+                bch.iter(|| dst[..b].copy_from_slice(black_box(&src[..b])));
+                black_box(&dst);
+            });
+        }
         g.finish();
 
-        let lbs = timings(FRAMES, || {
-            frame(false, &rest, &skin, &bones, &mut palette, &mut out)
-        });
-        let dqs = timings(FRAMES, || {
-            frame(true, &rest, &skin, &bones, &mut palette, &mut out)
-        });
-        let copy = timings(FRAMES, || {
-            dst.copy_from_slice(black_box(&src));
-            black_box(&dst);
-        });
         let us = |d: Duration| d.as_secs_f64() * 1e6;
-        let line = |name: &str, (med, min): (Duration, Duration)| {
-            format!(
-                "{name} k={k}: {:.1} µs/frame, memcpy of {bytes} bytes: {:.1} µs, ratio {:.1} \
-                 (min: {:.1} µs, {:.1} µs, ratio {:.1})",
-                us(med),
+        for (label, method, b) in methods {
+            let t = timings(FRAMES, || {
+                frame(method, rest, skin, &packed, bones, &mut palette, &mut out)
+            });
+            let copy = timings(FRAMES, || {
+                dst[..b].copy_from_slice(black_box(&src[..b]));
+                black_box(&dst);
+            });
+            summary.push(format!(
+                "{label} {name} (k={k}): {:.1} µs/frame, memcpy of {b} bytes: {:.1} µs, ratio \
+                 {:.1} (min: {:.1} µs, {:.1} µs, ratio {:.1})",
+                us(t.0),
                 us(copy.0),
-                us(med) / us(copy.0),
-                us(min),
+                us(t.0) / us(copy.0),
+                us(t.1),
                 us(copy.1),
-                us(min) / us(copy.1),
-            )
-        };
-        summary.push(line("lbs", lbs));
-        summary.push(line("dqs", dqs));
+                us(t.1) / us(copy.1),
+            ));
+        }
     }
     println!(
-        "\nsummary ({n} vertices, {BONES} bones, {}; medians (and minima) of {FRAMES} frames)",
+        "\nsummary ({BONES}-bone synthetic rigs on {n} vertices, {}; medians (and minima) of \
+         {FRAMES} frames, palette update included)",
         threads()
     );
     for s in summary {

@@ -19,7 +19,7 @@ use std::sync::Arc;
 use glam::{Quat, Vec3};
 
 use super::predict::RotationScratch;
-use super::skin::{BonePalette, RigidTransform, SkinError, skin_lbs};
+use super::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
 use super::translations::{TranslationError, TranslationScratch, TranslationSolver};
 use crate::model::TrainedModel;
 
@@ -57,6 +57,8 @@ pub enum PredictError {
 #[derive(Debug)]
 pub struct Predictor {
     model: Arc<TrainedModel>,
+    /// The rig's skin weights packed once for the per-frame LBS ([`skin_lbs_packed`]).
+    skin: PackedSkin,
     solver: TranslationSolver,
     beta: f32,
 }
@@ -112,8 +114,10 @@ impl Predictor {
             model.rig.bone_count,
             beta,
         )?;
+        let skin = PackedSkin::new(&model.rig.skin)?;
         Ok(Self {
             model,
+            skin,
             solver,
             beta,
         })
@@ -254,9 +258,9 @@ impl Predictor {
     /// Skins the rest mesh with the context's current transforms into `ctx.positions()`.
     pub fn skin(&self, ctx: &mut FrameContext) -> Result<(), PredictError> {
         ctx.palette.update(&ctx.transforms);
-        skin_lbs(
+        skin_lbs_packed(
             &self.model.rig.rest.positions,
-            &self.model.rig.skin,
+            &self.skin,
             &ctx.palette,
             &mut ctx.positions,
         )?;
