@@ -112,11 +112,7 @@ pub fn try_fit_edge_weights<R: AsRef<[Quat]> + Sync>(
     check(rest, edges, frames, rotations, vertex_skin, k)?;
     let f = frames.len();
     let bones = rotations.first().map_or(0, |r| r.as_ref().len());
-    // Frame-major rotations as matrices: [j * bones + b].
-    let rot: Vec<Mat3A> = rotations
-        .iter()
-        .flat_map(|r| r.as_ref().iter().map(|&q| Mat3A::from_quat(q)))
-        .collect();
+    let rot = frame_major_rotations(rotations);
     let input = Input {
         rest,
         edges,
@@ -187,7 +183,16 @@ fn check_weighted_bones<R: AsRef<[Quat]>>(
     Ok(())
 }
 
-/// Checked inputs, in the layout the per-edge loop wants.
+/// Rotations as matrices, frame-major `[j * bones + b]`.
+fn frame_major_rotations<R: AsRef<[Quat]>>(rotations: &[R]) -> Vec<Mat3A> {
+    rotations
+        .iter()
+        .flat_map(|r| r.as_ref().iter().map(|&q| Mat3A::from_quat(q)))
+        .collect()
+}
+
+/// Checked inputs, in the layout the per-edge loops want (the vertex weights give the
+/// candidate bones of an edge's endpoints).
 struct Input<'a> {
     rest: &'a [Vec3],
     edges: &'a [[u32; 2]],
@@ -428,11 +433,8 @@ pub fn fit_edge_vectors<R: AsRef<[Quat]> + Sync>(
     }
     check(rest, edges, frames, rotations, vertex_skin, k)?;
     let bones = rotations.first().map_or(0, |r| r.as_ref().len());
-    let rot: Vec<Mat3A> = rotations
-        .iter()
-        .flat_map(|r| r.as_ref().iter().map(|&q| Mat3A::from_quat(q)))
-        .collect();
-    let sys = VectorInput {
+    let rot = frame_major_rotations(rotations);
+    let sys = Input {
         rest,
         edges,
         frames,
@@ -570,20 +572,6 @@ fn check_frames<R: AsRef<[Quat]>>(
     Ok(())
 }
 
-/// Checked inputs of the vector fit.
-struct VectorInput<'a> {
-    rest: &'a [Vec3],
-    edges: &'a [[u32; 2]],
-    frames: &'a [&'a [Vec3]],
-    /// Frame-major rotation matrices `[j * bones + b]`.
-    rot: &'a [Mat3A],
-    bones: usize,
-    /// Vertex weights (the support comes from the edge's endpoints).
-    skin: &'a SkinWeights,
-    /// Slots per edge.
-    k: usize,
-}
-
 /// One edge's least-squares system, per frame and summed, in a per-worker buffer.
 ///
 /// Unknowns `x = (a_1, .., a_n)` (3 per support bone). Frame `j` contributes
@@ -633,7 +621,7 @@ impl EdgeSystem {
     }
 
     /// Per-frame systems of edge `e`.
-    fn build(&mut self, input: &VectorInput<'_>, e: usize) {
+    fn build(&mut self, input: &Input<'_>, e: usize) {
         let [i0, i1] = input.edges[e].map(|v| v as usize);
         let e0 = input.rest[i0] - input.rest[i1];
         // Support: the endpoints' averaged vertex weights, the `k` largest, renormalised.
