@@ -30,7 +30,7 @@ pub struct Cli {
 pub enum Command {
     /// Fit proxy bones and skinning weights to example meshes and write a rig file.
     Fit(commands::fit::FitArgs),
-    /// Train a model: bones, control points, rotation regressors, edge weights.
+    /// Train a model: bones, control points, rotation regressors, edge skin.
     Train(commands::train::TrainArgs),
     /// Synthesize meshes from a file of control frames.
     Synth(commands::synth::SynthArgs),

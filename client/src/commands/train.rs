@@ -1,4 +1,4 @@
-//! `crease train`: bones, control points, rotation regressors and edge weights in one model
+//! `crease train`: bones, control points, rotation regressors and the edge skin in one model
 //! file (FKY08 §3–5, HZY11 §5.1).
 
 use std::path::PathBuf;
@@ -21,8 +21,9 @@ pub struct RegressArgs {
     /// Most bones per vertex (K, 1..=8).
     #[arg(long, default_value_t = 8)]
     pub max_influences: usize,
-    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), `select:N` (N of 2N PCA +
-    /// varimax representatives, chosen by leave-one-out inside the training set), or vertex
+    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), `select:N` (auto:N improved by
+    /// swaps with 2N PCA + varimax representatives, scored by leave-one-out inside the training
+    /// set), or vertex
     /// indices `12,400,7`. Default: the manifest's list, else auto:8.
     #[arg(long, value_name = "SPEC")]
     pub control_points: Option<String>,
@@ -198,6 +199,26 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         model.controls.iter().map(|c| c.vertex).collect::<Vec<_>>(),
         model.method
     );
+    if let Some(c) = &report.control_selection {
+        eprintln!(
+            "control points by leave-one-out: {:?} (swaps {:?}; LOO {:.4e} -> {:.4e}; {:.1} s)",
+            c.chosen,
+            c.swaps,
+            c.errors.first().copied().unwrap_or(f64::NAN),
+            c.errors.last().copied().unwrap_or(f64::NAN),
+            c.seconds
+        );
+    }
+    if let Some(s) = &report.selection {
+        eprintln!(
+            "selected by leave-one-out: {} kappa {:e} beta {} (LOO {:.4e}; {:.1} s)",
+            super::eval::kernel_name(&s.best.kernel),
+            s.best.kappa,
+            s.best.beta,
+            s.best.rms,
+            s.seconds
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
