@@ -8,10 +8,12 @@
 //!   caller-provided buffers.
 //! - [`model`]: the on-disk container (versioned header, checksummed sections, atomic writes),
 //!   the [`model::Rig`] it stores, and the skinned-glTF export of a rig.
+//! - [`sweep`]: the LYK06 sweep hand; today its skeleton, poses and forward kinematics.
 
 mod atomic;
 pub mod mesh;
 pub mod model;
 pub mod runtime;
+pub mod sweep;
 
 pub use glam;

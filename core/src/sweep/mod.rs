@@ -1,0 +1,9 @@
+//! The sweep-based hand of Lee, Yoon & Kim 2006 (LYK06): a simplified hand skeleton whose
+//! digits each carry one sweep from the wrist to the tip (LYK06 §2, "Hand modeling").
+//!
+//! Layout:
+//! - [`skeleton`]: the articulated skeleton (digits, joints, anatomical limits), hand poses
+//!   (named poses and a seeded sampler of natural poses), and forward kinematics giving, per
+//!   digit, the chain of joint frames from the wrist to the tip that the sweeps will follow.
+
+pub mod skeleton;
