@@ -5,5 +5,9 @@
 //! - [`skeleton`]: the articulated skeleton (digits, joints, anatomical limits), hand poses
 //!   (named poses and a seeded sampler of natural poses), and forward kinematics giving, per
 //!   digit, the chain of joint frames from the wrist to the tip that the sweeps will follow.
+//! - [`surface`]: the rest skin built by the project: a smooth signed distance function of the
+//!   flat hand (round-cone phalanges, palm slab, wrist stub, smooth-minimum webs), polygonised
+//!   by Surface Nets and smoothed, at two resolutions (base ~8K, detailed >= 150K vertices).
 
 pub mod skeleton;
+pub mod surface;
