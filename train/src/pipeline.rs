@@ -16,7 +16,7 @@ use crease_core::runtime::edge_skin::EdgeSkin;
 use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
 use crate::controls;
 use crate::edges;
-use crate::regress::{self, RegressInput, RegressOptions};
+use crate::regress::{self, Method, RegressInput, RegressOptions};
 use crate::select::{self, SelectGrid, Selection};
 
 /// Where the control points come from.
@@ -345,12 +345,18 @@ pub fn train_base(
             count.saturating_mul(2).min(input.rest.vertex_count()),
         )
         .map_err(|e| TrainError::Controls(e.to_string()))?;
+        // Scored with the global model whatever the method: the search is about which points
+        // carry the pose, the cheapest model answers it, and train and eval then agree.
+        let scoring = RegressOptions {
+            method: Method::Global,
+            ..options.regress.clone()
+        };
         let sel = select::select_controls(
             &base,
             input.frames,
             &base.control_vertices,
             &pool,
-            &options.regress,
+            &scoring,
             options.beta,
         )?;
         base.example_controls = input
