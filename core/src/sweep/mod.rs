@@ -8,6 +8,10 @@
 //! - [`surface`]: the rest skin built by the project: a smooth signed distance function of the
 //!   flat hand (round-cone phalanges, palm slab, wrist stub, smooth-minimum webs), polygonised
 //!   by Surface Nets and smoothed, at two resolutions (base ~8K, detailed >= 150K vertices).
+//! - [`sweeps`]: the control sweeps (one per digit: a C1 trajectory and a slerped orientation
+//!   curve through the joint key frames), the binding of skin vertices by LYK06 eq. 1, and the
+//!   blended, allocation-free deformation.
 
 pub mod skeleton;
 pub mod surface;
+pub mod sweeps;
