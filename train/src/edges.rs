@@ -109,19 +109,8 @@ pub fn try_fit_edge_weights<R: AsRef<[Quat]> + Sync>(
     vertex_skin: &SkinWeights,
     k: usize,
 ) -> Result<SkinWeights, EdgeWeightError> {
-    check(rest, edges, frames, rotations, vertex_skin, k)?;
+    let input = Input::new(rest, edges, frames, rotations, vertex_skin, k)?;
     let f = frames.len();
-    let bones = rotations.first().map_or(0, |r| r.as_ref().len());
-    let rot = frame_major_rotations(rotations);
-    let input = Input {
-        rest,
-        edges,
-        frames,
-        rot: &rot,
-        bones,
-        skin: vertex_skin,
-        k,
-    };
     let mut out: Vec<(u32, f32)> = vec![(0, 0.0); edges.len() * k];
     par::map_chunks_mut(
         &mut out,
@@ -183,14 +172,6 @@ fn check_weighted_bones<R: AsRef<[Quat]>>(
     Ok(())
 }
 
-/// Rotations as matrices, frame-major `[j * bones + b]`.
-fn frame_major_rotations<R: AsRef<[Quat]>>(rotations: &[R]) -> Vec<Mat3A> {
-    rotations
-        .iter()
-        .flat_map(|r| r.as_ref().iter().map(|&q| Mat3A::from_quat(q)))
-        .collect()
-}
-
 /// Checked inputs, in the layout the per-edge loops want (the vertex weights give the
 /// candidate bones of an edge's endpoints).
 struct Input<'a> {
@@ -198,10 +179,36 @@ struct Input<'a> {
     edges: &'a [[u32; 2]],
     frames: &'a [&'a [Vec3]],
     /// Rotations as matrices, frame-major `[j * bones + b]`.
-    rot: &'a [Mat3A],
+    rot: Vec<Mat3A>,
     bones: usize,
     skin: &'a SkinWeights,
     k: usize,
+}
+
+impl<'a> Input<'a> {
+    /// Checks the inputs ([`check`]) and lays them out for the per-edge loops.
+    fn new<R: AsRef<[Quat]>>(
+        rest: &'a [Vec3],
+        edges: &'a [[u32; 2]],
+        frames: &'a [&'a [Vec3]],
+        rotations: &[R],
+        skin: &'a SkinWeights,
+        k: usize,
+    ) -> Result<Self, EdgeWeightError> {
+        check(rest, edges, frames, rotations, skin, k)?;
+        Ok(Self {
+            rest,
+            edges,
+            frames,
+            rot: rotations
+                .iter()
+                .flat_map(|r| r.as_ref().iter().map(|&q| Mat3A::from_quat(q)))
+                .collect(),
+            bones: rotations.first().map_or(0, |r| r.as_ref().len()),
+            skin,
+            k,
+        })
+    }
 }
 
 /// Per-worker buffers, reused across edges.
@@ -431,18 +438,7 @@ pub fn fit_edge_vectors<R: AsRef<[Quat]> + Sync>(
             what: format!("edge ridge {r} (must be >= 0)"),
         });
     }
-    check(rest, edges, frames, rotations, vertex_skin, k)?;
-    let bones = rotations.first().map_or(0, |r| r.as_ref().len());
-    let rot = frame_major_rotations(rotations);
-    let sys = Input {
-        rest,
-        edges,
-        frames,
-        rot: &rot,
-        bones,
-        skin: vertex_skin,
-        k,
-    };
+    let sys = Input::new(rest, edges, frames, rotations, vertex_skin, k)?;
 
     let (ridge, cv) = match ridge {
         Some(r) => (r, Vec::new()),
