@@ -111,19 +111,8 @@ pub fn select(
     grid: &SelectGrid,
 ) -> Result<Selection, TrainError> {
     let start = Instant::now();
-    let n = frames.len();
-    if n < 3 {
-        return Err(TrainError::Select(format!(
-            "leave-one-out selection needs at least 3 examples, got {n}"
-        )));
-    }
     if grid.kernels.is_empty() || grid.kappas.is_empty() || grid.betas.is_empty() {
         return Err(TrainError::Select("the candidate grid is empty".into()));
-    }
-    if let Some(b) = grid.betas.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
-        return Err(TrainError::Select(format!(
-            "beta {b}: must be finite and >= 0"
-        )));
     }
     let candidates: Vec<(KernelChoice, f64)> = grid
         .kernels
@@ -174,6 +163,16 @@ fn loo_errors(
     betas: &[f32],
 ) -> Result<Vec<f64>, TrainError> {
     let n = frames.len();
+    if n < 3 {
+        return Err(TrainError::Select(format!(
+            "leave-one-out selection needs at least 3 examples, got {n}"
+        )));
+    }
+    if let Some(b) = betas.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
+        return Err(TrainError::Select(format!(
+            "beta {b}: must be finite and >= 0"
+        )));
+    }
     let rig = &base.rig;
     let solvers = betas
         .iter()
@@ -273,19 +272,8 @@ pub fn select_controls(
     beta: f32,
 ) -> Result<ControlSelection, TrainError> {
     let t0 = Instant::now();
-    if frames.len() < 3 {
-        return Err(TrainError::Select(format!(
-            "leave-one-out selection needs at least 3 examples, got {}",
-            frames.len()
-        )));
-    }
     if start.is_empty() {
         return Err(TrainError::Select("no starting control points".into()));
-    }
-    if !(beta.is_finite() && beta >= 0.0) {
-        return Err(TrainError::Select(format!(
-            "beta {beta}: must be finite and >= 0"
-        )));
     }
     let candidate = [(options.kernel, options.kcca.kappa)];
     let score = |set: &[u32]| -> Result<f64, TrainError> {
