@@ -13,6 +13,7 @@
 mod atomic;
 pub mod mesh;
 pub mod model;
+pub mod render;
 pub mod runtime;
 pub mod sweep;
 

@@ -12,6 +12,8 @@
 //!   curve through the joint key frames), the binding of skin vertices by LYK06 eq. 1, and the
 //!   blended, allocation-free deformation.
 
+pub mod collide;
 pub mod skeleton;
 pub mod surface;
 pub mod sweeps;
+pub mod webxr;

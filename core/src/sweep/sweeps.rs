@@ -158,8 +158,9 @@ impl Sweep {
         self.knots[self.keys - 1]
     }
 
-    /// Arc-length parameter of chain joint `j` (0 = wrist, last = tip).
-    fn joint_knot(&self, j: usize) -> f32 {
+    /// Arc-length parameter of chain joint `j` (0 = wrist, 1 = CMC, 2 = MCP, ..., last = tip):
+    /// the `t_J * length` of LYK06's joint tests.
+    pub fn joint_arc(&self, j: usize) -> f32 {
         if j == 0 {
             0.0
         } else {
@@ -306,7 +307,7 @@ impl SweepHand {
     pub fn bind(skeleton: &HandSkeleton, rest: &Mesh) -> SweepHand {
         let posed = skeleton.pose(&HandPose::FLAT);
         let sweeps = Digit::ALL.map(|d| Sweep::of_digit(&posed, d));
-        let mcp = sweeps.map(|s| s.joint_knot(MCP_CHAIN_INDEX));
+        let mcp = sweeps.map(|s| s.joint_arc(MCP_CHAIN_INDEX));
         let bindings = rest
             .positions
             .iter()

@@ -1,0 +1,1 @@
+//! A small software rasteriser for pictures of meshes (PNG). Being written.

@@ -1,0 +1,1 @@
+//! The WebXR generic hand bound to the sweeps. Being written.
