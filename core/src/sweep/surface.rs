@@ -13,8 +13,14 @@
 //! - the palm is a rounded slab: a planar polygon spanning the metacarpals, inflated by half the
 //!   palm thickness (the exact distance to a flat polygon minus a radius), plus a flattened
 //!   wrist stub (a capsule across the wrist);
-//! - palm, wrist and digits are united by a polynomial smooth minimum (blend radius
-//!   [`BLEND_RADIUS`]), which grows the webs between the fingers and the thenar web.
+//! - palm and wrist are united by a polynomial smooth minimum (blend radius [`BLEND_RADIUS`]),
+//!   and each digit is blended with that body separately, the five results united by a hard
+//!   `min`: the fillets grow the webs at the knuckles and the thenar web, but two fingers
+//!   never blend with each other along their phalanges. (Blending the digits with each other
+//!   filled the 2-3 mm gaps between the proximal phalanges with thin sheets of skin that the
+//!   sweeps stretched up to 19x when neighbouring fingers bent differently; per-digit
+//!   fillets keep the worst edge stretch of the named poses at 3-6x, in the thenar web, as
+//!   measured by `cargo run --release -p crease-core --example sweep_stretch`.)
 //!
 //! Every piece is an exact distance (or 1-Lipschitz bound), and `min` / the polynomial smooth
 //! minimum keep the result 1-Lipschitz: `|f(p) - f(q)| <= |p - q|`. Polygonisation relies on
@@ -275,14 +281,15 @@ impl HandSdf {
 
     /// Signed distance (metres, negative inside) of the rest hand at `p`; 1-Lipschitz.
     pub fn distance(&self, p: Vec3) -> f32 {
-        let mut d = smin(self.palm_distance(p), self.wrist.distance(p), self.blend);
+        let body = smin(self.palm_distance(p), self.wrist.distance(p), self.blend);
+        let mut d = body;
         for digit in Digit::ALL {
             let dd = self
                 .cones(digit)
                 .iter()
                 .map(|c| c.distance(p))
                 .fold(f32::INFINITY, f32::min);
-            d = smin(d, dd, self.blend);
+            d = d.min(smin(body, dd, self.blend));
         }
         d
     }
