@@ -4,6 +4,7 @@
 //! `cargo run --release -p crease-core --example sweep_stretch`
 
 use crease_core::glam::Vec3;
+use crease_core::sweep::palm::PalmSurface;
 use crease_core::sweep::skeleton::{HandPose, HandSkeleton, NamedPose};
 use crease_core::sweep::surface::{HandSurface, Resolution};
 use crease_core::sweep::sweeps::SweepHand;
@@ -12,6 +13,13 @@ fn main() {
     let surface = HandSurface::build(Resolution::Base).expect("base surface");
     let rest = &surface.mesh;
     let hand = SweepHand::bind(&HandSkeleton::adult_right(), rest);
+    let normals = rest.vertex_normals();
+    let palm = PalmSurface::bind(&HandSkeleton::adult_right(), rest, &normals).expect("palm");
+    println!(
+        "palm: {} vertices bound, moving nodes {:?}",
+        palm.palm_vertices().count(),
+        palm.moving_nodes().collect::<Vec<_>>()
+    );
     let mut edges = Vec::new();
     for t in &rest.triangles {
         for k in 0..3 {
@@ -25,6 +33,14 @@ fn main() {
     println!("{} vertices, {} edges", rest.positions.len(), edges.len());
     for named in NamedPose::ALL {
         hand.deform_into(&HandPose::named(named), &mut out);
+        let before = out.clone();
+        palm.apply(&HandPose::named(named), &mut out);
+        let moved = out
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0f32, f32::max);
+        print!("palm moved <= {:.1} mm; ", moved * 1e3);
         let mut ratios: Vec<(f32, usize)> = edges
             .iter()
             .enumerate()

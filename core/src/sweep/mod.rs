@@ -13,6 +13,7 @@
 //!   blended, allocation-free deformation.
 
 pub mod collide;
+pub mod palm;
 pub mod skeleton;
 pub mod surface;
 pub mod sweeps;
