@@ -13,7 +13,9 @@
 //!   blended, allocation-free deformation.
 
 pub mod collide;
+pub mod creases;
 pub mod palm;
+pub mod rig;
 pub mod skeleton;
 pub mod surface;
 pub mod sweeps;

@@ -276,10 +276,11 @@ fn frame(su: Vec3, sv: Vec3, sign: f32) -> (Vec3, Vec3, Vec3) {
 /// The palm domain: a quadrilateral in the flat hand's `xy` plane, corners at
 /// `(u, v) = (0, 0), (1, 0), (1, 1), (0, 1)`.
 #[derive(Clone, Copy, Debug)]
-struct Domain([Vec2; 4]);
+pub(crate) struct Domain([Vec2; 4]);
 
 impl Domain {
-    fn of(skeleton: &HandSkeleton) -> Domain {
+    /// The palm domain of `skeleton` (module docs).
+    pub(crate) fn of(skeleton: &HandSkeleton) -> Domain {
         let posed = skeleton.pose(&HandPose::FLAT);
         let xy = |j: Joint| posed.joint(j).position.truncate();
         let (index, little) = (xy(Joint::IndexMcp), xy(Joint::LittleMcp));
@@ -297,7 +298,8 @@ impl Domain {
         ])
     }
 
-    fn at(&self, uv: Vec2) -> Vec2 {
+    /// The point of the plane at `(u, v)`.
+    pub(crate) fn at(&self, uv: Vec2) -> Vec2 {
         let [a, b, c, d] = self.0;
         let bottom = a.lerp(b, uv.x);
         let top = d.lerp(c, uv.x);

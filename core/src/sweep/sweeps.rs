@@ -82,6 +82,9 @@ pub const WEB_WIDTH: f32 = 0.002;
 pub const FINGER_RAMP: f32 = 0.015;
 /// Chain index of the MCP joint (wrist 0, CMC 1, MCP 2) for every digit.
 const MCP_CHAIN_INDEX: usize = 2;
+/// Bound on how far a sweep's curve strays from the polyline through its keys (metres; the
+/// Hermite spans bulge by well under a millimetre between keys at most ~4 cm apart).
+const POLYLINE_SLACK: f32 = 0.003;
 /// Samples per key interval for the initial closest-point search.
 const PROJECTION_SAMPLES: usize = 8;
 /// Newton refinement steps of the closest-point search.
@@ -240,6 +243,18 @@ impl Sweep {
         self.frame_at_arc(t * self.length())
     }
 
+    /// Distance from `v` to the polyline through the key positions (within
+    /// [`POLYLINE_SLACK`] of the distance to the curve).
+    fn polyline_distance(&self, v: Vec3) -> f32 {
+        let mut best = f32::INFINITY;
+        for w in self.positions[..self.keys].windows(2) {
+            let e = w[1] - w[0];
+            let t = ((v - w[0]).dot(e) / e.length_squared().max(1e-12)).clamp(0.0, 1.0);
+            best = best.min((w[0] + e * t - v).length());
+        }
+        best
+    }
+
     /// Arc length of the point of the sweep closest to `v`, and that distance.
     pub fn project(&self, v: Vec3) -> (f32, f32) {
         let mut best_s = 0.0;
@@ -314,6 +329,34 @@ struct HoldInfo {
     offset: Vec3,
 }
 
+/// One vertex's holds while binding.
+#[derive(Clone, Copy, Debug)]
+struct VertexHolds {
+    count: usize,
+    holds: [Hold; 5],
+    info: [HoldInfo; 5],
+}
+
+impl Default for VertexHolds {
+    fn default() -> Self {
+        VertexHolds {
+            count: 0,
+            holds: [Hold {
+                sample: 0,
+                a: 0.0,
+                b: 0.0,
+                offset: Vec3::ZERO,
+            }; 5],
+            info: [HoldInfo {
+                digit: 0,
+                weight: 0.0,
+                arc: 0.0,
+                offset: Vec3::ZERO,
+            }; 5],
+        }
+    }
+}
+
 /// Samples per sweep of the per-frame sampled representation (module docs, "Evaluation").
 pub const SWEEP_SAMPLES: usize = 160;
 
@@ -375,7 +418,7 @@ fn sample_of(s: f32, len: f32) -> (usize, f32) {
 }
 
 /// A rest skin bound to the five control sweeps of a skeleton (module docs).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct SweepHand {
     skeleton: HandSkeleton,
     /// Rest length of each digit's sweep (for the normalised `t`).
@@ -384,6 +427,8 @@ pub struct SweepHand {
     start: Vec<u32>,
     holds: Vec<Hold>,
     info: Vec<HoldInfo>,
+    /// The flat pose's samples (for carrying rest directions, [`SweepHand::local_direction`]).
+    rest_samples: SweepSamples,
 }
 
 impl SweepHand {
@@ -396,12 +441,20 @@ impl SweepHand {
         let mut rest_samples = SweepSamples::new();
         sample_sweeps(&sweeps, &posed, &mut rest_samples);
         let mcp = sweeps.map(|s| s.joint_arc(MCP_CHAIN_INDEX));
-        let mut start = Vec::with_capacity(rest.positions.len() + 1);
-        let mut holds = Vec::new();
-        let mut info = Vec::new();
-        start.push(0);
-        for &v in &rest.positions {
-            let proj = sweeps.map(|s| s.project(v));
+        let bind_vertex = |v: Vec3| -> VertexHolds {
+            // Exact projections only onto the sweeps that can get a weight: a sweep's key
+            // polyline is within POLYLINE_SLACK of its curve, so one whose polyline is farther
+            // than the nearest polyline + the widest band + twice the slack gets weight 0.
+            let rough = sweeps.map(|s| s.polyline_distance(v));
+            let nearest_rough = rough.iter().copied().fold(f32::INFINITY, f32::min);
+            let reach = nearest_rough + BAND_INNER + BAND_WIDTH + 2.0 * POLYLINE_SLACK;
+            let proj: [(f32, f32); 5] = std::array::from_fn(|k| {
+                if rough[k] <= reach {
+                    sweeps[k].project(v)
+                } else {
+                    (0.0, f32::INFINITY)
+                }
+            });
             let (nearest, &(s_near, d_near)) = proj
                 .iter()
                 .enumerate()
@@ -410,7 +463,7 @@ impl SweepHand {
             let open = 1.0 - smoothstep((s_near - mcp[nearest]) / FINGER_RAMP);
             let inner = BAND_INNER * open;
             let width = WEB_WIDTH + (BAND_WIDTH - WEB_WIDTH) * open;
-            let first = holds.len();
+            let mut out = VertexHolds::default();
             let mut total = 0.0;
             for (k, (sweep, &(s, d))) in sweeps.iter().zip(&proj).enumerate() {
                 let x = d - d_near;
@@ -425,12 +478,6 @@ impl SweepHand {
                     continue;
                 }
                 let frame = sweep.frame_at_arc(s);
-                info.push(HoldInfo {
-                    digit: k as u8,
-                    weight: w,
-                    arc: s,
-                    offset: frame.rotation.inverse() * (v - frame.position),
-                });
                 let (i, f) = sample_of(s, lengths[k]);
                 let sample = k * SWEEP_SAMPLES + i;
                 let m0 = rest_samples.frames[sample];
@@ -439,19 +486,43 @@ impl SweepHand {
                     matrix3: m0.matrix3 * (1.0 - f) + m1.matrix3 * f,
                     translation: m0.translation * (1.0 - f) + m1.translation * f,
                 };
-                holds.push(Hold {
+                let c = out.count;
+                out.info[c] = HoldInfo {
+                    digit: k as u8,
+                    weight: w,
+                    arc: s,
+                    offset: frame.rotation.inverse() * (v - frame.position),
+                };
+                out.holds[c] = Hold {
                     sample: sample as u32,
                     a: w * (1.0 - f),
                     b: w * f,
                     offset: blended.inverse().transform_point3(v),
-                });
+                };
+                out.count += 1;
                 total += w;
             }
-            for (h, i) in holds[first..].iter_mut().zip(&mut info[first..]) {
+            for (h, i) in out.holds[..out.count].iter_mut().zip(&mut out.info) {
                 h.a /= total;
                 h.b /= total;
                 i.weight /= total;
             }
+            out
+        };
+        #[cfg(feature = "parallel")]
+        let per_vertex: Vec<VertexHolds> = {
+            use rayon::prelude::*;
+            rest.positions.par_iter().map(|&v| bind_vertex(v)).collect()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let per_vertex: Vec<VertexHolds> = rest.positions.iter().map(|&v| bind_vertex(v)).collect();
+        let mut start = Vec::with_capacity(rest.positions.len() + 1);
+        let mut holds = Vec::new();
+        let mut info = Vec::new();
+        start.push(0);
+        for vh in &per_vertex {
+            holds.extend_from_slice(&vh.holds[..vh.count]);
+            info.extend_from_slice(&vh.info[..vh.count]);
             start.push(holds.len() as u32);
         }
         SweepHand {
@@ -460,6 +531,7 @@ impl SweepHand {
             start,
             holds,
             info,
+            rest_samples,
         }
     }
 
@@ -510,23 +582,24 @@ impl SweepHand {
         }
     }
 
-    /// The rotation part of vertex `i`'s blended sweep frames applied to a rest-frame
-    /// direction expressed as `local` in that vertex's first hold (used to carry a rest
-    /// normal along; see [`SweepHand::local_direction`]).
+    /// A rest-space direction `d` at vertex `i` expressed in the rest frame of the vertex's
+    /// first hold, for [`SweepHand::rotate_local`].
+    pub fn local_direction(&self, i: usize, d: Vec3) -> Vec3 {
+        let h = &self.holds[self.start[i] as usize];
+        let w = h.a + h.b;
+        let m = |k: usize| self.rest_samples.frames[h.sample as usize + k].matrix3;
+        let blended = m(0) * (h.a / w) + m(1) * (h.b / w);
+        Vec3::from(blended.inverse() * Vec3A::from(d))
+    }
+
+    /// Carries a direction from [`SweepHand::local_direction`] to the posed frame of the
+    /// same hold: the rest direction rotated as the skin around vertex `i` rotated (for the
+    /// normal displacements of creases).
+    #[inline]
     pub fn rotate_local(&self, samples: &SweepSamples, i: usize, local: Vec3) -> Vec3 {
         let h = &self.holds[self.start[i] as usize];
         let w = h.a + h.b;
         Vec3::from(samples.apply_vector(h.sample, h.a / w, h.b / w, Vec3A::from(local)))
-    }
-
-    /// A rest-space direction `d` at vertex `i` expressed in the rest frame of its first
-    /// (strongest-first is not guaranteed) hold, for [`SweepHand::rotate_local`].
-    pub fn local_direction(&self, rest_samples: &SweepSamples, i: usize, d: Vec3) -> Vec3 {
-        let h = &self.holds[self.start[i] as usize];
-        let w = h.a + h.b;
-        let m = |k: usize| rest_samples.frames[h.sample as usize + k].matrix3;
-        let blended = m(0) * (h.a / w) + m(1) * (h.b / w);
-        Vec3::from(blended.inverse() * Vec3A::from(d))
     }
 
     /// Deforms the bound skin to `pose`, writing one position per vertex into `out`:
