@@ -14,6 +14,7 @@
 
 pub mod collide;
 pub mod creases;
+pub mod dataset;
 pub mod palm;
 pub mod rig;
 pub mod skeleton;
