@@ -7,6 +7,7 @@
 //! - [`commands::train`]: `crease train` — a whole model (bones, controls, regressors).
 //! - [`commands::synth`]: `crease synth` — control frames in, meshes out.
 //! - [`commands::eval`]: `crease eval` — leave-one-out and test tables of every method.
+//! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
 //! - [`commands::common`]: example loading, control-point specs, progress display.
 
 pub mod commands;
@@ -36,6 +37,11 @@ pub enum Command {
     Synth(commands::synth::SynthArgs),
     /// Compare methods by leave-one-out and on held-out test poses.
     Eval(commands::eval::EvalArgs),
+    /// Generate a hand data set (LYK06 sweep hand): posed meshes at two resolutions, joint
+    /// angles, control-point layouts, manifests for train/eval, and a contact sheet.
+    Handgen(commands::handgen::HandgenArgs),
+    /// Write one posed sweep hand (a named pose or joint angles) as a mesh.
+    Pose(commands::handgen::PoseArgs),
 }
 
 /// Runs a parsed command line.
@@ -45,6 +51,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Train(args) => commands::train::run(&args),
         Command::Synth(args) => commands::synth::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
+        Command::Handgen(args) => commands::handgen::run(&args),
+        Command::Pose(args) => commands::handgen::run_pose(&args),
     }
 }
 

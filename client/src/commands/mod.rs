@@ -3,5 +3,6 @@
 pub mod common;
 pub mod eval;
 pub mod fit;
+pub mod handgen;
 pub mod synth;
 pub mod train;

@@ -1,0 +1,140 @@
+//! `crease handgen`: a generated hand data set (LYK06 sweep hand, issue 4) — posed meshes at
+//! two resolutions, joint angles, control-point layouts, manifests and a contact sheet — and
+//! `crease pose`: one posed hand mesh.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use crease_core::sweep::dataset::{DatasetProgress, write_dataset};
+use crease_core::sweep::rig::{HandRig, Layers};
+use crease_core::sweep::skeleton::{HandPose, JointLimits, NamedPose};
+use crease_core::sweep::surface::Resolution;
+
+/// Options of `crease handgen`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct HandgenArgs {
+    /// Training poses, the flat rest pose first, then the named poses, then sampled ones.
+    #[arg(long, default_value_t = 14)]
+    pub train: usize,
+    /// Held-out test poses (sampled from a separate stream).
+    #[arg(long, default_value_t = 40)]
+    pub test: usize,
+    /// Seed of the pose sampler.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder (created).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Write only the base resolution (~8K vertices), not the detailed one (>= 150K).
+    #[arg(long)]
+    pub base_only: bool,
+}
+
+/// Runs `crease handgen`.
+pub fn run(args: &HandgenArgs) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let resolutions: &[Resolution] = if args.base_only {
+        &[Resolution::Base]
+    } else {
+        &[Resolution::Base, Resolution::Detailed]
+    };
+    let summary = write_dataset(
+        &args.out,
+        args.train,
+        args.test,
+        args.seed,
+        resolutions,
+        |p| match p {
+            DatasetProgress::Building(r) => {
+                eprintln!(
+                    "[{:>5.1}s] building the {r:?} hand",
+                    start.elapsed().as_secs_f32()
+                )
+            }
+            DatasetProgress::Wrote {
+                resolution,
+                done,
+                total,
+                ..
+            } if done == total => eprintln!(
+                "[{:>5.1}s] wrote {total} {resolution:?} meshes",
+                start.elapsed().as_secs_f32()
+            ),
+            DatasetProgress::Wrote { .. } => {}
+            DatasetProgress::Sheet => {
+                eprintln!(
+                    "[{:>5.1}s] rendering the contact sheet",
+                    start.elapsed().as_secs_f32()
+                )
+            }
+        },
+    )
+    .with_context(|| format!("generating the hand data set in {}", args.out.display()))?;
+    for (res, [v, t]) in &summary.resolutions {
+        println!("{res}: {v} vertices, {t} triangles");
+    }
+    println!(
+        "{} training + {} test poses in {} ({:.1} s)",
+        summary.train.len(),
+        summary.test.len(),
+        args.out.display(),
+        start.elapsed().as_secs_f32()
+    );
+    println!(
+        "train with: crease train --examples {} --out hand.crease",
+        args.out.join("train-back.toml").display()
+    );
+    Ok(())
+}
+
+/// Options of `crease pose`.
+#[derive(Clone, Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("which").required(true).args(["pose", "angles"])))]
+pub struct PoseArgs {
+    /// A named pose: flat, relaxed, fist, point, victory, pinch, grasp, spread, thumbs-up, ok.
+    #[arg(long)]
+    pub pose: Option<NamedPose>,
+    /// Joint angles: a JSON object of degree-of-freedom names to radians (as `crease handgen`
+    /// writes in poses/); missing ones are 0. Clamped to the joint limits.
+    #[arg(long, value_name = "FILE")]
+    pub angles: Option<PathBuf>,
+    /// Output mesh (.obj, .ply, .gltf or .glb).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Resolution.
+    #[arg(long, default_value = "base", value_parser = ["base", "detailed"])]
+    pub resolution: String,
+}
+
+/// Runs `crease pose`.
+pub fn run_pose(args: &PoseArgs) -> anyhow::Result<()> {
+    let pose = match (&args.pose, &args.angles) {
+        (Some(named), _) => HandPose::named(*named),
+        (None, Some(path)) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let map: std::collections::BTreeMap<String, f32> = serde_json::from_str(&text)
+                .with_context(|| {
+                    format!("{}: expected a JSON object of joint angles", path.display())
+                })?;
+            let pose =
+                HandPose::try_from(map).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            if !pose.is_finite() {
+                bail!("{}: a joint angle is not finite", path.display());
+            }
+            pose.clamp(&JointLimits::adult())
+        }
+        (None, None) => bail!("give --pose NAME or --angles FILE"),
+    };
+    let resolution = match args.resolution.as_str() {
+        "detailed" => Resolution::Detailed,
+        _ => Resolution::Base,
+    };
+    let rig = HandRig::build(resolution).context("building the hand")?;
+    let mesh = rig.posed_mesh(&pose, Layers::default());
+    mesh.write(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!("{}: {} vertices", args.out.display(), mesh.vertex_count());
+    Ok(())
+}
