@@ -1,10 +1,12 @@
 //! The whole sweep hand as one per-frame deformer: the rest skin bound to the sweeps
 //! ([`super::sweeps`]), the palm-control surface ([`super::palm`]), the creases
 //! ([`super::creases`], detailed resolution) and the self-intersection fix and collisions
-//! ([`super::collide`]), applied in that order (LYK06 §2-§5).
+//! ([`super::collide`]), applied in that order (LYK06 §2-§5); the creases come last so the
+//! fold fix does not flatten them.
 
 use glam::Vec3;
 
+use super::collide::{CollideOptions, CollideStats, Contact, HandCollider};
 use super::creases::{Creases, skin_texture, standard_creases};
 use super::palm::PalmSurface;
 use super::skeleton::{HandPose, HandSkeleton};
@@ -17,12 +19,15 @@ const TEXTURE_SEED: u32 = 1;
 
 /// Which layers [`HandRig::deform`] applies (all on by default; layers the rig was built
 /// without are skipped whatever these say).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Layers {
     /// The palm-control surface (bulge, no crushing).
     pub palm: bool,
     /// The creases.
     pub creases: bool,
+    /// The self-intersection fix and collisions ([`CollideOptions`]: folds at the joints,
+    /// digit-digit, digit-palm, an optional ball; push-out on), or none.
+    pub collide: Option<CollideOptions>,
 }
 
 impl Default for Layers {
@@ -30,14 +35,28 @@ impl Default for Layers {
         Layers {
             palm: true,
             creases: true,
+            collide: Some(CollideOptions::default()),
         }
     }
+}
+
+impl Layers {
+    /// Only the sweeps (LYK06 §2), no palm surface, creases or collisions.
+    pub const SWEEPS_ONLY: Layers = Layers {
+        palm: false,
+        creases: false,
+        collide: None,
+    };
 }
 
 /// Per-frame working memory of [`HandRig::deform`] (reuse it: no allocation per frame).
 #[derive(Clone, Debug, Default)]
 pub struct RigScratch {
     samples: SweepSamples,
+    /// The rig's collider with its per-frame buffers (cloned on first use).
+    collider: Option<HandCollider>,
+    contacts: Vec<Contact>,
+    stats: CollideStats,
 }
 
 impl RigScratch {
@@ -50,6 +69,16 @@ impl RigScratch {
     pub fn samples(&self) -> &SweepSamples {
         &self.samples
     }
+
+    /// The contacts found in the last deformed pose (empty without collisions).
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts
+    }
+
+    /// What the collision layer did in the last deformed pose.
+    pub fn collide_stats(&self) -> CollideStats {
+        self.stats
+    }
 }
 
 /// The bound sweep hand (module docs).
@@ -60,6 +89,7 @@ pub struct HandRig {
     hand: SweepHand,
     palm: Option<PalmSurface>,
     creases: Option<Creases>,
+    collider: Option<HandCollider>,
 }
 
 impl HandRig {
@@ -84,12 +114,14 @@ impl HandRig {
         let palm = PalmSurface::bind(skeleton, &rest, &normals);
         let creases =
             creases.then(|| Creases::bind(skeleton, &hand, &rest, &normals, standard_creases()));
+        let collider = HandCollider::build(&hand, &rest).ok();
         HandRig {
             skeleton: skeleton.clone(),
             rest,
             hand,
             palm,
             creases,
+            collider,
         }
     }
 
@@ -113,6 +145,11 @@ impl HandRig {
         self.palm.as_ref()
     }
 
+    /// The collider (self-intersection and collision primitives), if it could be built.
+    pub fn collider(&self) -> Option<&HandCollider> {
+        self.collider.as_ref()
+    }
+
     /// The creases, if bound.
     pub fn creases(&self) -> Option<&Creases> {
         self.creases.as_ref()
@@ -123,7 +160,9 @@ impl HandRig {
         self.rest.positions.len()
     }
 
-    /// Deforms the hand to `pose` into `out` with the chosen layers. Allocation-free.
+    /// Deforms the hand to `pose` into `out` with the chosen layers, in the order sweeps,
+    /// palm surface, folds and collisions, creases. Allocation-free after the first call with
+    /// a given `scratch`.
     ///
     /// # Panics
     /// If `out.len()` differs from [`HandRig::vertex_count`].
@@ -138,6 +177,13 @@ impl HandRig {
         self.hand.skin_into(&scratch.samples, out);
         if let (true, Some(palm)) = (layers.palm, &self.palm) {
             palm.apply(pose, out);
+        }
+        scratch.contacts.clear();
+        scratch.stats = CollideStats::default();
+        if let (Some(options), Some(template)) = (&layers.collide, &self.collider) {
+            let collider = scratch.collider.get_or_insert_with(|| template.clone());
+            scratch.stats =
+                collider.apply(scratch.samples.posed(), out, options, &mut scratch.contacts);
         }
         if let (true, Some(creases)) = (layers.creases, &self.creases) {
             creases.apply(pose, &self.hand, &scratch.samples, out);
