@@ -39,7 +39,9 @@
 use glam::{Vec2, Vec3};
 
 use super::palm::Domain;
-use super::skeleton::{Digit, Dof, DofKind, HandPose, HandSkeleton, Joint, JointLimits};
+use super::skeleton::{
+    Digit, Dof, DofKind, HandPose, HandSkeleton, Joint, JointLimits, PosedSkeleton,
+};
 use super::sweeps::{Sweep, SweepHand, SweepSamples};
 use crate::mesh::Mesh;
 
@@ -48,7 +50,7 @@ pub const TEXTURE_AMPLITUDE: f32 = 0.00006;
 /// Most creases a [`Creases`] can hold (the per-frame depths live on the stack).
 pub const MAX_CREASES: usize = 40;
 /// Distal offset of a finger's MCP flexion crease from the joint centre (metres).
-const MCP_CREASE_OFFSET: f32 = 0.012;
+pub const MCP_CREASE_OFFSET: f32 = 0.012;
 /// Spacing of the dorsal wrinkle lines (metres).
 const DORSAL_SPACING: f32 = 0.0025;
 /// Entries with a profile below this are dropped.
@@ -106,6 +108,29 @@ impl CreaseDef {
             .map(|&d| pose.get(d) / limits.range(d).1)
             .sum();
         (sum / self.drivers.len() as f32).clamp(0.0, 1.0)
+    }
+
+    /// The digit a joint crease lies on (`None` for palm lines).
+    pub fn digit(&self) -> Option<Digit> {
+        match self.place {
+            Place::Joint { digit, .. } => Some(digit),
+            Place::Palm(_) => None,
+        }
+    }
+
+    /// The point of a posed skeleton a digit crease wraps around: the joint centre (a finger's
+    /// MCP flexion crease: [`MCP_CREASE_OFFSET`] along the proximal phalanx). `None` for palm
+    /// lines.
+    pub fn centre(&self, posed: &PosedSkeleton) -> Option<Vec3> {
+        let Place::Joint { digit, chain } = self.place else {
+            return None;
+        };
+        let frames = posed.chain(digit);
+        let mut p = frames[chain].position;
+        if self.kind == CreaseKind::Flexion && digit != Digit::Thumb && chain == 2 {
+            p += frames[chain].axis() * MCP_CREASE_OFFSET;
+        }
+        Some(p)
     }
 
     /// The crease's depth in `pose` (metres; module docs).
