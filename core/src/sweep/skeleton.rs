@@ -1134,6 +1134,104 @@ impl PoseSampler {
     }
 }
 
+/// Why [`HandSkeleton::from_joint_positions`] refused a rest chain.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{digit:?} chain, bone from chain frame {bone}: {what}")]
+pub struct RestChainError {
+    /// The digit whose chain is unusable.
+    pub digit: Digit,
+    /// Chain index (1 = CMC, ..., last = tip) of the joint at the start of the bad bone.
+    pub bone: usize,
+    /// What was wrong, with the value found.
+    pub what: String,
+}
+
+/// Shortest bone [`HandSkeleton::from_joint_positions`] accepts (metres): a shorter one has no
+/// usable direction in `f32` at hand scale.
+pub const MIN_BONE_LENGTH: f32 = 1e-4;
+
+impl HandSkeleton {
+    /// A skeleton whose flat pose ([`HandPose::FLAT`]) passes exactly through given joint
+    /// centres, for binding external rest meshes (e.g. the WebXR hand, issue 4 item 7).
+    ///
+    /// `positions[d]` holds digit `d`'s chain in the wrist frame (module docs), wrist excluded:
+    /// CMC, MCP, (PIP, DIP | IP), tip, i.e. [`Digit::chain_len`]` - 1` entries (the thumb's
+    /// last slot is ignored). `dorsal[d][k]` is the dorsal (nail-side) direction of joint `k`
+    /// of the digit ([`Digit::joints`] order; need not be unit or orthogonal to the bone).
+    ///
+    /// Every joint's rest frame gets local `+Y` towards the next chain position and `+Z` the
+    /// dorsal hint made orthogonal to it; the CMC base is the first position, the bone lengths
+    /// the distances along the chain, and the rest rotations the frames' relative rotations
+    /// (the wrist frame is the identity). So any curl or splay of the given chain becomes part of
+    /// the rest rotations: joint angles are measured from it.
+    pub fn from_joint_positions(
+        positions: &[[Vec3; MAX_CHAIN - 1]; 5],
+        dorsal: &[[Vec3; MAX_CHAIN - 2]; 5],
+    ) -> Result<HandSkeleton, RestChainError> {
+        let mut digits = [DigitRest {
+            base: Vec3::ZERO,
+            rest: [Quat::IDENTITY; MAX_DIGIT_JOINTS],
+            lengths: [0.0; MAX_DIGIT_JOINTS],
+        }; 5];
+        for digit in Digit::ALL {
+            let p = &positions[digit.index()];
+            let fail = |bone: usize, what: String| RestChainError { digit, bone, what };
+            let out = &mut digits[digit.index()];
+            out.base = p[0];
+            if !p[0].is_finite() {
+                return Err(fail(1, format!("CMC position {} is not finite", p[0])));
+            }
+            let mut parent = Quat::IDENTITY;
+            for k in 0..digit.joints().len() {
+                let bone = p[k + 1] - p[k];
+                let length = bone.length();
+                if !(length.is_finite() && length >= MIN_BONE_LENGTH) {
+                    return Err(fail(
+                        k + 1,
+                        format!("bone length {length} m, expected finite and >= {MIN_BONE_LENGTH}"),
+                    ));
+                }
+                let y = bone / length;
+                let hint = dorsal[digit.index()][k];
+                let z = hint - hint.dot(y) * y;
+                if !(z.is_finite() && z.length() > 1e-3 * hint.length()) {
+                    return Err(fail(
+                        k + 1,
+                        format!("dorsal direction {hint} is zero, not finite or along the bone"),
+                    ));
+                }
+                let z = z.normalize();
+                let frame = Quat::from_mat3(&glam::Mat3::from_cols(y.cross(z), y, z)).normalize();
+                out.rest[k] = (parent.inverse() * frame).normalize();
+                out.lengths[k] = length;
+                parent = frame;
+            }
+        }
+        Ok(HandSkeleton { digits })
+    }
+
+    /// This skeleton with another hand's bone geometry: the CMC bases (wrist frame) and bone
+    /// lengths ([`HandSkeleton::bone_lengths`] order; unused entries ignored) replaced, the rest
+    /// rotations kept, so the same angles pose it the same way (e.g. to measure how well angles
+    /// recovered from a tracked hand reproduce that hand's own joints).
+    pub fn with_bones(&self, bases: [Vec3; 5], lengths: [[f32; MAX_CHAIN - 2]; 5]) -> HandSkeleton {
+        let mut out = self.clone();
+        for digit in Digit::ALL {
+            let d = &mut out.digits[digit.index()];
+            d.base = bases[digit.index()];
+            let n = digit.joints().len();
+            d.lengths[..n].copy_from_slice(&lengths[digit.index()][..n]);
+        }
+        out
+    }
+
+    /// Rest rotations of `digit`'s joints relative to their parent frames (the first relative
+    /// to the wrist frame), applied before each joint's articulation; [`Digit::joints`] order.
+    pub fn rest_rotations(&self, digit: Digit) -> &[Quat] {
+        &self.digits[digit.index()].rest[..digit.joints().len()]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
