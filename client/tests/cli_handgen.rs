@@ -1,0 +1,175 @@
+//! End to end: `crease handgen` writes a generated hand data set that `crease train`/`eval`
+//! can read (manifests, control-point layouts), joint angles that `crease pose` turns back
+//! into the same meshes, and a contact sheet that is not blank.
+
+use std::path::Path;
+use std::process::Command;
+
+use crease_core::glam::Vec3;
+use crease_core::mesh::{ExampleSet, Mesh};
+
+fn crease() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_crease"))
+}
+
+fn run(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("crease runs");
+    assert!(
+        out.status.success(),
+        "crease failed: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+/// Luminance mean and variance of a PNG, and its size.
+fn png_stats(path: &Path) -> (u32, u32, f64, f64) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(path).expect("png exists"),
+    ));
+    let mut reader = decoder.read_info().expect("png header");
+    let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+    let info = reader.next_frame(&mut buf).expect("png frame");
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    let px = &buf[..info.buffer_size()];
+    let lum: Vec<f64> = px
+        .chunks(3)
+        .map(|c| 0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64)
+        .collect();
+    let mean = lum.iter().sum::<f64>() / lum.len() as f64;
+    let var = lum.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / lum.len() as f64;
+    (info.width, info.height, mean, var)
+}
+
+#[test]
+fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("hands");
+    let stdout = run(crease()
+        .args([
+            "handgen", "--train", "12", "--test", "3", "--seed", "5", "--out",
+        ])
+        .arg(&out));
+    assert!(stdout.contains("base: "), "{stdout}");
+    assert!(stdout.contains("detailed: "), "{stdout}");
+
+    // Base manifests: 12 training meshes (rest first), the three layouts.
+    for (layout, n) in [("palm", 17), ("back", 15), ("glove13", 13)] {
+        let set = ExampleSet::load(out.join(format!("train-{layout}.toml"))).expect("manifest");
+        assert_eq!(set.examples.len(), 12, "{layout}");
+        assert!(set.rest_name.ends_with("00-flat.ply"), "{}", set.rest_name);
+        let cps = set.control_points.as_ref().expect("control points");
+        assert_eq!(cps.len(), n, "{layout}");
+        let mut unique = cps.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), n, "{layout}: repeated control points {cps:?}");
+    }
+    let test = ExampleSet::load(out.join("test.toml")).expect("test manifest");
+    assert_eq!(test.examples.len(), 3);
+    let train = ExampleSet::load(out.join("train-back.toml")).expect("train");
+    assert_eq!(test.rest.triangles, train.rest.triangles, "shared topology");
+    assert!((6_000..=10_000).contains(&train.rest.vertex_count()));
+
+    // Detailed manifests: same poses, >= 150K vertices, shared topology.
+    let detailed = ExampleSet::load(out.join("detailed/train.toml")).expect("detailed");
+    assert_eq!(detailed.examples.len(), 12);
+    assert!(detailed.rest.vertex_count() >= 150_000);
+    let dtest = ExampleSet::load(out.join("detailed/test.toml")).expect("detailed test");
+    assert_eq!(dtest.rest.triangles, detailed.rest.triangles);
+
+    // glove13 geometry against the recording's layout: hand_left/hand_right ~3 cm apart near
+    // the wrist (hand_left on the thumb side, -X), hand_top ~5 cm distal, all on the back.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("handgen.json")).unwrap())
+            .expect("summary json");
+    let glove = &summary["layouts"]["glove13"]["base"];
+    let at = |name: &str| -> Vec3 {
+        let lm = glove
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|l| l["name"] == name)
+            .unwrap_or_else(|| panic!("no landmark {name}"));
+        train.rest.positions[lm["vertex"].as_u64().unwrap() as usize]
+    };
+    let (top, left, right) = (at("hand_top"), at("hand_left"), at("hand_right"));
+    assert!(
+        left.x < right.x,
+        "hand_left {left} should be radial of hand_right {right}"
+    );
+    assert!(
+        (0.02..0.045).contains(&left.distance(right)),
+        "{left} {right}"
+    );
+    assert!((0.035..0.07).contains(&top.distance(left)), "{top} {left}");
+    assert!(top.z > 0.0 && left.z > 0.0 && right.z > 0.0, "on the back");
+    assert!(at("index_tip").y > at("index_middle").y + 0.03);
+
+    // Joint angles round trip: `crease pose --angles` reproduces a test mesh exactly.
+    let angles = out.join("poses/test/001-sampled.json");
+    let posed = dir.path().join("posed.ply");
+    run(crease()
+        .args(["pose", "--angles"])
+        .arg(&angles)
+        .arg("--out")
+        .arg(&posed));
+    let a = Mesh::read(&posed).expect("posed mesh");
+    let b = Mesh::read(out.join("base/test/001-sampled.ply")).expect("test mesh");
+    let worst = a
+        .positions
+        .iter()
+        .zip(&b.positions)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 1e-6,
+        "pose --angles differs from handgen by {worst} m"
+    );
+
+    // A named pose differs from the flat hand.
+    let fist = dir.path().join("fist.obj");
+    run(crease()
+        .args(["pose", "--pose", "fist", "--out"])
+        .arg(&fist));
+    let fist = Mesh::read(&fist).expect("fist");
+    let moved = fist
+        .positions
+        .iter()
+        .zip(&train.rest.positions)
+        .filter(|(p, q)| p.distance(**q) > 0.01)
+        .count();
+    assert!(moved > 1000, "only {moved} vertices moved in the fist");
+
+    // Contact sheet: 15 poses x 2 views, not blank.
+    let (w, h, mean, var) = png_stats(&out.join("contact-sheet.png"));
+    eprintln!("contact sheet {w}x{h}: luminance mean {mean:.1}, variance {var:.1}");
+    assert!(w >= 1000 && h >= 300, "{w}x{h}");
+    assert!(var > 100.0, "contact sheet looks blank (variance {var})");
+}
+
+#[test]
+fn handgen_and_pose_reject_bad_input() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = crease()
+        .args(["handgen", "--train", "0", "--base-only", "--out"])
+        .arg(dir.path().join("x"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--train"));
+
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, r#"{"index_pip_flexion": 0.5, "elbow": 1.0}"#).unwrap();
+    let out = crease()
+        .args(["pose", "--angles"])
+        .arg(&bad)
+        .arg("--out")
+        .arg(dir.path().join("y.obj"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.json") && err.contains("elbow"), "{err}");
+}
