@@ -228,11 +228,11 @@ impl Net {
     fn eval(&self, pv: &PalmVertex) -> (Vec3, Vec3, Vec3) {
         let (mut s, mut su, mut sv) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         for j in 0..4 {
-            let row = &self.0[pv.su as usize + CU * (pv.sv as usize + j)..];
+            let start = pv.su as usize + CU * (pv.sv as usize + j);
             let (mut r, mut ru) = (Vec3::ZERO, Vec3::ZERO);
-            for i in 0..4 {
-                r += pv.bu[i] * row[i];
-                ru += pv.dbu[i] * row[i];
+            for ((&c, &b), &db) in self.0[start..start + 4].iter().zip(&pv.bu).zip(&pv.dbu) {
+                r += b * c;
+                ru += db * c;
             }
             s += pv.bv[j] * r;
             su += pv.bv[j] * ru;
