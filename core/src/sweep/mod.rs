@@ -10,7 +10,19 @@
 //!   by Surface Nets and smoothed, at two resolutions (base ~8K, detailed >= 150K vertices).
 //! - [`sweeps`]: the control sweeps (one per digit: a C1 trajectory and a slerped orientation
 //!   curve through the joint key frames), the binding of skin vertices by LYK06 eq. 1, and the
-//!   blended, allocation-free deformation.
+//!   blended, allocation-free deformation (sampled sweep frames).
+//! - [`palm`]: the palm-control surface (LYK06 §3): a bicubic B-spline through 54 palmar
+//!   vertices, 10 of them rising with MCP / thumb CMC flexion (bulge); palm vertices bound by
+//!   `(u, v, d)` (LYK06 eq. 2).
+//! - [`creases`]: palm lines, palmar flexion creases and dorsal knuckle wrinkles driven by
+//!   named joints, and a static skin texture (the detailed resolution).
+//! - [`collide`]: the self-intersection fix at IP/PIP/DIP (LYK06 §5, cross-sectional planes)
+//!   and collisions (digit spheres, palm planes, an external ball) with push-out.
+//! - [`rig`]: all of the above as one per-frame deformer ([`rig::HandRig`]).
+//! - [`webxr`]: the WebXR generic hand (../shared/data/hand) bound to the sweeps from its
+//!   joints; WebXR joint matrices <-> joint angles; the iwer poses.
+//! - [`dataset`]: the data-set generator of `crease handgen` (poses, control-point layouts,
+//!   meshes at both resolutions, joint angles, manifests, contact sheet).
 
 pub mod collide;
 pub mod creases;
