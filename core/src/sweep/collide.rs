@@ -132,7 +132,11 @@ pub const PALM_BUCKET: f32 = 0.02;
 /// further out than this is tested again against every primitive, which is rare with 5 mm.
 pub const CULL_MARGIN: f32 = 0.005;
 /// Most successive pushes of one vertex (out of the deepest primitive each time).
-pub const MAX_PUSHES: usize = 8;
+pub const MAX_PUSHES: usize = 32;
+/// How far past a primitive's surface a push puts a vertex (metres): 10 µm, invisible, but it
+/// ends the ping-pong of a vertex in the wedge between two touching primitives, which an exact
+/// push leaves micrometres inside one of them after [`MAX_PUSHES`].
+pub const PUSH_SLACK: f32 = 1e-5;
 /// Chain index of the MCP joint (wrist 0, CMC 1, MCP 2) for every digit.
 const MCP: usize = 2;
 /// Smallest `-n.z` of a rest normal for a palm vertex to count as palmar (~45°).
@@ -1103,7 +1107,7 @@ fn push_vertex(v: &mut Vec3, obstacles: impl Iterator<Item = Obstacle> + Clone) 
         if deepest.0 <= 0.0 {
             break;
         }
-        *v += deepest.0 * deepest.1;
+        *v += (deepest.0 + PUSH_SLACK) * deepest.1;
         moved = true;
     }
     moved

@@ -334,7 +334,7 @@ impl HandSdf {
 /// The two mesh resolutions of the rest hand (issue 4: base ≈ 8K vertices, detailed ≥ 150K).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Resolution {
-    /// About 8K vertices (6K..10K).
+    /// About 9.5K vertices (6K..10K): two Loop subdivision levels then give ≥ 150K (issue 5).
     Base,
     /// At least 150K vertices.
     Detailed,
@@ -342,11 +342,11 @@ pub enum Resolution {
 
 impl Resolution {
     /// Grid spacing, metres. Surface Nets gives about one vertex per grid cell the surface
-    /// crosses, so the count scales as `1 / spacing²`; these values were measured to give ~8.2K
-    /// and ~178K vertices on [`HandSdf::adult_right`].
+    /// crosses, so the count scales as `1 / spacing²`; these values were measured to give 9,458
+    /// and 180,460 vertices on [`HandSdf::adult_right`].
     pub const fn spacing(self) -> f32 {
         match self {
-            Resolution::Base => 0.0027,
+            Resolution::Base => 0.00252,
             Resolution::Detailed => 0.00058,
         }
     }
