@@ -17,6 +17,7 @@
 
 pub mod bones;
 pub mod controls;
+pub mod detail_regress;
 pub mod edges;
 pub mod eval;
 pub mod geodesic;
