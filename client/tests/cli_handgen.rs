@@ -65,6 +65,12 @@ fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
         unique.sort_unstable();
         unique.dedup();
         assert_eq!(unique.len(), n, "{layout}: repeated control points {cps:?}");
+        let names = set.control_point_names.as_ref().expect("names");
+        assert_eq!(names.len(), n, "{layout}");
+        if layout == "glove13" {
+            assert_eq!(names[..3], ["hand_top", "hand_left", "hand_right"]);
+            assert!(names.contains(&"thumb_tip".to_owned()));
+        }
     }
     let test = ExampleSet::load(out.join("test.toml")).expect("test manifest");
     assert_eq!(test.examples.len(), 3);

@@ -183,10 +183,15 @@ fn manifest_globs_in_natural_order_skipping_the_rest() {
 rest = "reference.obj"
 examples = ["poses/*", "gallop/*.obj", "*.obj", "poses/2.obj"]
 control_points = [3, 0, 2]
+control_point_names = ["tip", "root", "mid"]
 "#,
     )
     .unwrap();
     let set = ExampleSet::load(&manifest).unwrap();
+    assert_eq!(
+        set.control_point_names,
+        Some(vec!["tip".to_owned(), "root".to_owned(), "mid".to_owned()])
+    );
     assert_eq!(
         names(&set),
         vec![
@@ -222,6 +227,19 @@ fn manifest_rejects_unknown_keys_with_line() {
             "{} line 3: unknown field `control_point`",
             m.display()
         )),
+        "{e}"
+    );
+}
+
+#[test]
+fn manifest_control_point_names_must_match_the_points() {
+    let (m, e, _t) = manifest_error(
+        "rest = \"reference.obj\"\ncontrol_points = [0, 1]\ncontrol_point_names = [\"a\"]\n",
+        &["reference.obj"],
+    );
+    assert!(
+        e.starts_with(&format!("{} line 3", m.display()))
+            && e.contains("1 names for 2 control points"),
         "{e}"
     );
 }

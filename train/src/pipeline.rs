@@ -39,6 +39,9 @@ pub struct TrainOptions {
     pub fit: FitOptions,
     /// Control points.
     pub controls: ControlSpec,
+    /// Names of the control points (e.g. a manifest's `control_point_names`), used when there
+    /// is one per chosen point; otherwise they are named `c0`, `c1`, ...
+    pub control_names: Option<Vec<String>>,
     /// Regression.
     pub regress: RegressOptions,
     /// Bones per edge in the edge skin; defaults to the vertex K.
@@ -59,6 +62,7 @@ impl Default for TrainOptions {
         Self {
             fit: FitOptions::default(),
             controls: ControlSpec::Auto(8),
+            control_names: None,
             regress: RegressOptions::default(),
             edge_influences: None,
             edge_model: EdgeModel::default(),
@@ -210,7 +214,14 @@ pub fn train(
         }
         None => (options.regress.clone(), options.beta),
     };
-    let model = base.model(&regress, beta);
+    let mut model = base.model(&regress, beta);
+    if let Some(names) = &options.control_names
+        && names.len() == model.controls.len()
+    {
+        for (c, name) in model.controls.iter_mut().zip(names) {
+            c.name.clone_from(name);
+        }
+    }
     base.report.regress_seconds = t.elapsed().as_secs_f64();
     base.report.seconds += base.report.regress_seconds;
     Ok((model, base.report))

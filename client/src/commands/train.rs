@@ -118,6 +118,12 @@ impl RegressArgs {
                 ..FitOptions::default()
             },
             controls: common::control_spec(self.control_points.as_deref(), set)?,
+            // The manifest's names go with the manifest's points.
+            control_names: self
+                .control_points
+                .is_none()
+                .then(|| set.control_point_names.clone())
+                .flatten(),
             regress: RegressOptions {
                 method,
                 kc: self.kc,

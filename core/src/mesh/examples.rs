@@ -13,6 +13,7 @@
 //! rest = "reference.obj"
 //! examples = ["gallop/*.obj", "poses/*.obj"]   # globs or paths, in this order
 //! control_points = [12, 400, 7]                # optional vertex indices of the rest pose
+//! control_point_names = ["tip", "palm", "heel"] # optional, one per control point
 //! ```
 //! Each glob's matches are in natural order, must include at least one mesh file, and non-mesh
 //! files are skipped; a file already listed (the rest, or an earlier pattern) is not repeated.
@@ -50,6 +51,8 @@ pub struct ExampleSet {
     pub examples: Vec<NamedMesh>,
     /// Vertex indices chosen as control points (manifest `control_points`), all in range.
     pub control_points: Option<Vec<u32>>,
+    /// Names of the control points (manifest `control_point_names`), one per control point.
+    pub control_point_names: Option<Vec<String>>,
     /// The folder names are relative to: the loaded folder, or the manifest's folder.
     pub root: PathBuf,
 }
@@ -74,6 +77,8 @@ struct Manifest {
     examples: Vec<String>,
     #[serde(default)]
     control_points: Option<Vec<toml::Spanned<u32>>>,
+    #[serde(default)]
+    control_point_names: Option<toml::Spanned<Vec<String>>>,
 }
 
 /// Deepest folder nesting searched: guards against symbolic-link cycles.
@@ -115,8 +120,8 @@ impl ExampleSet {
         let is_toml = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-        let (root, entries, control_points) = if meta.is_dir() {
-            (path.to_path_buf(), folder_entries(path)?, None)
+        let (root, entries, control_points, names) = if meta.is_dir() {
+            (path.to_path_buf(), folder_entries(path)?, None, None)
         } else if is_toml {
             manifest_entries(path)?
         } else {
@@ -142,10 +147,27 @@ impl ExampleSet {
         }
         let (values, lines) = control_points.unzip();
         let lines = lines.unwrap_or_default();
-        Self::assemble(root, examples, values, |position| Location {
+        let mut set = Self::assemble(root, examples, values, |position| Location {
             path: Some(path.to_path_buf()),
             line: lines.get(position).copied().flatten(),
-        })
+        })?;
+        if let Some((names, line)) = names {
+            let count = set.control_points.as_ref().map_or(0, Vec::len);
+            if names.len() != count {
+                return Err(MeshError::ExampleSet {
+                    at: Location {
+                        path: Some(path.to_path_buf()),
+                        line: Some(line),
+                    },
+                    message: format!(
+                        "control_point_names has {} names for {count} control points",
+                        names.len()
+                    ),
+                });
+            }
+            set.control_point_names = Some(names);
+        }
+        Ok(set)
     }
 
     /// Builds a set from meshes already in memory; `examples[0]` is the rest pose. Checks every
@@ -203,6 +225,7 @@ impl ExampleSet {
             rest_name: rest.name.clone(),
             examples,
             control_points,
+            control_point_names: None,
             root,
         })
     }
@@ -312,11 +335,14 @@ fn walk(dir: &Path, prefix: &str, depth: usize, out: &mut Vec<Entry>) -> Result<
 
 /// Control point values and the TOML line of each.
 type ControlPoints = Option<(Vec<u32>, Vec<Option<usize>>)>;
+/// Control point names and the TOML line of the list.
+type ControlNames = Option<(Vec<String>, usize)>;
 
-/// Reads a manifest: the root (its folder), the files in load order, and the control points.
+/// Reads a manifest: the root (its folder), the files in load order, the control points and
+/// their names.
 fn manifest_entries(
     manifest_path: &Path,
-) -> Result<(PathBuf, Vec<Entry>, ControlPoints), MeshError> {
+) -> Result<(PathBuf, Vec<Entry>, ControlPoints, ControlNames), MeshError> {
     let text =
         std::fs::read_to_string(manifest_path).map_err(|e| MeshError::io(manifest_path, e))?;
     let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
@@ -396,7 +422,10 @@ fn manifest_entries(
             .map(|c| (*c.get_ref(), Some(line_of(c.span().start))))
             .unzip()
     });
-    Ok((root, entries, cps))
+    let names = manifest
+        .control_point_names
+        .map(|n| (n.get_ref().clone(), line_of(n.span().start)));
+    Ok((root, entries, cps, names))
 }
 
 /// The path by which duplicates are recognised: canonical when the file exists (so

@@ -449,6 +449,8 @@ pub fn write_dataset(
                 let _ = writeln!(text, "examples = [\"base/train/*.ply\"]");
                 let ids: Vec<String> = lms.iter().map(|l| l.vertex.to_string()).collect();
                 let _ = writeln!(text, "control_points = [{}]", ids.join(", "));
+                let names: Vec<String> = lms.iter().map(|l| format!("{:?}", l.name)).collect();
+                let _ = writeln!(text, "control_point_names = [{}]", names.join(", "));
                 write_text(&dir.join(format!("train-{}.toml", layout.name())), &text)?;
             }
             if let Some(tr) = &test_rest {
