@@ -10,6 +10,8 @@
 //!   edge skin fitted on top of them.
 //! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
 //!   local, RBF baseline) as a runtime `RotationModel`.
+//! - [`detail`]: the detail layer (HZY11 §4, §5.2): displacement extraction by ray casting,
+//!   and the per-vertex detail regressor collapsed into one matrix.
 //! - [`select`]: kernel, width, regularisation and beta chosen by leave-one-out inside the
 //!   training set.
 //! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
@@ -17,7 +19,7 @@
 
 pub mod bones;
 pub mod controls;
-pub mod detail_regress;
+pub mod detail;
 pub mod edges;
 pub mod eval;
 pub mod geodesic;

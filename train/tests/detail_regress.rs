@@ -1,4 +1,4 @@
-//! The HZY11 §5.2 detail regressor (`crease_train::detail_regress`): the collapsed matrix
+//! The HZY11 §5.2 detail regressor (`crease_train::detail::regress`): the collapsed matrix
 //! `D xi(c) + b` equals per-vertex 1-D KCCA fits made one vertex at a time, training poses are
 //! reproduced, held-out poses are predicted better than by the static detail, and bad input
 //! is refused with the field named.
@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use crease_core::runtime::kernel::Kernel;
-use crease_train::detail_regress::{DetailFitError, DetailInput, DetailModel};
+use crease_train::detail::regress::{DetailFitError, DetailInput, DetailModel};
 use crease_train::kcca::{KccaOptions, fit_kcca};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};

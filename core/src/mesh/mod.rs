@@ -21,6 +21,7 @@ pub mod examples;
 pub mod gltf;
 pub mod obj;
 pub mod ply;
+pub mod subdivision;
 pub mod topology;
 
 pub use error::{Location, MeshError};

@@ -11,6 +11,7 @@
 //!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 
+pub mod detail;
 pub mod edge_skin;
 pub mod kernel;
 pub mod predict;

@@ -1,0 +1,605 @@
+//! The detail layer at run time: HZY11 eq. 4's `+ h(c) n(v)` on the Loop-subdivided base mesh.
+//!
+//! HZY11 §5.3 (eq. 4): the skinned low-resolution mesh is subdivided "in the same way as in the
+//! subdivision procedure for detail extraction" (§4), each subdivided vertex gets its normal
+//! `n(v)`, and the regressed per-vertex displacement `h(c)` moves it along that normal. Per frame
+//! (DESIGN step 9):
+//! 1. `high = S · base`: one sparse mat-vec with the fixed Loop matrix
+//!    ([`LoopSubdivision`], [`SparseMatrix::apply`]);
+//! 2. area-weighted unit vertex normals of `high`, the definition of
+//!    [`crate::mesh::compute_vertex_normals`] (which training uses to measure `h`);
+//! 3. `out = high + h ⊙ n` ([`displace`]).
+//!
+//! `h = D · xi(c)` itself (one dense mat-vec) is the caller's; [`DetailSynth`] takes it as a
+//! slice. [`DetailSynth`] holds `S`, the topology and its buffers, so a frame allocates nothing;
+//! it fuses the normalisation of step 2 with step 3 in one pass over the vertices.
+//!
+//! Normals, two ways ([`NormalsMethod`]); measured on the 151K-vertex 2-level hand, one core
+//! (`benches/detail.rs`), both bound by arithmetic, not memory (renumbering the vertices for
+//! locality changed neither):
+//! - scatter ([`scatter_normals`]): one cross product per triangle, added to its three corners;
+//!   ~1.5 ms. Sequential: the corners of different triangles collide.
+//! - gather ([`VertexFans`]): each vertex sums the face normals of its own triangles along its
+//!   one-ring, so rows are independent and split over threads without atomics or per-thread
+//!   buffers, but every face normal is computed at all three corners; ~2.8 ms on one core.
+//!
+//! [`NormalsMethod::Auto`] scatters on one thread and gathers when the rayon pool has several.
+//! The two sum in different orders, so their normals differ in the last bits (≤ ~1e-6).
+//!
+//! With the `parallel` feature the vertex passes split into chunks of [`PARALLEL_CHUNK`] on the
+//! rayon pool when the pool has more than one thread; otherwise the same kernels run on the
+//! calling thread (as in [`super::skin`]).
+
+use glam::{Vec3, Vec3A};
+
+use crate::mesh::Mesh;
+use crate::mesh::subdivision::{LoopSubdivision, SparseMatrix, SubdivisionError};
+
+/// Vertices per rayon task. A subdivided vertex costs ~10 ns per pass, so 4096 of them
+/// (~40 µs) dwarf the task overhead (~1 µs) while 151K vertices still make ~37 tasks.
+pub const PARALLEL_CHUNK: usize = 4096;
+
+/// Whether to split `n` vertices over the rayon pool: more than one chunk, and more than one
+/// thread (a one-thread pool only adds a cross-thread hand-off; see [`super::skin`]).
+#[cfg(feature = "parallel")]
+fn use_pool(n: usize) -> bool {
+    n > PARALLEL_CHUNK && rayon::current_num_threads() > 1
+}
+
+/// An error from the detail layer: building the subdivision, or a buffer of the wrong size.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DetailError {
+    /// Building `S` failed, or a base buffer does not match it.
+    #[error(transparent)]
+    Subdivision(#[from] SubdivisionError),
+    /// A per-vertex buffer does not have one entry per subdivided vertex.
+    #[error("detail layer: {what} has {got} entries, expected {expected} (one per vertex)")]
+    Length {
+        /// Which buffer ("displacements h", "normals", "output").
+        what: &'static str,
+        /// The length required.
+        expected: usize,
+        /// The length found.
+        got: usize,
+    },
+}
+
+fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), DetailError> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(DetailError::Length {
+            what,
+            expected,
+            got,
+        })
+    }
+}
+
+/// Separates the chains of one vertex's fan in [`VertexFans`].
+const BREAK: u32 = u32::MAX;
+
+/// For every vertex, the triangles around it as chains of their other corners, in CSR form:
+/// consecutive entries `r_i`, `r_i+1` of a chain are the other two corners of one incident
+/// triangle in its winding order (the triangle is `[v, r_i, r_i+1]` up to rotation), so
+/// `(p[r_i] - p[v]) × (p[r_i+1] - p[v])` is its face normal with twice its area as length.
+///
+/// On an oriented manifold each vertex's triangles form one chain, closed (first entry repeated
+/// at the end) inside and open on the boundary: `n` triangles take `n + 1` entries and every
+/// neighbour is loaded once, where a list of triangles would load each twice. Triangles that do
+/// not chain (inconsistent winding, several fans) are stored as further chains after a
+/// separator, so any triangle list gives the same normals as [`scatter_normals`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct VertexFans {
+    offsets: Vec<u32>,
+    chains: Vec<u32>,
+}
+
+impl VertexFans {
+    /// Builds the fans of `vertex_count` vertices from `triangles`.
+    ///
+    /// # Panics
+    /// If a triangle index is `>= vertex_count`, or there are 2³² or more corners.
+    pub fn new(vertex_count: usize, triangles: &[[u32; 3]]) -> VertexFans {
+        // The incident triangles of every vertex as (b, c) pairs, in CSR.
+        let mut start = vec![0u32; vertex_count + 1];
+        for t in triangles {
+            for &v in t {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..vertex_count {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start[..vertex_count].to_vec();
+        let mut pairs = vec![[0u32; 2]; triangles.len() * 3];
+        for &[a, b, c] in triangles {
+            for (v, pair) in [(a, [b, c]), (b, [c, a]), (c, [a, b])] {
+                pairs[fill[v as usize] as usize] = pair;
+                fill[v as usize] += 1;
+            }
+        }
+        // Chain them per vertex (valences are small: the quadratic scans cost nothing).
+        let mut offsets = Vec::with_capacity(vertex_count + 1);
+        let mut chains = Vec::with_capacity(pairs.len() + vertex_count);
+        offsets.push(0u32);
+        let mut used = Vec::new();
+        for v in 0..vertex_count {
+            let fan = &pairs[start[v] as usize..start[v + 1] as usize];
+            used.clear();
+            used.resize(fan.len(), false);
+            let mut left = fan.len();
+            while left > 0 {
+                if chains.len() > *offsets.last().expect("starts with 0") as usize {
+                    chains.push(BREAK);
+                }
+                // Open chains start at a pair whose first corner no other pair ends at.
+                let unused = |i: &usize| !used[*i];
+                let first = (0..fan.len())
+                    .filter(unused)
+                    .find(|&i| {
+                        !(0..fan.len()).any(|j| !used[j] && j != i && fan[j][1] == fan[i][0])
+                    })
+                    .or_else(|| (0..fan.len()).find(unused))
+                    .expect("left > 0");
+                used[first] = true;
+                left -= 1;
+                chains.extend(fan[first]);
+                let mut end = fan[first][1];
+                while let Some(i) = (0..fan.len()).find(|&i| !used[i] && fan[i][0] == end) {
+                    used[i] = true;
+                    left -= 1;
+                    end = fan[i][1];
+                    chains.push(end);
+                }
+            }
+            offsets.push(u32::try_from(chains.len()).expect("fewer than 2^32 corners"));
+        }
+        VertexFans { offsets, chains }
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Stored entries (neighbour indices and separators), the table's size in `u32`s.
+    pub fn len(&self) -> usize {
+        self.chains.len()
+    }
+
+    /// Whether no vertex has a triangle.
+    pub fn is_empty(&self) -> bool {
+        self.chains.is_empty()
+    }
+
+    /// Area-weighted unit vertex normals of `positions` into `out` (one per vertex). A vertex
+    /// whose triangles have no area (or that has none) gets `Vec3::ZERO`, as in
+    /// [`crate::mesh::compute_vertex_normals`]: a displacement along it is no displacement.
+    pub fn normals(&self, positions: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
+        let n = self.vertex_count();
+        check_len("positions", n, positions.len())?;
+        check_len("normals", n, out.len())?;
+        #[cfg(feature = "parallel")]
+        if use_pool(n) {
+            use rayon::prelude::*;
+            out.par_chunks_mut(PARALLEL_CHUNK)
+                .enumerate()
+                .for_each(|(c, o)| self.normals_rows(positions, c * PARALLEL_CHUNK, o));
+            return Ok(());
+        }
+        self.normals_rows(positions, 0, out);
+        Ok(())
+    }
+
+    /// [`VertexFans::normals`] for the vertices `first .. first + out.len()` only.
+    ///
+    /// # Panics
+    /// If the range runs past [`VertexFans::vertex_count`] or a corner is outside `positions`.
+    #[inline]
+    pub fn normals_rows(&self, positions: &[Vec3], first: usize, out: &mut [Vec3]) {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = self.normal(positions, first + i).into();
+        }
+    }
+
+    /// Normals and HZY11 eq. 4's displacement in one pass: for every vertex `v`,
+    /// `normals[v] = n(v)` of `high` and `out[v] = high[v] + h[v] n(v)`. Reads `high` only, so
+    /// every normal is that of the undisplaced mesh.
+    pub fn normals_and_displace(
+        &self,
+        high: &[Vec3],
+        h: &[f32],
+        normals: &mut [Vec3],
+        out: &mut [Vec3],
+    ) -> Result<(), DetailError> {
+        let n = self.vertex_count();
+        check_len("positions", n, high.len())?;
+        check_len("displacements h", n, h.len())?;
+        check_len("normals", n, normals.len())?;
+        check_len("output", n, out.len())?;
+        #[cfg(feature = "parallel")]
+        if use_pool(n) {
+            use rayon::prelude::*;
+            out.par_chunks_mut(PARALLEL_CHUNK)
+                .zip(normals.par_chunks_mut(PARALLEL_CHUNK))
+                .enumerate()
+                .for_each(|(c, (o, nm))| {
+                    self.normals_and_displace_rows(high, h, c * PARALLEL_CHUNK, nm, o)
+                });
+            return Ok(());
+        }
+        self.normals_and_displace_rows(high, h, 0, normals, out);
+        Ok(())
+    }
+
+    /// [`VertexFans::normals_and_displace`] for the vertices `first .. first + out.len()`
+    /// (`normals` as long as `out`).
+    ///
+    /// # Panics
+    /// If the range runs past [`VertexFans::vertex_count`], `h` or `high`.
+    #[inline]
+    pub fn normals_and_displace_rows(
+        &self,
+        high: &[Vec3],
+        h: &[f32],
+        first: usize,
+        normals: &mut [Vec3],
+        out: &mut [Vec3],
+    ) {
+        let rows = out.len();
+        let iter = out
+            .iter_mut()
+            .zip(normals.iter_mut())
+            .zip(&h[first..first + rows])
+            .enumerate();
+        for (i, ((o, nm), &hv)) in iter {
+            let v = first + i;
+            let n = self.normal(high, v);
+            *nm = n.into();
+            *o = (Vec3A::from(high[v]) + hv * n).into();
+        }
+    }
+
+    /// The unit area-weighted normal of vertex `v`: the sum of `d_i × d_i+1` along its chains,
+    /// `d_i = p[r_i] - p[v]`.
+    #[inline(always)]
+    fn normal(&self, positions: &[Vec3], v: usize) -> Vec3A {
+        let chain = &self.chains[self.offsets[v] as usize..self.offsets[v + 1] as usize];
+        let p = Vec3A::from(positions[v]);
+        let mut it = chain.iter();
+        let Some(&r) = it.next() else {
+            return Vec3A::ZERO;
+        };
+        let mut q = Vec3A::from(positions[r as usize]) - p;
+        let mut n = Vec3A::ZERO;
+        while let Some(&r) = it.next() {
+            if r == BREAK {
+                match it.next() {
+                    Some(&r) => q = Vec3A::from(positions[r as usize]) - p,
+                    None => break,
+                }
+                continue;
+            }
+            let d = Vec3A::from(positions[r as usize]) - p;
+            n += q.cross(d);
+            q = d;
+        }
+        n.normalize_or_zero()
+    }
+}
+
+/// Area-weighted unit vertex normals by a scatter pass over the triangles (zero, accumulate each
+/// face normal at its corners, normalise): the textbook method and the reference for
+/// [`VertexFans::normals`]. Single-threaded; `out` must have one entry per position.
+///
+/// # Panics
+/// If a triangle index is outside `positions`.
+pub fn scatter_normals(
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    out: &mut [Vec3],
+) -> Result<(), DetailError> {
+    check_len("normals", positions.len(), out.len())?;
+    accumulate_face_normals(positions, triangles, out);
+    for n in out.iter_mut() {
+        *n = n.normalize_or_zero();
+    }
+    Ok(())
+}
+
+/// HZY11 eq. 4's second term: `positions[v] += h[v] * normals[v]` for every vertex.
+pub fn displace(positions: &mut [Vec3], normals: &[Vec3], h: &[f32]) -> Result<(), DetailError> {
+    check_len("normals", positions.len(), normals.len())?;
+    check_len("displacements h", positions.len(), h.len())?;
+    #[cfg(feature = "parallel")]
+    if use_pool(positions.len()) {
+        use rayon::prelude::*;
+        positions
+            .par_chunks_mut(PARALLEL_CHUNK)
+            .zip(normals.par_chunks(PARALLEL_CHUNK))
+            .zip(h.par_chunks(PARALLEL_CHUNK))
+            .for_each(|((p, n), h)| displace_kernel(p, n, h));
+        return Ok(());
+    }
+    displace_kernel(positions, normals, h);
+    Ok(())
+}
+
+#[inline]
+fn displace_kernel(positions: &mut [Vec3], normals: &[Vec3], h: &[f32]) {
+    for ((p, &n), &h) in positions.iter_mut().zip(normals).zip(h) {
+        *p += h * n;
+    }
+}
+
+/// How [`DetailSynth`] computes vertex normals (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NormalsMethod {
+    /// [`NormalsMethod::Scatter`] on one thread, [`NormalsMethod::Gather`] when the `parallel`
+    /// feature is on and the rayon pool has more than one thread.
+    #[default]
+    Auto,
+    /// One cross product per triangle added to its corners: fastest on one core, sequential.
+    Scatter,
+    /// Per vertex over its one-ring ([`VertexFans`]): 3x the arithmetic, but parallel.
+    Gather,
+}
+
+/// The per-frame detail synthesis of HZY11 eq. 4 (module docs): `S`, the subdivided topology,
+/// and reusable buffers for `S · base` and the normals.
+#[derive(Clone, Debug)]
+pub struct DetailSynth {
+    subdivision: LoopSubdivision,
+    fans: VertexFans,
+    method: NormalsMethod,
+    /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
+    high: Vec<Vec3>,
+    normals: Vec<Vec3>,
+}
+
+impl DetailSynth {
+    /// The synthesis for a subdivision built by the caller (e.g. the one training used), with
+    /// [`NormalsMethod::Auto`].
+    pub fn new(subdivision: LoopSubdivision) -> DetailSynth {
+        let n = subdivision.vertex_count();
+        let fans = VertexFans::new(n, subdivision.triangles());
+        DetailSynth {
+            subdivision,
+            fans,
+            method: NormalsMethod::Auto,
+            high: vec![Vec3::ZERO; n],
+            normals: vec![Vec3::ZERO; n],
+        }
+    }
+
+    /// Subdivides `base`'s topology `levels` times ([`LoopSubdivision::new`]) and prepares the
+    /// synthesis.
+    pub fn from_mesh(base: &Mesh, levels: u32) -> Result<DetailSynth, DetailError> {
+        Ok(DetailSynth::new(LoopSubdivision::new(base, levels)?))
+    }
+
+    /// The same synthesis computing normals with `method`.
+    pub fn with_normals_method(mut self, method: NormalsMethod) -> DetailSynth {
+        self.method = method;
+        self
+    }
+
+    /// The normals method chosen.
+    pub fn normals_method(&self) -> NormalsMethod {
+        self.method
+    }
+
+    /// The subdivision: `S` and the subdivided triangles (the index buffer to render `out`).
+    pub fn subdivision(&self) -> &LoopSubdivision {
+        &self.subdivision
+    }
+
+    /// The one-ring table of [`NormalsMethod::Gather`].
+    pub fn fans(&self) -> &VertexFans {
+        &self.fans
+    }
+
+    /// Number of subdivided vertices: the length of `h` and `out`.
+    pub fn vertex_count(&self) -> usize {
+        self.subdivision.vertex_count()
+    }
+
+    /// Number of base vertices: the length of `base`.
+    pub fn base_vertex_count(&self) -> usize {
+        self.subdivision.base_vertex_count()
+    }
+
+    /// The unit normals of the undisplaced subdivided mesh `S · base` from the last
+    /// [`DetailSynth::synthesize`] (zeros before the first).
+    pub fn normals(&self) -> &[Vec3] {
+        &self.normals
+    }
+
+    /// `out = S · base` (rows split over the pool with the `parallel` feature).
+    pub fn subdivide(&self, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
+        subdivide_into(self.subdivision.matrix(), base, out)
+    }
+
+    /// HZY11 eq. 4: `out = S · base + h ⊙ n(S · base)`. `base` has
+    /// [`DetailSynth::base_vertex_count`] entries (the skinned base mesh), `h` and `out`
+    /// [`DetailSynth::vertex_count`]. Afterwards [`DetailSynth::normals`] holds `n`.
+    /// Allocates nothing.
+    pub fn synthesize(
+        &mut self,
+        base: &[Vec3],
+        h: &[f32],
+        out: &mut [Vec3],
+    ) -> Result<(), DetailError> {
+        check_len("displacements h", self.vertex_count(), h.len())?;
+        check_len("output", self.vertex_count(), out.len())?;
+        subdivide_into(self.subdivision.matrix(), base, &mut self.high)?;
+        if self.gathers() {
+            return self
+                .fans
+                .normals_and_displace(&self.high, h, &mut self.normals, out);
+        }
+        accumulate_face_normals(&self.high, self.subdivision.triangles(), &mut self.normals);
+        normalize_and_displace(&self.high, h, &mut self.normals, out);
+        Ok(())
+    }
+
+    /// Whether this frame's normals are gathered (resolves [`NormalsMethod::Auto`]).
+    fn gathers(&self) -> bool {
+        match self.method {
+            NormalsMethod::Scatter => false,
+            NormalsMethod::Gather => true,
+            #[cfg(feature = "parallel")]
+            NormalsMethod::Auto => use_pool(self.vertex_count()),
+            #[cfg(not(feature = "parallel"))]
+            NormalsMethod::Auto => false,
+        }
+    }
+}
+
+/// Sets `acc` (one entry per position) to the sum of the unnormalised face normals
+/// `(b - a) × (c - a)` of each vertex's triangles.
+///
+/// # Panics
+/// If a triangle index is outside `positions` or `acc`.
+fn accumulate_face_normals(positions: &[Vec3], triangles: &[[u32; 3]], acc: &mut [Vec3]) {
+    acc.fill(Vec3::ZERO);
+    for &[a, b, c] in triangles {
+        let [a, b, c] = [a as usize, b as usize, c as usize];
+        let pa = Vec3A::from(positions[a]);
+        let n = (Vec3A::from(positions[b]) - pa).cross(Vec3A::from(positions[c]) - pa);
+        let n = Vec3::from(n);
+        acc[a] += n;
+        acc[b] += n;
+        acc[c] += n;
+    }
+}
+
+/// Normalises the accumulated normals in place and writes `out = high + h ⊙ n`, all slices of
+/// equal length (checked by the caller); split over the pool with the `parallel` feature.
+fn normalize_and_displace(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &mut [Vec3]) {
+    #[cfg(feature = "parallel")]
+    if use_pool(out.len()) {
+        use rayon::prelude::*;
+        out.par_chunks_mut(PARALLEL_CHUNK)
+            .zip(normals.par_chunks_mut(PARALLEL_CHUNK))
+            .zip(high.par_chunks(PARALLEL_CHUNK))
+            .zip(h.par_chunks(PARALLEL_CHUNK))
+            .for_each(|(((o, n), p), h)| normalize_and_displace_kernel(p, h, n, o));
+        return;
+    }
+    normalize_and_displace_kernel(high, h, normals, out);
+}
+
+#[inline]
+fn normalize_and_displace_kernel(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &mut [Vec3]) {
+    for (((o, n), &p), &h) in out.iter_mut().zip(normals).zip(high).zip(h) {
+        *n = n.normalize_or_zero();
+        *o = p + h * *n;
+    }
+}
+
+/// `out = s · base`, rows split over the pool with the `parallel` feature.
+fn subdivide_into(s: &SparseMatrix, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
+    s.check(base, out.len())?;
+    #[cfg(feature = "parallel")]
+    if use_pool(out.len()) {
+        use rayon::prelude::*;
+        out.par_chunks_mut(PARALLEL_CHUNK)
+            .enumerate()
+            .for_each(|(c, o)| s.apply_rows(base, c * PARALLEL_CHUNK, o));
+        return Ok(());
+    }
+    s.apply_rows(base, 0, out);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetrahedron() -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(1.0, 1.0, 1.0),
+                Vec3::new(1.0, -1.0, -1.0),
+                Vec3::new(-1.0, 1.0, -1.0),
+                Vec3::new(-1.0, -1.0, 1.0),
+            ],
+            triangles: vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]],
+        }
+    }
+
+    #[test]
+    fn fan_normals_match_scatter_normals_with_degenerate_and_isolated_vertices() {
+        let mut m = tetrahedron();
+        // A zero-area triangle (collinear corners) and an isolated vertex.
+        m.positions.push(Vec3::new(3.0, 0.0, 0.0));
+        m.positions.push(Vec3::new(5.0, 0.0, 0.0));
+        m.positions.push(Vec3::new(9.0, 9.0, 9.0));
+        m.triangles.push([4, 5, 0]);
+        m.positions[0] = Vec3::new(4.0, 0.0, 0.0);
+        let fans = VertexFans::new(m.vertex_count(), &m.triangles);
+        let mut a = vec![Vec3::NAN; m.vertex_count()];
+        let mut b = vec![Vec3::NAN; m.vertex_count()];
+        fans.normals(&m.positions, &mut a).unwrap();
+        scatter_normals(&m.positions, &m.triangles, &mut b).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((*x - *y).length() < 1e-6, "{x} vs {y}");
+        }
+        assert_eq!(a[6], Vec3::ZERO);
+        assert_eq!(a[4], Vec3::ZERO);
+    }
+
+    #[test]
+    fn fan_normals_match_scatter_normals_with_inconsistent_winding() {
+        // A 3 x 3 grid of quads with bumpy heights, one triangle flipped.
+        let mut m = Mesh::default();
+        for j in 0..4u32 {
+            for i in 0..4u32 {
+                let z = ((i * 7 + j * 3) % 5) as f32 * 0.1;
+                m.positions.push(Vec3::new(i as f32, j as f32, z));
+            }
+        }
+        for j in 0..3u32 {
+            for i in 0..3u32 {
+                let id = |a: u32, b: u32| b * 4 + a;
+                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        m.triangles[7].swap(1, 2);
+        let fans = VertexFans::new(m.vertex_count(), &m.triangles);
+        let mut a = vec![Vec3::NAN; m.vertex_count()];
+        let mut b = vec![Vec3::NAN; m.vertex_count()];
+        fans.normals(&m.positions, &mut a).unwrap();
+        scatter_normals(&m.positions, &m.triangles, &mut b).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((*x - *y).length() < 1e-6, "{x} vs {y}");
+        }
+        // 18 triangles: 54 corners, plus one closing/separating entry per chain.
+        assert!(fans.len() > 54, "{}", fans.len());
+    }
+
+    #[test]
+    fn sizes_are_checked() {
+        let mut d = DetailSynth::from_mesh(&tetrahedron(), 1).unwrap();
+        let mut out = vec![Vec3::ZERO; 10];
+        let e = d
+            .synthesize(&tetrahedron().positions, &[0.0; 9], &mut out)
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "detail layer: displacements h has 9 entries, expected 10 (one per vertex)"
+        );
+        let e = d
+            .synthesize(&tetrahedron().positions[..3], &[0.0; 10], &mut out)
+            .unwrap_err();
+        assert_eq!(e.to_string(), "base positions: 3 vertices, expected 4");
+        let e = DetailSynth::from_mesh(&tetrahedron(), 0).unwrap_err();
+        assert!(matches!(
+            e,
+            DetailError::Subdivision(SubdivisionError::BadLevels { levels: 0 })
+        ));
+    }
+}
