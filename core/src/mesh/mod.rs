@@ -7,6 +7,7 @@
 //! - [`obj`], [`ply`], [`gltf`]: one module per file format, readers and writers.
 //! - [`topology`]: vertex normals, unique edges, vertex adjacency ([`Adjacency`]).
 //! - [`examples`]: [`ExampleSet`], a folder or TOML manifest of meshes sharing one topology.
+//! - [`subdivision`]: Loop subdivision as a sparse matrix `S` (the detail layer's `S · base`).
 //!
 //! Every reader keeps the file's vertex order (examples correspond by vertex index) and returns a
 //! mesh that passes [`Mesh::validate`]: indices in range, coordinates finite.

@@ -10,6 +10,7 @@
 //! - [`predictor`]: the per-frame pipeline (controls -> transforms -> skinned mesh) and its
 //!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
+//! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 
 pub mod detail;
 pub mod edge_skin;
