@@ -150,9 +150,13 @@ impl DetailModel {
         }
     }
 
-    /// `h = D xi(x) + b` into `out`; `xi` is scratch of length [`DetailModel::example_count`].
-    /// Allocates nothing.
+    /// `h = D xi(x) + b` into `out`; `xi` is scratch of at least
+    /// [`DetailModel::example_count`] values (only that prefix is used). Allocates nothing.
+    ///
+    /// # Panics
+    /// If `xi` is shorter than the example count or `out` is not one value per vertex.
     pub fn predict(&self, x: &[f32], xi: &mut [f32], out: &mut [f32]) {
+        let xi = &mut xi[..self.model.n];
         self.kernel_vector(x, xi);
         self.model.predict(xi, out);
     }
