@@ -7,17 +7,27 @@
 //! RMS over all subdivided vertices and over the crease regions (the 5% of vertices whose h
 //! varies most across the training poses), bounding box = 1.
 //!
-//! `cargo run --release -p crease-train --example detail_hand -- HANDGEN_DIR [LAYOUT] [MAX_TEST]`
+//! Then the whole pipeline: a base model (global and local, BONES proxy bones, K = 4) trained
+//! on the base training meshes with the layout's control points predicts each held-out base
+//! from the true control points, and the detail layer adds S and h(c): the full detailed
+//! output `S·base_pred + h(c) n` against the detailed truth `S·base_true + h_true n`, with
+//! base RMS beside it.
+//!
+//! `cargo run --release -p crease-train --example detail_hand -- HANDGEN_DIR [LAYOUT] [MAX_TEST] [BONES]`
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::{ExampleSet, Mesh};
 use crease_core::runtime::detail::DetailSynth;
+use crease_core::runtime::predictor::Predictor;
 use crease_train::detail::DisplacementTarget;
 use crease_train::detail::regress::{DetailInput, DetailModel};
 use crease_train::kcca::KccaOptions;
+use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
+use crease_train::regress::{Method, RegressOptions};
 
 /// Ray search distance (metres). 5 mm let rays reach neighbouring skin where fingertips press
 /// into the palm (h outliers of 3-4 mm that swamped the creases: pose-dependent then lost to
@@ -33,6 +43,7 @@ fn main() {
     );
     let layout = args.next().unwrap_or_else(|| "back".into());
     let max_test: usize = args.next().map_or(40, |s| s.parse().expect("MAX_TEST"));
+    let bones: usize = args.next().map_or(40, |s| s.parse().expect("BONES"));
     let t0 = Instant::now();
     let train = ExampleSet::load(dir.join(format!("train-{layout}.toml"))).expect("train");
     let test = ExampleSet::load(dir.join("test.toml")).expect("test");
@@ -81,7 +92,7 @@ fn main() {
         t0.elapsed().as_secs_f32()
     );
     let d_in = cps.len() * 3;
-    let model = DetailModel::fit(
+    let detail_model = DetailModel::fit(
         DetailInput::Controls,
         &x,
         d_in,
@@ -107,13 +118,17 @@ fn main() {
     let (lo, hi) = train.rest.bounding_box();
     let scale = (hi - lo).max_element();
     let mut sums = [[0.0f64; 2]; 3];
-    let mut xi = vec![0.0; model.example_count()];
+    let mut xi = vec![0.0; detail_model.example_count()];
     let mut hp = vec![0.0; nv];
     let n_test = test.examples.len().min(max_test);
+    let mut test_h = Vec::with_capacity(n_test);
     for (b, d) in test.examples.iter().zip(&dtest.examples).take(n_test) {
         let (_, _, h_true) = resample(&b.mesh, &d.mesh);
         let c = controls(&b.mesh);
-        for (row, m) in [Some(&model), Some(&fixed), None].into_iter().enumerate() {
+        for (row, m) in [Some(&detail_model), Some(&fixed), None]
+            .into_iter()
+            .enumerate()
+        {
             match m {
                 Some(m) => m.predict(&c, &mut xi, &mut hp),
                 None => hp.iter_mut().for_each(|v| *v = 0.0),
@@ -123,6 +138,7 @@ fn main() {
             sums[row][0] += (0..nv).map(err).sum::<f64>() / nv as f64;
             sums[row][1] += crease.iter().map(|&v| err(v)).sum::<f64>() / crease.len() as f64;
         }
+        test_h.push(h_true);
     }
     eprintln!(
         "[{:.1}s] {n_test} test poses evaluated",
@@ -142,5 +158,88 @@ fn main() {
             (s[0] / n_test as f64).sqrt(),
             (s[1] / n_test as f64).sqrt()
         );
+    }
+
+    // The whole pipeline: predicted base + detail.
+    let frames = train.frames();
+    let names = train.names();
+    let options = TrainOptions {
+        controls: ControlSpec::Vertices(cps.clone()),
+        ..TrainOptions::default()
+    };
+    let mut options = options;
+    options.fit.bones = bones;
+    options.fit.max_influences = 4;
+    let base = pipeline::train_base(
+        TrainInput {
+            rest: &train.rest,
+            frames: &frames,
+            names: &names,
+        },
+        &options,
+        &mut |_| {},
+    )
+    .expect("base training");
+    eprintln!(
+        "[{:.1}s] base layer trained ({bones} bones)",
+        t0.elapsed().as_secs_f32()
+    );
+    let mut truth = vec![Vec3::ZERO; nv];
+    let mut out = vec![Vec3::ZERO; nv];
+    println!();
+    println!(
+        "whole pipeline ({bones} bones, K = 4, beta 1): predicted base + detail vs the detailed truth, bbox = 1:"
+    );
+    println!(
+        "{:>8} {:>16} {:>12} {:>14} {:>16}",
+        "method", "detail", "base RMS", "detailed RMS", "creases 5% RMS"
+    );
+    for method in [Method::Global, Method::Local] {
+        let model = base.model(
+            &RegressOptions {
+                method,
+                ..RegressOptions::default()
+            },
+            1.0,
+        );
+        let predictor = Predictor::new(Arc::new(model), None).expect("predictor");
+        let mut ctx = predictor.new_context();
+        for (dname, dm) in [("pose-dependent", &detail_model), ("static", &fixed)] {
+            let (mut sb, mut sd, mut sc) = (0.0f64, 0.0f64, 0.0f64);
+            for (k, b) in test.examples.iter().take(n_test).enumerate() {
+                let c = controls(&b.mesh);
+                let cv: Vec<Vec3> = c.chunks(3).map(Vec3::from_slice).collect();
+                let pred = predictor
+                    .predict(&mut ctx, &cv, None)
+                    .expect("predict")
+                    .to_vec();
+                sb += pred
+                    .iter()
+                    .zip(&b.mesh.positions)
+                    .map(|(p, q)| f64::from(p.distance_squared(*q) / (scale * scale)))
+                    .sum::<f64>()
+                    / pred.len() as f64;
+                dm.predict(&c, &mut xi, &mut hp);
+                synth.synthesize(&pred, &hp, &mut out).expect("synth");
+                synth
+                    .synthesize(&b.mesh.positions, &test_h[k], &mut truth)
+                    .expect("synth");
+                let e: Vec<f64> = out
+                    .iter()
+                    .zip(&truth)
+                    .map(|(p, q)| f64::from(p.distance_squared(*q) / (scale * scale)))
+                    .collect();
+                sd += e.iter().sum::<f64>() / nv as f64;
+                sc += crease.iter().map(|&v| e[v]).sum::<f64>() / crease.len() as f64;
+            }
+            let n = n_test as f64;
+            println!(
+                "{:>8} {dname:>16} {:>12.3e} {:>14.3e} {:>16.3e}",
+                method.name(),
+                (sb / n).sqrt(),
+                (sd / n).sqrt(),
+                (sc / n).sqrt()
+            );
+        }
     }
 }
