@@ -3,7 +3,7 @@
 //! These assume indices are in range (readers guarantee it; check in-memory meshes with
 //! [`Mesh::validate`]) and panic otherwise.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::Mesh;
 
@@ -62,15 +62,27 @@ impl Mesh {
 pub fn compute_vertex_normals(positions: &[Vec3], triangles: &[[u32; 3]], out: &mut Vec<Vec3>) {
     out.clear();
     out.resize(positions.len(), Vec3::ZERO);
-    for t in triangles {
-        let [a, b, c] = t.map(|i| i as usize);
-        let n = (positions[b] - positions[a]).cross(positions[c] - positions[a]);
-        out[a] += n;
-        out[b] += n;
-        out[c] += n;
-    }
+    accumulate_face_normals(positions, triangles, out);
     for n in out.iter_mut() {
         *n = n.normalize_or_zero();
+    }
+}
+
+/// The un-normalised half of [`compute_vertex_normals`]: `acc` (one entry per vertex) is
+/// zeroed, then every triangle adds its cross product (twice its area times its unit normal)
+/// to its three corners. Allocates nothing (the per-frame normal passes use it).
+///
+/// # Panics
+/// If a triangle index is out of range of `positions` or `acc`.
+pub fn accumulate_face_normals(positions: &[Vec3], triangles: &[[u32; 3]], acc: &mut [Vec3]) {
+    acc.fill(Vec3::ZERO);
+    for t in triangles {
+        let [a, b, c] = t.map(|i| i as usize);
+        let pa = Vec3A::from(positions[a]);
+        let n = Vec3::from((Vec3A::from(positions[b]) - pa).cross(Vec3A::from(positions[c]) - pa));
+        acc[a] += n;
+        acc[b] += n;
+        acc[c] += n;
     }
 }
 

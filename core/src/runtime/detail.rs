@@ -34,6 +34,7 @@ use glam::{Vec3, Vec3A};
 
 use crate::mesh::Mesh;
 use crate::mesh::subdivision::{LoopSubdivision, SparseMatrix, SubdivisionError};
+use crate::mesh::topology::accumulate_face_normals;
 
 /// Vertices per rayon task. A subdivided vertex costs ~10 ns per pass, so 4096 of them
 /// (~40 µs) dwarf the task overhead (~1 µs) while 151K vertices still make ~37 tasks.
@@ -454,24 +455,6 @@ impl DetailSynth {
             #[cfg(not(feature = "parallel"))]
             NormalsMethod::Auto => false,
         }
-    }
-}
-
-/// Sets `acc` (one entry per position) to the sum of the unnormalised face normals
-/// `(b - a) × (c - a)` of each vertex's triangles.
-///
-/// # Panics
-/// If a triangle index is outside `positions` or `acc`.
-fn accumulate_face_normals(positions: &[Vec3], triangles: &[[u32; 3]], acc: &mut [Vec3]) {
-    acc.fill(Vec3::ZERO);
-    for &[a, b, c] in triangles {
-        let [a, b, c] = [a as usize, b as usize, c as usize];
-        let pa = Vec3A::from(positions[a]);
-        let n = (Vec3A::from(positions[b]) - pa).cross(Vec3A::from(positions[c]) - pa);
-        let n = Vec3::from(n);
-        acc[a] += n;
-        acc[b] += n;
-        acc[c] += n;
     }
 }
 

@@ -400,20 +400,6 @@ pub struct HandCollider {
     flat: Vec<Shape>,
 }
 
-/// Area-weighted vertex normals of a mesh.
-fn vertex_normals(mesh: &Mesh) -> Vec<Vec3> {
-    let mut n = vec![Vec3::ZERO; mesh.positions.len()];
-    for t in &mesh.triangles {
-        let [a, b, c] = t.map(|i| i as usize);
-        let (pa, pb, pc) = (mesh.positions[a], mesh.positions[b], mesh.positions[c]);
-        let f = (pb - pa).cross(pc - pa);
-        n[a] += f;
-        n[b] += f;
-        n[c] += f;
-    }
-    n.iter().map(|v| v.normalize_or_zero()).collect()
-}
-
 /// The `q`-quantile of `values` (sorted in place); `None` if empty.
 fn quantile(values: &mut [f32], q: f32) -> Option<f32> {
     if values.is_empty() {
@@ -540,7 +526,7 @@ impl HandCollider {
         }
 
         // Palm planes: palmar palm vertices sampled on a grid, with four neighbours each.
-        let normals = vertex_normals(rest);
+        let normals = rest.vertex_normals();
         let palmar: Vec<usize> = (0..n)
             .filter(|&i| {
                 classes[i] == VertexClass::Palm

@@ -36,6 +36,7 @@
 //! (cells of 1.2 and 0.6 mm, amplitude [`TEXTURE_AMPLITUDE`]), baked into the detailed rest
 //! mesh before binding so that it deforms with the skin.
 
+use super::smoothstep;
 use glam::{Vec2, Vec3};
 
 use super::palm::Domain;
@@ -88,11 +89,6 @@ pub struct CreaseDef {
 enum Place {
     Palm(Vec<Vec2>),
     Joint { digit: Digit, chain: usize },
-}
-
-fn smoothstep(x: f32) -> f32 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 fn flexion(joint: Joint) -> Dof {

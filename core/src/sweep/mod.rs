@@ -33,3 +33,10 @@ pub mod skeleton;
 pub mod surface;
 pub mod sweeps;
 pub mod webxr;
+
+/// The cubic smoothstep `3x² - 2x³` of `x` clamped to `[0, 1]`: the fall-offs and activations
+/// of the sweep weights, the palm bulge, the palm-surface border and the creases.
+pub(crate) fn smoothstep(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    x * x * (3.0 - 2.0 * x)
+}

@@ -43,6 +43,7 @@
 //! so the surface result is blended with the sweep result by a weight that falls from 1 to 0
 //! over the outer [`BORDER`] of the domain, hiding any seam.
 
+use super::smoothstep;
 use glam::{Vec2, Vec3};
 
 use super::skeleton::{Digit, Dof, DofKind, HandPose, HandSkeleton, Joint, JointLimits};
@@ -71,11 +72,6 @@ const PROJECTION_STEPS: usize = 8;
 const BULGE_ROW: usize = GRID_V - 2;
 /// Thenar moving nodes: column 0, these rows.
 const THENAR_ROWS: [usize; 3] = [1, 2, 3];
-
-fn smoothstep(x: f32) -> f32 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
-}
 
 /// Uniform cubic B-spline basis at local parameter `t` in `[0, 1]`, and its derivative.
 fn basis(t: f32) -> ([f32; 4], [f32; 4]) {

@@ -56,6 +56,7 @@
 //! blend several. Weights are normalised to sum to one; influences of weight 0 are dropped.
 //! (LYK06's cylinder/cone radii are absolute; a relative band needs no per-digit radii.)
 
+use super::smoothstep;
 use glam::{Affine3A, Quat, Vec3, Vec3A};
 
 use super::skeleton::{Digit, HandPose, HandSkeleton, JointFrame, MAX_CHAIN, PosedSkeleton};
@@ -108,11 +109,6 @@ pub struct Sweep {
     knots: [f32; MAX_KEYS],
     bones: [Quat; MAX_CHAIN - 1],
     keys: usize,
-}
-
-fn smoothstep(x: f32) -> f32 {
-    let x = x.clamp(0.0, 1.0);
-    x * x * (3.0 - 2.0 * x)
 }
 
 impl Sweep {
