@@ -88,8 +88,8 @@ fn training_poses_reproduce_their_detailed_meshes() {
             .map(|(p, q)| p.distance(*q))
             .fold(0.0f32, f32::max);
         eprintln!(
-            "training pose {i}: max distance to the resampled truth {:.4} mm",
-            e * 1e3
+            "training pose {i}: max distance to the resampled truth {:.3} µm",
+            e * 1e6
         );
         worst = worst.max(e);
     }
