@@ -32,6 +32,9 @@
 
 use glam::{Vec3, Vec3A};
 
+use super::fill_rows;
+#[cfg(feature = "parallel")]
+use super::use_pool;
 use crate::mesh::Mesh;
 use crate::mesh::subdivision::{LoopSubdivision, SparseMatrix, SubdivisionError};
 use crate::mesh::topology::accumulate_face_normals;
@@ -39,13 +42,6 @@ use crate::mesh::topology::accumulate_face_normals;
 /// Vertices per rayon task. A subdivided vertex costs ~10 ns per pass, so 4096 of them
 /// (~40 µs) dwarf the task overhead (~1 µs) while 151K vertices still make ~37 tasks.
 pub const PARALLEL_CHUNK: usize = 4096;
-
-/// Whether to split `n` vertices over the rayon pool: more than one chunk, and more than one
-/// thread (a one-thread pool only adds a cross-thread hand-off; see [`super::skin`]).
-#[cfg(feature = "parallel")]
-fn use_pool(n: usize) -> bool {
-    n > PARALLEL_CHUNK && rayon::current_num_threads() > 1
-}
 
 /// An error from the detail layer: building the subdivision, or a buffer of the wrong size.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -181,15 +177,9 @@ impl VertexFans {
         let n = self.vertex_count();
         check_len("positions", n, positions.len())?;
         check_len("normals", n, out.len())?;
-        #[cfg(feature = "parallel")]
-        if use_pool(n) {
-            use rayon::prelude::*;
-            out.par_chunks_mut(PARALLEL_CHUNK)
-                .enumerate()
-                .for_each(|(c, o)| self.normals_rows(positions, c * PARALLEL_CHUNK, o));
-            return Ok(());
-        }
-        self.normals_rows(positions, 0, out);
+        fill_rows(out, PARALLEL_CHUNK, |first, o| {
+            self.normals_rows(positions, first, o)
+        });
         Ok(())
     }
 
@@ -220,7 +210,7 @@ impl VertexFans {
         check_len("normals", n, normals.len())?;
         check_len("output", n, out.len())?;
         #[cfg(feature = "parallel")]
-        if use_pool(n) {
+        if use_pool(n, PARALLEL_CHUNK) {
             use rayon::prelude::*;
             out.par_chunks_mut(PARALLEL_CHUNK)
                 .zip(normals.par_chunks_mut(PARALLEL_CHUNK))
@@ -314,7 +304,7 @@ pub fn displace(positions: &mut [Vec3], normals: &[Vec3], h: &[f32]) -> Result<(
     check_len("normals", positions.len(), normals.len())?;
     check_len("displacements h", positions.len(), h.len())?;
     #[cfg(feature = "parallel")]
-    if use_pool(positions.len()) {
+    if use_pool(positions.len(), PARALLEL_CHUNK) {
         use rayon::prelude::*;
         positions
             .par_chunks_mut(PARALLEL_CHUNK)
@@ -451,7 +441,7 @@ impl DetailSynth {
             NormalsMethod::Scatter => false,
             NormalsMethod::Gather => true,
             #[cfg(feature = "parallel")]
-            NormalsMethod::Auto => use_pool(self.vertex_count()),
+            NormalsMethod::Auto => use_pool(self.vertex_count(), PARALLEL_CHUNK),
             #[cfg(not(feature = "parallel"))]
             NormalsMethod::Auto => false,
         }
@@ -462,7 +452,7 @@ impl DetailSynth {
 /// equal length (checked by the caller); split over the pool with the `parallel` feature.
 fn normalize_and_displace(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &mut [Vec3]) {
     #[cfg(feature = "parallel")]
-    if use_pool(out.len()) {
+    if use_pool(out.len(), PARALLEL_CHUNK) {
         use rayon::prelude::*;
         out.par_chunks_mut(PARALLEL_CHUNK)
             .zip(normals.par_chunks_mut(PARALLEL_CHUNK))
@@ -485,15 +475,7 @@ fn normalize_and_displace_kernel(high: &[Vec3], h: &[f32], normals: &mut [Vec3],
 /// `out = s · base`, rows split over the pool with the `parallel` feature.
 fn subdivide_into(s: &SparseMatrix, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
     s.check(base, out.len())?;
-    #[cfg(feature = "parallel")]
-    if use_pool(out.len()) {
-        use rayon::prelude::*;
-        out.par_chunks_mut(PARALLEL_CHUNK)
-            .enumerate()
-            .for_each(|(c, o)| s.apply_rows(base, c * PARALLEL_CHUNK, o));
-        return Ok(());
-    }
-    s.apply_rows(base, 0, out);
+    fill_rows(out, PARALLEL_CHUNK, |first, o| s.apply_rows(base, first, o));
     Ok(())
 }
 

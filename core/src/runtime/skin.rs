@@ -32,16 +32,6 @@ pub const MAX_INFLUENCES: usize = 8;
 /// never normalised, while tolerating weights written with 5 significant digits.
 pub const WEIGHT_SUM_TOLERANCE: f32 = 1e-4;
 
-/// Whether to split `n` vertices over the rayon pool: more than one [`PARALLEL_CHUNK`], and a
-/// pool of more than one thread. A one-thread pool would only hand the whole job from the
-/// calling thread to its single worker and back: a cross-thread wake-up that measured ~15 µs per
-/// call on the horse (120 vs 105 µs for `skin_lbs`, 92 vs 77 µs for `skin_lbs_packed`, with
-/// `RAYON_NUM_THREADS=1`), for no parallelism.
-#[cfg(feature = "parallel")]
-fn use_pool(n: usize) -> bool {
-    n > PARALLEL_CHUNK && rayon::current_num_threads() > 1
-}
-
 /// Vertices per rayon task. One vertex costs ~10 ns, so 1024 vertices (~10 µs) outweigh the
 /// task overhead (~1 µs) while an 8k-vertex mesh still splits into enough tasks for 8 cores.
 pub const PARALLEL_CHUNK: usize = 1024;
@@ -797,7 +787,7 @@ fn packed_chunks<I, T>(
     T: RowTable<I> + Sync + ?Sized,
 {
     #[cfg(feature = "parallel")]
-    if use_pool(out.len()) {
+    if super::use_pool(out.len(), PARALLEL_CHUNK) {
         use rayon::prelude::*;
         const BLOCKS: usize = PARALLEL_CHUNK / LANES;
         out.par_chunks_mut(PARALLEL_CHUNK)
@@ -951,7 +941,7 @@ where
 {
     let (idx, w) = (skin.indices(), skin.weights());
     #[cfg(feature = "parallel")]
-    if use_pool(out.len()) {
+    if super::use_pool(out.len(), PARALLEL_CHUNK) {
         use rayon::prelude::*;
         out.par_chunks_mut(PARALLEL_CHUNK)
             .zip(rest.par_chunks(PARALLEL_CHUNK))
