@@ -84,7 +84,6 @@ impl RigScratch {
 /// The bound sweep hand (module docs).
 #[derive(Clone, Debug)]
 pub struct HandRig {
-    skeleton: HandSkeleton,
     rest: Mesh,
     hand: SweepHand,
     palm: Option<PalmSurface>,
@@ -116,7 +115,6 @@ impl HandRig {
             creases.then(|| Creases::bind(skeleton, &hand, &rest, &normals, standard_creases()));
         let collider = HandCollider::build(&hand, &rest).ok();
         HandRig {
-            skeleton: skeleton.clone(),
             rest,
             hand,
             palm,
@@ -132,7 +130,7 @@ impl HandRig {
 
     /// The skeleton.
     pub fn skeleton(&self) -> &HandSkeleton {
-        &self.skeleton
+        self.hand.skeleton()
     }
 
     /// The sweep binding.
