@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 
 use crease_core::glam::{DVec3, Vec3};
 use crease_core::mesh::Mesh;
-use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError};
+use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError, subdivided_vertex_count};
 use crease_core::runtime::detail::{DetailSynth, NormalsMethod, VertexFans, scatter_normals};
 use crease_core::sweep::surface::{HandSurface, Resolution};
 use rand::rngs::StdRng;
@@ -368,6 +368,28 @@ fn planar_mesh_stays_planar() {
             assert!(
                 off.abs() < 2e-6,
                 "levels {levels}: {q} is {off} off the plane"
+            );
+        }
+    }
+}
+
+#[test]
+fn vertex_count_formula_matches_the_built_subdivision() {
+    // Closed (octahedron, sphere) and open (grid) meshes; the formula never builds S.
+    for m in [
+        octahedron(),
+        tetrahedron(),
+        grid(4, 3),
+        uv_sphere(1.0, 6, 9),
+    ] {
+        assert_eq!(subdivided_vertex_count(&m, 0), m.vertex_count());
+        for levels in 1..=3 {
+            let s = LoopSubdivision::new(&m, levels).unwrap();
+            assert_eq!(
+                subdivided_vertex_count(&m, levels),
+                s.vertex_count(),
+                "{} vertices, {levels} levels",
+                m.vertex_count()
             );
         }
     }

@@ -24,7 +24,7 @@ use crease_core::mesh::{ExampleSet, Mesh};
 use crease_core::runtime::detail::DetailSynth;
 use crease_core::runtime::predictor::Predictor;
 use crease_train::detail::DisplacementTarget;
-use crease_train::detail::regress::{DetailInput, DetailModel};
+use crease_train::detail::regress::{self, DetailInput, DetailRegressor};
 use crease_train::kcca::KccaOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use crease_train::regress::{Method, RegressOptions};
@@ -92,7 +92,7 @@ fn main() {
         t0.elapsed().as_secs_f32()
     );
     let d_in = cps.len() * 3;
-    let detail_model = DetailModel::fit(
+    let detail_model = regress::fit(
         DetailInput::Controls,
         &x,
         d_in,
@@ -101,7 +101,7 @@ fn main() {
         &KccaOptions::default(),
     )
     .expect("fit");
-    let fixed = DetailModel::fixed(DetailInput::Controls, d_in, &h_train[0]);
+    let fixed = DetailRegressor::fixed(DetailInput::Controls, d_in, h_train[0].clone());
     // Crease regions: the 5% of vertices whose h varies most over the training poses.
     let mut spread: Vec<(f32, usize)> = (0..nv)
         .map(|v| {

@@ -14,6 +14,26 @@
 //! Two protocols: a held-out test set (trained once on the training set), and leave-one-out
 //! over the training set, where the held-out pose is removed from everything, the bone fit
 //! included.
+//!
+//! **With detailed examples** ([`evaluate_test_layers`], [`evaluate_loo_layers`]; HZY11 Table 2
+//! and Figs. 5, 8) every predictor row also gets the detail layer (pose-dependent, from the
+//! control points) on its predicted base, and the row carries `base_rms_mean` (the base mesh,
+//! as `rms_mean`), `detail_rms_mean` (the full detailed output) and `crease_rms_mean` (the
+//! detailed output on the crease regions: the [`CREASE_FRACTION`] of detailed vertices whose
+//! displacement varies most over the training examples). The detailed ground truth of a pose
+//! is its detailed example resampled on the subdivided true base, `S B + h n` with `h` found by
+//! the ray casts of training: every point of it lies on the detailed surface (closest point
+//! for the rare fallbacks), in one-to-one correspondence with the output. A base error of a
+//! few millimetres swamps sub-millimetre detail in those two, so each row also carries
+//! `crease_h_rms_mean`: the error of its displacements `h` alone on the crease regions. Extra
+//! rows:
+//!
+//! - `static-detail`: the base of [`DETAIL_BASELINE_METHOD`] with the rest pose's displacements
+//!   in every pose (HZY11 Fig. 8a);
+//! - `cascaded-detail`: that base with displacements regressed from its predicted bone
+//!   rotations instead of the control points (HZY11 Fig. 5c);
+//! - `true-base`, `true-base-static`: the true base with pose-dependent or static detail,
+//!   which isolates the detail layer from the base layer's error.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -24,7 +44,12 @@ use crease_core::mesh::Mesh;
 use crease_core::runtime::predictor::Predictor;
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
 
+use crease_core::model::DetailLayer;
+use crease_core::runtime::detail::DetailSynth;
+use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
+
 use crate::bones::{self, IterationStat};
+use crate::detail::layer::{self as detail_layer, DetailFrames, DetailOptions};
 use crate::pipeline::{self, TrainError, TrainInput, TrainOptions, TrainedBase};
 use crate::regress::{Method, RegressOptions};
 use crate::select::{self, Candidate};
@@ -46,13 +71,33 @@ pub struct MethodStats {
     /// With model selection, the candidate chosen for each training run (one per fold).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub selected: Vec<Candidate>,
+    /// With detailed examples: mean per-frame RMS of the base mesh (= `rms_mean`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub base_rms_mean: Option<f64>,
+    /// With detailed examples: mean per-frame RMS of the detailed output against the detailed
+    /// ground truth (module docs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail_rms_mean: Option<f64>,
+    /// With detailed examples: the same on the crease regions only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crease_rms_mean: Option<f64>,
+    /// With detailed examples: the RMS error of the displacements `h` alone on the crease
+    /// regions (the detail layer's own error, whatever the base did).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crease_h_rms_mean: Option<f64>,
+    /// Per-frame detailed RMS errors, in frame order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub detail_frames: Vec<f64>,
+    /// Per-frame crease-region RMS errors, in frame order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub crease_frames: Vec<f64>,
 }
 
 /// One table: method name -> statistics.
 pub type EvalTable = BTreeMap<String, MethodStats>;
 
 /// The row order of printed tables.
-pub const ROWS: [&str; 8] = [
+pub const ROWS: [&str; 12] = [
     "rest",
     "oracle",
     "oracle-rotations",
@@ -61,7 +106,43 @@ pub const ROWS: [&str; 8] = [
     "local-geometry",
     "local-pose",
     "local",
+    "static-detail",
+    "cascaded-detail",
+    "true-base",
+    "true-base-static",
 ];
+
+/// Fraction of detailed vertices that make the crease regions (module docs).
+pub const CREASE_FRACTION: f64 = 0.05;
+
+/// The base method of the `static-detail` and `cascaded-detail` rows (HZY11 compares detail
+/// models on its own, local, base); the last evaluated method when it is not evaluated.
+pub const DETAIL_BASELINE_METHOD: Method = Method::Local;
+
+/// Detailed examples of an evaluation (module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct DetailEval<'a> {
+    /// The detailed version of every training frame.
+    pub train: DetailFrames<'a>,
+    /// The detailed version of every held-out frame ([`evaluate_test_layers`] only).
+    pub test: Option<DetailFrames<'a>>,
+    /// Subdivision, ray distance, kernel.
+    pub options: &'a DetailOptions,
+}
+
+/// What a fold's detail rows need: the three regressors, the evaluated frames' ground truth,
+/// the crease regions and a synthesis.
+struct FoldDetail<'a> {
+    levels: u32,
+    pose: DetailRegressor,
+    fixed: DetailRegressor,
+    cascaded: DetailRegressor,
+    /// `S B + h n` of each evaluated frame.
+    truth: &'a [Truth],
+    /// The crease-region vertices.
+    crease: &'a [u32],
+    synth: DetailSynth,
+}
 
 /// Options of an evaluation.
 #[derive(Clone, Debug)]
@@ -101,10 +182,147 @@ pub fn evaluate_test(
     options: &EvalOptions,
     progress: &mut dyn FnMut(&IterationStat),
 ) -> Result<EvalTable, TrainError> {
+    evaluate_test_layers(train, test, None, options, progress)
+}
+
+/// [`evaluate_test`] with the detail layer when `detail` gives the detailed examples of both
+/// sets (module docs).
+pub fn evaluate_test_layers(
+    train: TrainInput<'_>,
+    test: HeldOut<'_>,
+    detail: Option<DetailEval<'_>>,
+    options: &EvalOptions,
+    progress: &mut dyn FnMut(&IterationStat),
+) -> Result<EvalTable, TrainError> {
     let base = pipeline::train_base(train, &options.train, progress)?;
     let mut table = EvalTable::new();
-    evaluate_frames(&base, train.frames, test.frames, options, &mut table)?;
+    let prepared = match detail {
+        Some(d) => {
+            let test_frames = d.test.ok_or_else(|| {
+                TrainError::Detail(detail_layer::DetailTrainError::Shape(
+                    "no detailed version of the test frames".into(),
+                ))
+            })?;
+            Some(PreparedDetail::new(
+                train,
+                d,
+                Some((test.frames, test_frames)),
+            )?)
+        }
+        None => None,
+    };
+    let fold = match &prepared {
+        Some(p) => Some(p.fold(&base, None, &p.test_truth)?),
+        None => None,
+    };
+    evaluate_frames(&base, train.frames, test.frames, options, fold, &mut table)?;
     Ok(table)
+}
+
+/// The detailed ground truth of one pose: `S B + h n` and its `h`.
+struct Truth {
+    positions: Vec<Vec3>,
+    h: Vec<f32>,
+}
+
+/// The detail data shared by the folds: the synthesis, every training frame's `h`, the crease
+/// regions, and the ground truth of the test frames.
+struct PreparedDetail<'a> {
+    options: &'a DetailOptions,
+    synth: DetailSynth,
+    train_h: Vec<Vec<f32>>,
+    /// `S B + h n` of every training frame (leave-one-out's ground truth).
+    train_truth: Vec<Truth>,
+    test_truth: Vec<Truth>,
+    crease: Vec<u32>,
+}
+
+impl<'a> PreparedDetail<'a> {
+    fn new(
+        train: TrainInput<'_>,
+        detail: DetailEval<'a>,
+        test: Option<(&[&[Vec3]], DetailFrames<'_>)>,
+    ) -> Result<Self, TrainError> {
+        let options = detail.options;
+        let mut synth = DetailSynth::from_mesh(train.rest, options.levels)
+            .map_err(detail_layer::DetailTrainError::from)?;
+        let max_distance = options.max_distance * train.rest.bbox_diagonal_scale();
+        let (train_h, _) = detail_layer::resample(
+            &mut synth,
+            train.frames,
+            detail.train,
+            max_distance,
+            |_, _| {},
+        )?;
+        let truth = |synth: &mut DetailSynth, frames: &[&[Vec3]], h: &[Vec<f32>]| {
+            frames
+                .iter()
+                .zip(h)
+                .map(|(f, h)| {
+                    let mut positions = vec![Vec3::ZERO; synth.vertex_count()];
+                    synth.synthesize(f, h, &mut positions).map(|()| Truth {
+                        positions,
+                        h: h.clone(),
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(detail_layer::DetailTrainError::from)
+        };
+        let train_truth = truth(&mut synth, train.frames, &train_h)?;
+        let test_truth = match test {
+            Some((frames, detailed)) => {
+                let (h, _) =
+                    detail_layer::resample(&mut synth, frames, detailed, max_distance, |_, _| {})?;
+                truth(&mut synth, frames, &h)?
+            }
+            None => Vec::new(),
+        };
+        let crease = detail_layer::crease_vertices(&train_h, CREASE_FRACTION);
+        Ok(Self {
+            options,
+            synth,
+            train_h,
+            train_truth,
+            test_truth,
+            crease,
+        })
+    }
+
+    /// The regressors of a fold trained on every training frame but `held`.
+    fn fold<'t>(
+        &'t self,
+        base: &TrainedBase,
+        held: Option<usize>,
+        truth: &'t [Truth],
+    ) -> Result<FoldDetail<'t>, TrainError> {
+        let h: Vec<Vec<f32>> = self
+            .train_h
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| Some(i) != held)
+            .map(|(_, h)| h.clone())
+            .collect();
+        let fit = |input: DetailInput| -> Result<DetailRegressor, TrainError> {
+            let x = detail_layer::inputs(input, &base.example_controls, &base.rotations);
+            let d_in = x.len() / h.len().max(1);
+            let options = DetailOptions {
+                input,
+                ..self.options.clone()
+            };
+            detail_layer::fit(&h, &x, d_in, &options).map_err(|e| TrainError::Detail(e.into()))
+        };
+        let pose = fit(DetailInput::Controls)?;
+        let fixed = DetailRegressor::fixed(DetailInput::Controls, pose.d_in, h[0].clone());
+        Ok(FoldDetail {
+            levels: self.options.levels,
+            cascaded: fit(DetailInput::Rotations)?,
+            pose,
+            fixed,
+            truth,
+            crease: &self.crease,
+            synth: self.synth.clone(),
+        })
+    }
 }
 
 /// Leave-one-out over the training examples but the rest pose (frame 0): each fold trains on
@@ -114,8 +332,23 @@ pub fn evaluate_loo(
     options: &EvalOptions,
     on_fold: &mut dyn FnMut(usize, usize),
 ) -> Result<EvalTable, TrainError> {
+    evaluate_loo_layers(train, None, options, on_fold)
+}
+
+/// [`evaluate_loo`] with the detail layer when `detail` gives the detailed training examples:
+/// each fold's detail regressors are refitted without the held-out pose.
+pub fn evaluate_loo_layers(
+    train: TrainInput<'_>,
+    detail: Option<DetailEval<'_>>,
+    options: &EvalOptions,
+    on_fold: &mut dyn FnMut(usize, usize),
+) -> Result<EvalTable, TrainError> {
     let n = train.frames.len();
     let mut table = EvalTable::new();
+    let prepared = match detail {
+        Some(d) => Some(PreparedDetail::new(train, d, None)?),
+        None => None,
+    };
     for held in 1..n {
         on_fold(held, n - 1);
         let frames: Vec<&[Vec3]> = (0..n)
@@ -132,7 +365,18 @@ pub fn evaluate_loo(
             names: &names,
         };
         let base = pipeline::train_base(input, &options.train, &mut |_| {})?;
-        evaluate_frames(&base, &frames, &[train.frames[held]], options, &mut table)?;
+        let fold = match &prepared {
+            Some(p) => Some(p.fold(&base, Some(held), &p.train_truth[held..=held])?),
+            None => None,
+        };
+        evaluate_frames(
+            &base,
+            &frames,
+            &[train.frames[held]],
+            options,
+            fold,
+            &mut table,
+        )?;
     }
     Ok(table)
 }
@@ -143,6 +387,7 @@ fn evaluate_frames(
     train_frames: &[&[Vec3]],
     frames: &[&[Vec3]],
     options: &EvalOptions,
+    mut detail: Option<FoldDetail<'_>>,
     table: &mut EvalTable,
 ) -> Result<(), TrainError> {
     let rest = &base.rig.rest;
@@ -195,7 +440,30 @@ fn evaluate_frames(
         );
     }
 
+    // the detail layer on the true base
+    if let Some(d) = detail.as_mut() {
+        let mut xi = vec![0.0; d.pose.example_count()];
+        let mut h = vec![0.0; d.synth.vertex_count()];
+        let mut out = vec![Vec3::ZERO; d.synth.vertex_count()];
+        for (k, f) in frames.iter().enumerate() {
+            let x: Vec<f32> = controls_of(f).iter().flat_map(|p| p.to_array()).collect();
+            for (row, r) in [("true-base", &d.pose), ("true-base-static", &d.fixed)] {
+                r.predict(&x, &mut xi, &mut h);
+                d.synth
+                    .synthesize(f, &h, &mut out)
+                    .map_err(|e| TrainError::Detail(e.into()))?;
+                push(table, row, 0.0, 0.0);
+                push_detail(table, row, 0.0, &out, &h, &d.truth[k], d.crease, scale);
+            }
+        }
+    }
+
     // the predictors
+    let baseline = if options.methods.contains(&DETAIL_BASELINE_METHOD) {
+        Some(DETAIL_BASELINE_METHOD)
+    } else {
+        options.methods.last().copied()
+    };
     for &method in &options.methods {
         let regress = RegressOptions {
             method,
@@ -213,11 +481,17 @@ fn evaluate_frames(
             }
             None => (regress, options.beta),
         };
-        let model = base.model(&regress, beta);
+        let mut model = base.model(&regress, beta);
+        if let Some(d) = &detail {
+            model.detail = Some(DetailLayer {
+                levels: d.levels,
+                regressor: d.pose.clone(),
+            });
+        }
         let predictor = Predictor::new(Arc::new(model), Some(beta))
             .map_err(|e| TrainError::Controls(e.to_string()))?;
         let mut ctx = predictor.new_context();
-        for f in frames {
+        for (k, f) in frames.iter().enumerate() {
             let controls = controls_of(f);
             let t = Instant::now();
             let got = predictor
@@ -226,9 +500,56 @@ fn evaluate_frames(
             let us = t.elapsed().as_secs_f64() * 1e6;
             let e = rms_normalized(got, f, scale);
             push(table, method.name(), e, us);
+            let Some(d) = &detail else { continue };
+            let mut rows = vec![(method.name(), &d.pose)];
+            if Some(method) == baseline {
+                rows.push(("static-detail", &d.fixed));
+                rows.push(("cascaded-detail", &d.cascaded));
+            }
+            for (row, r) in rows {
+                predictor
+                    .predict_detail_with(&mut ctx, r)
+                    .map_err(|e| TrainError::Controls(e.to_string()))?;
+                if row != method.name() {
+                    push(table, row, e, 0.0);
+                }
+                let (out, h) = (ctx.detail_positions(), ctx.displacements());
+                push_detail(table, row, e, out, h, &d.truth[k], d.crease, scale);
+            }
         }
     }
     Ok(())
+}
+
+/// Adds a frame's detailed errors to `row`: its base error `base`, the full and crease-region
+/// RMS of `out` against the truth, and the crease-region RMS of its displacements `h`.
+#[allow(clippy::too_many_arguments)]
+fn push_detail(
+    table: &mut EvalTable,
+    row: &str,
+    base: f64,
+    out: &[Vec3],
+    h: &[f32],
+    truth: &Truth,
+    crease: &[u32],
+    scale: f32,
+) {
+    let detail = rms_normalized(out, &truth.positions, scale);
+    let rms = |sq: &dyn Fn(usize) -> f64| {
+        let sse: f64 = crease.iter().map(|&v| sq(v as usize)).sum();
+        (sse / crease.len().max(1) as f64).sqrt() / f64::from(scale)
+    };
+    let creases = rms(&|v| f64::from((out[v] - truth.positions[v]).length_squared()));
+    let displacement = rms(&|v| f64::from(h[v] - truth.h[v]).powi(2));
+    let s = table.entry(row.to_string()).or_default();
+    let n = s.detail_frames.len() as f64;
+    let mean = |old: Option<f64>, x: f64| Some((old.unwrap_or(0.0) * n + x) / (n + 1.0));
+    s.base_rms_mean = mean(s.base_rms_mean, base);
+    s.detail_rms_mean = mean(s.detail_rms_mean, detail);
+    s.crease_rms_mean = mean(s.crease_rms_mean, creases);
+    s.crease_h_rms_mean = mean(s.crease_h_rms_mean, displacement);
+    s.detail_frames.push(detail);
+    s.crease_frames.push(creases);
 }
 
 fn push(table: &mut EvalTable, row: &str, rms: f64, us: f64) {

@@ -4,7 +4,9 @@
 //! 2. control points: given, or automatic ([`crate::controls`]);
 //! 3. rotation regressors of the chosen method ([`crate::regress`]);
 //! 4. the edge skin of the translation solver ([`crate::edges`]): by default the vector edge
-//!    skin (its ridge cross-validated), or FKY08 eq. 10's scalar weights.
+//!    skin (its ridge cross-validated), or FKY08 eq. 10's scalar weights;
+//! 5. with detailed examples ([`train_layers`]), the detail layer
+//!    ([`crate::detail::layer`]: subdivide, resample, regress; HZY11 §4, §5.2).
 
 use std::time::Instant;
 
@@ -15,6 +17,9 @@ use crease_core::runtime::edge_skin::EdgeSkin;
 
 use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
 use crate::controls;
+use crate::detail::layer::{
+    self as detail_layer, DetailFrames, DetailOptions, DetailReport, DetailTrainError,
+};
 use crate::edges;
 use crate::regress::{self, Method, RegressInput, RegressOptions};
 use crate::select::{self, SelectGrid, Selection};
@@ -55,6 +60,8 @@ pub struct TrainOptions {
     /// over this grid ([`crate::select`]), overriding `regress.kernel`, the KCCA `kappa` (RBF
     /// ridge) and `beta`.
     pub select: Option<SelectGrid>,
+    /// The detail layer, trained when [`train_layers`] gets detailed examples.
+    pub detail: DetailOptions,
 }
 
 impl Default for TrainOptions {
@@ -68,6 +75,7 @@ impl Default for TrainOptions {
             edge_model: EdgeModel::default(),
             beta: 1.0,
             select: None,
+            detail: DetailOptions::default(),
         }
     }
 }
@@ -109,6 +117,9 @@ pub enum TrainError {
     /// Too few examples.
     #[error("need at least 2 examples (the rest pose and one more), got {0}")]
     TooFewExamples(usize),
+    /// The detail layer could not be trained.
+    #[error(transparent)]
+    Detail(#[from] DetailTrainError),
 }
 
 /// Timings and reports of a training run.
@@ -128,6 +139,8 @@ pub struct TrainReport {
     pub selection: Option<Selection>,
     /// Control-point selection, for [`ControlSpec::Select`] (its time is part of `seconds`).
     pub control_selection: Option<select::ControlSelection>,
+    /// The detail layer, when trained (its time is part of `seconds`).
+    pub detail: Option<DetailReport>,
     /// Total seconds.
     pub seconds: f64,
 }
@@ -193,15 +206,29 @@ impl TrainedBase {
             edges: self.edges.clone(),
             edge_skin: self.edge_skin.clone(),
             beta,
+            detail: None,
         }
     }
 }
 
-/// Trains a model. `progress` sees the bone fit's steps.
+/// Trains a model's base layer. `progress` sees the bone fit's steps.
 pub fn train(
     input: TrainInput<'_>,
     options: &TrainOptions,
     progress: &mut dyn FnMut(&IterationStat),
+) -> Result<(TrainedModel, TrainReport), TrainError> {
+    train_layers(input, None, options, progress, &mut |_, _| {})
+}
+
+/// Trains both layers: the base layer as [`train`] does and, when `detailed` gives the
+/// detailed version of every example, the detail layer on top (`options.detail`).
+/// `detail_progress(done, total)` follows the detailed examples' resampling.
+pub fn train_layers(
+    input: TrainInput<'_>,
+    detailed: Option<DetailFrames<'_>>,
+    options: &TrainOptions,
+    progress: &mut dyn FnMut(&IterationStat),
+    detail_progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(TrainedModel, TrainReport), TrainError> {
     let mut base = train_base(input, options, progress)?;
     let t = Instant::now();
@@ -224,6 +251,20 @@ pub fn train(
     }
     base.report.regress_seconds = t.elapsed().as_secs_f64();
     base.report.seconds += base.report.regress_seconds;
+    if let Some(detailed) = detailed {
+        let (layer, report, _) = detail_layer::train(
+            input.rest,
+            input.frames,
+            detailed,
+            &base.example_controls,
+            &base.rotations,
+            &options.detail,
+            detail_progress,
+        )?;
+        base.report.seconds += report.extract_seconds + report.fit_seconds;
+        base.report.detail = Some(report);
+        model.detail = Some(layer);
+    }
     Ok((model, base.report))
 }
 
@@ -338,6 +379,7 @@ pub fn train_base(
         edge_vectors,
         selection: None,
         control_selection: None,
+        detail: None,
         seconds: start.elapsed().as_secs_f64(),
     };
     let mut base = TrainedBase {

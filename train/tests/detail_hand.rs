@@ -10,7 +10,7 @@ use crease_core::sweep::dataset::{Layout, landmarks};
 use crease_core::sweep::rig::{HandRig, Layers};
 use crease_core::sweep::skeleton::{HandPose, NamedPose, PoseSampler};
 use crease_core::sweep::surface::Resolution;
-use crease_train::detail::regress::{DetailInput, DetailModel};
+use crease_train::detail::regress::{self, DetailInput};
 use crease_train::detail::{DisplacementSource, DisplacementTarget};
 use crease_train::kcca::KccaOptions;
 
@@ -71,8 +71,7 @@ fn training_poses_reproduce_their_detailed_meshes() {
         kappa: 1e-7,
         ..KccaOptions::default()
     };
-    let model =
-        DetailModel::fit(DetailInput::Controls, &x, cps.len() * 3, &h, None, &opts).unwrap();
+    let model = regress::fit(DetailInput::Controls, &x, cps.len() * 3, &h, None, &opts).unwrap();
     let d_in = cps.len() * 3;
     let mut xi = vec![0.0; poses.len()];
     let mut hp = vec![0.0; nv];

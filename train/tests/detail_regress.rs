@@ -6,7 +6,7 @@
 use std::time::Instant;
 
 use crease_core::runtime::kernel::Kernel;
-use crease_train::detail::regress::{DetailFitError, DetailInput, DetailModel};
+use crease_train::detail::regress::{self, DetailFitError, DetailInput, DetailRegressor};
 use crease_train::kcca::{KccaOptions, fit_kcca};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -40,7 +40,7 @@ fn collapsed_matrix_equals_one_vertex_at_a_time() {
     let (x, h) = data(n, d, v, 1);
     let kernel = Kernel::Gaussian { sigma: 1.1 };
     let opts = KccaOptions::default();
-    let model = DetailModel::fit(DetailInput::Controls, &x, d, &h, Some(kernel), &opts).unwrap();
+    let model = regress::fit(DetailInput::Controls, &x, d, &h, Some(kernel), &opts).unwrap();
     assert_eq!(model.vertex_count(), v);
     let mut xi = vec![0.0; n];
     let mut out = vec![0.0; v];
@@ -82,7 +82,7 @@ fn training_poses_are_reproduced_and_held_out_beats_static() {
         kappa: 1e-6,
         ..KccaOptions::default()
     };
-    let model = DetailModel::fit(DetailInput::Controls, &x, d, &h, None, &opts).unwrap();
+    let model = regress::fit(DetailInput::Controls, &x, d, &h, None, &opts).unwrap();
     let mut xi = vec![0.0; n];
     let mut out = vec![0.0; v];
     let scale = h.iter().flatten().fold(0.0f32, |m, &a| m.max(a.abs()));
@@ -99,9 +99,9 @@ fn training_poses_are_reproduced_and_held_out_beats_static() {
         );
     }
     // Held out: pose-dependent vs static (the rest's displacements everywhere).
-    let fixed = DetailModel::fixed(DetailInput::Controls, d, &h[0]);
+    let fixed = DetailRegressor::fixed(DetailInput::Controls, d, h[0].clone());
     let (tx, th) = data(20, d, v, 3);
-    let rms = |m: &DetailModel| {
+    let rms = |m: &DetailRegressor| {
         let mut xi = vec![0.0; m.example_count()];
         let mut o = vec![0.0; v];
         let mut s = 0.0f64;
@@ -124,7 +124,7 @@ fn training_poses_are_reproduced_and_held_out_beats_static() {
 fn bad_input_is_refused() {
     let (x, mut h) = data(5, 3, 10, 4);
     h[2].pop();
-    let err = DetailModel::fit(
+    let err = regress::fit(
         DetailInput::Controls,
         &x,
         3,
@@ -139,7 +139,7 @@ fn bad_input_is_refused() {
     );
     let (mut x, h) = data(5, 3, 10, 4);
     x[7] = f32::NAN;
-    let err = DetailModel::fit(
+    let err = regress::fit(
         DetailInput::Controls,
         &x,
         3,
@@ -165,7 +165,7 @@ fn hand_sized_fit_and_predict_timing() {
     let (n, d, v) = (14, 45, 151_328);
     let (x, h) = data(n, d, v, 5);
     let start = Instant::now();
-    let model = DetailModel::fit(
+    let model = regress::fit(
         DetailInput::Controls,
         &x,
         d,

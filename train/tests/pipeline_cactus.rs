@@ -256,6 +256,7 @@ fn selection_scores_equal_an_independent_leave_one_out() {
                 edges: base.edges.clone(),
                 edge_skin: base.edge_skin.clone(),
                 beta: cand.beta,
+                detail: None,
             };
             let predictor = Predictor::new(Arc::new(model), None).unwrap();
             let mut ctx = predictor.new_context();

@@ -1,15 +1,18 @@
 //! `crease eval`: leave-one-out and held-out test errors of every method, with the oracle rows
-//! that show each layer's floor (HZY11 Table 2 protocol).
+//! that show each layer's floor (HZY11 Table 2 protocol); with detailed examples, the detail
+//! layer's errors beside the base's, and the static- and cascaded-detail rows (HZY11 Figs. 5,
+//! 8).
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
-use crease_train::eval::{self, EvalOptions, EvalTable, HeldOut, ROWS};
+use crease_train::eval::{self, DetailEval, EvalOptions, EvalTable, HeldOut, ROWS};
 use crease_train::pipeline::TrainInput;
 use crease_train::regress::{KernelChoice, Method};
 
-use super::common::{self, Progress};
+use super::common::Progress;
+use super::layers;
 use super::train::RegressArgs;
 
 /// Options of `crease eval`.
@@ -31,6 +34,9 @@ pub struct EvalArgs {
     /// Shared regression options.
     #[command(flatten)]
     pub regress: RegressArgs,
+    /// Detail layer options (used when the examples are detailed).
+    #[command(flatten)]
+    pub detail: layers::DetailArgs,
     /// Print `{"loo": {METHOD: {...}}, "test": {METHOD: {...}}}` on stdout.
     #[arg(long)]
     pub json: bool,
@@ -44,14 +50,17 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     if !args.loo && args.test.is_none() {
         bail!("nothing to evaluate: give --loo, --test TEST, or both");
     }
-    let set = common::load_examples(&args.examples)?;
+    let layers = layers::load(&args.examples, &args.detail, None)?;
+    let set = &layers.base;
+    let detail_options = layers::detail_options(&args.detail, &layers)?;
+    let train_detail = layers.detail_frames();
     let methods = if args.methods.is_empty() {
         Method::ALL.to_vec()
     } else {
         args.methods.clone()
     };
     let options = EvalOptions {
-        train: args.regress.train_options(Method::Global, &set)?,
+        train: args.regress.train_options(Method::Global, set)?,
         methods,
         beta: args.regress.beta,
     };
@@ -67,7 +76,25 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     let mut results = serde_json::Map::new();
     let mut tables: Vec<(&str, EvalTable)> = Vec::new();
     if let Some(test_path) = &args.test {
-        let test = common::load_examples(test_path)?;
+        let test_layers = layers::load(test_path, &args.detail, layers.subset.as_ref())?;
+        let test = &test_layers.base;
+        if layers.detailed.is_some() != test_layers.detailed.is_some() {
+            bail!(
+                "{}: the training examples {} detailed versions and the test examples {}",
+                test_path.display(),
+                if layers.detailed.is_some() {
+                    "have"
+                } else {
+                    "have no"
+                },
+                if test_layers.detailed.is_some() {
+                    "do"
+                } else {
+                    "do not"
+                }
+            );
+        }
+        let test_detail = test_layers.detail_frames();
         if test.rest.vertex_count() != set.rest.vertex_count()
             || test.rest.triangles != set.rest.triangles
         {
@@ -82,12 +109,18 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         }
         let tf: Vec<&[Vec3]> = test.frames();
         let tn: Vec<String> = test.names();
-        let table = eval::evaluate_test(
+        let detail = train_detail.as_ref().map(|t| DetailEval {
+            train: layers::frames(t),
+            test: test_detail.as_ref().map(layers::frames),
+            options: &detail_options,
+        });
+        let table = eval::evaluate_test_layers(
             input,
             HeldOut {
                 names: &tn,
                 frames: &tf,
             },
+            detail,
             &options,
             &mut |s| progress.step(s),
         )
@@ -95,7 +128,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         tables.push(("test", table));
     }
     if args.loo {
-        let table = eval::evaluate_loo(input, &options, &mut |i, n| {
+        let detail = train_detail.as_ref().map(|t| DetailEval {
+            train: layers::frames(t),
+            test: None,
+            options: &detail_options,
+        });
+        let table = eval::evaluate_loo_layers(input, detail, &options, &mut |i, n| {
             progress.line(
                 "loo",
                 None,
@@ -108,19 +146,26 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     progress.finish();
 
-    let mut csv = String::from("protocol,method,rms_mean,rms_max,us_per_frame,frames\n");
+    let mut csv = String::from(
+        "protocol,method,rms_mean,rms_max,us_per_frame,frames,base_rms_mean,detail_rms_mean,crease_rms_mean,crease_h_rms_mean\n",
+    );
     for (protocol, table) in &tables {
         println_table(protocol, table, args.json);
         let mut obj = serde_json::Map::new();
         for row in ROWS {
             if let Some(s) = table.get(row) {
                 obj.insert(row.to_string(), serde_json::to_value(s)?);
+                let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
                 csv.push_str(&format!(
-                    "{protocol},{row},{:.6e},{:.6e},{:.1},{}\n",
+                    "{protocol},{row},{:.6e},{:.6e},{:.1},{},{},{},{},{}\n",
                     s.rms_mean,
                     s.rms_max,
                     s.us_per_frame,
-                    s.frames.len()
+                    s.frames.len(),
+                    opt(s.base_rms_mean),
+                    opt(s.detail_rms_mean),
+                    opt(s.crease_rms_mean),
+                    opt(s.crease_h_rms_mean)
                 ));
             }
         }
@@ -148,21 +193,41 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
 /// The human table (to stderr when stdout carries JSON).
 fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
     let mut text = format!("{protocol}: RMS vertex error, rest bbox largest side = 1\n");
+    let detailed = table.values().any(|s| s.detail_rms_mean.is_some());
     text.push_str(&format!(
-        "  {:<18} {:>10} {:>10} {:>10} {:>7}\n",
+        "  {:<18} {:>10} {:>10} {:>10} {:>7}",
         "method", "rms_mean", "rms_max", "us/frame", "frames"
     ));
+    if detailed {
+        text.push_str(&format!(
+            " {:>11} {:>11} {:>11}",
+            "detail_rms", "crease_rms", "crease_h"
+        ));
+    }
+    text.push('\n');
     for row in ROWS {
         if let Some(s) = table.get(row) {
             text.push_str(&format!(
-                "  {:<18} {:>10.4e} {:>10.4e} {:>10.1} {:>7}\n",
+                "  {:<18} {:>10.4e} {:>10.4e} {:>10.1} {:>7}",
                 row,
                 s.rms_mean,
                 s.rms_max,
                 s.us_per_frame,
                 s.frames.len()
             ));
+            if let (Some(d), Some(c), Some(h)) =
+                (s.detail_rms_mean, s.crease_rms_mean, s.crease_h_rms_mean)
+            {
+                text.push_str(&format!(" {d:>11.4e} {c:>11.4e} {h:>11.4e}"));
+            }
+            text.push('\n');
         }
+    }
+    if detailed {
+        text.push_str(&format!(
+            "  detail_rms: the detailed output against the detailed truth; crease_rms: the same on the {}% of detailed vertices whose displacement varies most over the training poses; crease_h: the displacements' own error there; true-base rows: the true base mesh with detail\n",
+            eval::CREASE_FRACTION * 100.0
+        ));
     }
     for row in ROWS {
         if let Some(s) = table.get(row).filter(|s| !s.selected.is_empty()) {

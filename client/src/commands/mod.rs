@@ -4,5 +4,6 @@ pub mod common;
 pub mod eval;
 pub mod fit;
 pub mod handgen;
+pub mod layers;
 pub mod synth;
 pub mod train;

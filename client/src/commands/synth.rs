@@ -42,6 +42,10 @@ pub struct SynthArgs {
     /// Control-point weight of the translation solve (default: the model's).
     #[arg(long)]
     pub beta: Option<f32>,
+    /// Write the detailed meshes (the detail layer on the subdivided base, HZY11 eq. 4)
+    /// instead of the base meshes; the model must have a detail layer.
+    #[arg(long)]
+    pub detail: bool,
 }
 
 /// One frame of control points with its validity mask.
@@ -64,12 +68,29 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     let model = TrainedModel::load(&args.model)
         .with_context(|| format!("loading model {}", args.model.display()))?;
     let frames = read_control_frames(&args.controls, model.controls.len())?;
+    if args.detail && model.detail.is_none() {
+        bail!(
+            "{}: --detail needs a model with a detail layer (train it on detailed examples: a manifest with `detailed`, or --base-vertices)",
+            args.model.display()
+        );
+    }
     let predictor =
         Predictor::new(Arc::new(model), args.beta).context("preparing the predictor")?;
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     }
-    let rest = &predictor.model().rig.rest;
+    let mut ctx = predictor.new_context();
+    // The output mesh at rest: the base rest mesh, or the detail layer at the rest pose.
+    let rest = if args.detail {
+        let controls = ctx.controls().to_vec();
+        predictor.predict(&mut ctx, &controls, None)?;
+        Mesh {
+            positions: predictor.predict_detail(&mut ctx)?.to_vec(),
+            triangles: predictor.detail_triangles().unwrap_or_default().to_vec(),
+        }
+    } else {
+        predictor.model().rig.rest.clone()
+    };
     // Every frame's positions, frame after frame, for the glTF; checked to fit one GLB before
     // any frame is computed.
     let mut animation = match &args.gltf {
@@ -84,7 +105,6 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         }
         None => Vec::new(),
     };
-    let mut ctx = predictor.new_context();
     let mut mesh = Mesh {
         positions: Vec::new(),
         triangles: rest.triangles.clone(),
@@ -95,14 +115,22 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     for (i, f) in frames.iter().enumerate() {
         let t = Instant::now();
         predictor.predict(&mut ctx, &f.positions, Some(&f.valid))?;
+        if args.detail {
+            predictor.predict_detail(&mut ctx)?;
+        }
         compute += t.elapsed().as_secs_f64();
         held += ctx.held_controls();
+        let positions = if args.detail {
+            ctx.detail_positions()
+        } else {
+            ctx.positions()
+        };
         if args.gltf.is_some() {
-            animation.extend_from_slice(ctx.positions());
+            animation.extend_from_slice(positions);
         }
         if let Some(out) = &args.out {
             mesh.positions.clear();
-            mesh.positions.extend_from_slice(ctx.positions());
+            mesh.positions.extend_from_slice(positions);
             let path = out.join(format!("frame_{i:05}.{}", args.format));
             mesh.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;

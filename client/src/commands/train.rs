@@ -1,5 +1,6 @@
 //! `crease train`: bones, control points, rotation regressors and the edge skin in one model
-//! file (FKY08 §3–5, HZY11 §5.1).
+//! file (FKY08 §3–5, HZY11 §5.1), and the detail layer when the examples are detailed
+//! (HZY11 §4, §5.2).
 
 use std::path::PathBuf;
 
@@ -11,6 +12,7 @@ use crease_train::regress::{KernelChoice, Method, RegressOptions};
 use crease_train::select::SelectGrid;
 
 use super::common::{self, Progress};
+use super::layers;
 
 /// Regression options shared by `train` and `eval`.
 #[derive(Clone, Debug, clap::Args)]
@@ -139,6 +141,7 @@ impl RegressArgs {
             edge_model,
             beta: self.beta,
             select: self.select.then(SelectGrid::default),
+            detail: Default::default(),
         })
     }
 }
@@ -155,6 +158,9 @@ pub struct TrainArgs {
     /// Shared regression options.
     #[command(flatten)]
     pub regress: RegressArgs,
+    /// Detail layer options.
+    #[command(flatten)]
+    pub detail: layers::DetailArgs,
     /// Where to write the model (atomically).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -175,19 +181,31 @@ pub fn parse_method(s: &str) -> Result<Method, String> {
 
 /// Runs `crease train`.
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
-    let set = common::load_examples(&args.examples)?;
-    let options = args.regress.train_options(args.method, &set)?;
+    let layers = layers::load(&args.examples, &args.detail, None)?;
+    let set = &layers.base;
+    let mut options = args.regress.train_options(args.method, set)?;
+    options.detail = layers::detail_options(&args.detail, &layers)?;
     let frames: Vec<&[crease_core::glam::Vec3]> = set.frames();
     let names: Vec<String> = set.names();
     let progress = Progress::new(options.fit.max_iterations as u64);
-    let (model, report) = pipeline::train(
+    let detail_parts = layers.detail_frames();
+    let (model, report) = pipeline::train_layers(
         TrainInput {
             rest: &set.rest,
             frames: &frames,
             names: &names,
         },
+        detail_parts.as_ref().map(layers::frames),
         &options,
         &mut |s| progress.step(s),
+        &mut |done, total| {
+            progress.line(
+                "detail",
+                None,
+                &format!("resampled {done}/{total}"),
+                &format!("detail layer: resampled detailed example {done}/{total}"),
+            )
+        },
     )
     .context("training")?;
     progress.finish();
@@ -223,6 +241,18 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             s.best.beta,
             s.best.rms,
             s.seconds
+        );
+    }
+    if let Some(d) = &report.detail {
+        eprintln!(
+            "detail layer: {} levels, {} vertices; rays {} hits, {} closest-point fallbacks (max |h| {:.3e}); resampling {:.1} s, regression {:.1} s",
+            d.levels,
+            d.vertices,
+            d.hits,
+            d.fallbacks,
+            d.max_abs_h,
+            d.extract_seconds,
+            d.fit_seconds
         );
     }
     if args.json {

@@ -14,7 +14,12 @@
 //! examples = ["gallop/*.obj", "poses/*.obj"]   # globs or paths, in this order
 //! control_points = [12, 400, 7]                # optional vertex indices of the rest pose
 //! control_point_names = ["tip", "palm", "heel"] # optional, one per control point
+//! detailed = "detailed/train.toml"             # optional: the same poses at high resolution
 //! ```
+//! `detailed` names another folder or manifest holding the detailed version of every example
+//! (any topology, shared among the detailed examples), in the same order and with the same file
+//! names; it is read by [`ExampleSet::load_detailed`] (the detail layer's training data,
+//! HZY11 §4).
 //! Each glob's matches are in natural order, must include at least one mesh file, and non-mesh
 //! files are skipped; a file already listed (the rest, or an earlier pattern) is not repeated.
 //!
@@ -55,6 +60,8 @@ pub struct ExampleSet {
     pub control_point_names: Option<Vec<String>>,
     /// The folder names are relative to: the loaded folder, or the manifest's folder.
     pub root: PathBuf,
+    /// The manifest's `detailed` set (resolved against `root`), if it names one.
+    pub detailed: Option<PathBuf>,
 }
 
 /// Reported before each file is read by [`ExampleSet::load_with_progress`].
@@ -79,6 +86,8 @@ struct Manifest {
     control_points: Option<Vec<toml::Spanned<u32>>>,
     #[serde(default)]
     control_point_names: Option<toml::Spanned<Vec<String>>>,
+    #[serde(default)]
+    detailed: Option<String>,
 }
 
 /// Deepest folder nesting searched: guards against symbolic-link cycles.
@@ -120,8 +129,8 @@ impl ExampleSet {
         let is_toml = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-        let (root, entries, control_points, names) = if meta.is_dir() {
-            (path.to_path_buf(), folder_entries(path)?, None, None)
+        let (root, entries, control_points, names, detailed) = if meta.is_dir() {
+            (path.to_path_buf(), folder_entries(path)?, None, None, None)
         } else if is_toml {
             manifest_entries(path)?
         } else {
@@ -167,7 +176,39 @@ impl ExampleSet {
             }
             set.control_point_names = Some(names);
         }
+        set.detailed = detailed;
         Ok(set)
+    }
+
+    /// The detailed version of this set (the manifest's `detailed`), or `None` when it names
+    /// none. Checked against this set: as many examples, pairwise the same file name (so pose
+    /// `k` is pose `k` at both resolutions), and one topology among the detailed examples.
+    pub fn load_detailed(&self) -> Result<Option<ExampleSet>, MeshError> {
+        let Some(path) = &self.detailed else {
+            return Ok(None);
+        };
+        let detailed = ExampleSet::load(path)?;
+        let error = |message: String| MeshError::ExampleSet {
+            at: Location::file(path),
+            message,
+        };
+        if detailed.examples.len() != self.examples.len() {
+            return Err(error(format!(
+                "{} detailed examples for {} base examples",
+                detailed.examples.len(),
+                self.examples.len()
+            )));
+        }
+        let file = |name: &str| name.rsplit('/').next().unwrap_or(name).to_owned();
+        for (k, (b, d)) in self.examples.iter().zip(&detailed.examples).enumerate() {
+            if file(&b.name) != file(&d.name) {
+                return Err(error(format!(
+                    "detailed example {k} is {:?}, the base example is {:?} (expected the same file name)",
+                    d.name, b.name
+                )));
+            }
+        }
+        Ok(Some(detailed))
     }
 
     /// Builds a set from meshes already in memory; `examples[0]` is the rest pose. Checks every
@@ -227,6 +268,7 @@ impl ExampleSet {
             control_points,
             control_point_names: None,
             root,
+            detailed: None,
         })
     }
 
@@ -338,11 +380,18 @@ type ControlPoints = Option<(Vec<u32>, Vec<Option<usize>>)>;
 /// Control point names and the TOML line of the list.
 type ControlNames = Option<(Vec<String>, usize)>;
 
-/// Reads a manifest: the root (its folder), the files in load order, the control points and
-/// their names.
-fn manifest_entries(
-    manifest_path: &Path,
-) -> Result<(PathBuf, Vec<Entry>, ControlPoints, ControlNames), MeshError> {
+/// A manifest's parts: the root (its folder), the files in load order, the control points, their
+/// names, and the detailed set.
+type ManifestParts = (
+    PathBuf,
+    Vec<Entry>,
+    ControlPoints,
+    ControlNames,
+    Option<PathBuf>,
+);
+
+/// Reads a manifest (see [`ManifestParts`]).
+fn manifest_entries(manifest_path: &Path) -> Result<ManifestParts, MeshError> {
     let text =
         std::fs::read_to_string(manifest_path).map_err(|e| MeshError::io(manifest_path, e))?;
     let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
@@ -425,7 +474,8 @@ fn manifest_entries(
     let names = manifest
         .control_point_names
         .map(|n| (n.get_ref().clone(), line_of(n.span().start)));
-    Ok((root, entries, cps, names))
+    let detailed = manifest.detailed.map(|d| root.join(d));
+    Ok((root, entries, cps, names, detailed))
 }
 
 /// The path by which duplicates are recognised: canonical when the file exists (so

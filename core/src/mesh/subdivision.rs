@@ -135,6 +135,23 @@ pub enum SubdivisionError {
     },
 }
 
+/// Vertex count of `mesh` Loop-subdivided `levels` times, without building `S`: each level adds
+/// one vertex per edge and turns each edge into two plus three per triangle (`V' = V + E`,
+/// `E' = 2E + 3F`, `F' = 4F`). Saturates instead of overflowing.
+pub fn subdivided_vertex_count(mesh: &Mesh, levels: u32) -> usize {
+    let (mut v, mut e, mut f) = (
+        mesh.vertex_count(),
+        mesh.edges().len(),
+        mesh.triangles.len(),
+    );
+    for _ in 0..levels {
+        v = v.saturating_add(e);
+        e = e.saturating_mul(2).saturating_add(f.saturating_mul(3));
+        f = f.saturating_mul(4);
+    }
+    v
+}
+
 /// A sparse matrix in compressed sparse row form with `f32` weights, applied to 3-vectors.
 ///
 /// Row `i` has entries `cols[row_ptr[i]..row_ptr[i + 1]]` (sorted ascending, unique, all below

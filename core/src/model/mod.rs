@@ -24,7 +24,7 @@ pub mod trained;
 pub use file::{FormatError, ModelKind};
 pub use gltf_export::export_rig_glb;
 pub use rig::{Rig, RigExample};
-pub use trained::{ControlPoint, TrainedModel};
+pub use trained::{ControlPoint, DetailLayer, TrainedModel};
 
 /// Errors from loading, saving, validating or exporting models.
 #[derive(Debug, thiserror::Error)]

@@ -12,6 +12,13 @@
 //! | `EDGE` | edges, u32 x 2 per edge |
 //! | `EDBI` / `EDVC` | edge skin: bone indices (u32) and rest-frame vectors (f32 x 3), stride from `CTRL` |
 //!
+//! | `DTLM` | JSON: the detail layer's meta ([`DetailLayer`]: subdivision levels, input, kernel, sizes) |
+//! | `DTLX` / `DTLD` / `DTLB` | the detail regressor: training inputs, `D` (vertices x examples, row-major) and `b`, f32 |
+//!
+//! The detail sections are present only for a model with a detail layer (trained on detailed
+//! examples); `S` is not stored but rebuilt from the rest topology and `levels` (it is exactly
+//! determined by them).
+//!
 //! Files written before the vector edge skin carry `EDBW` (scalar FKY08 eq. 10 weights, f32)
 //! instead of `EDVC`; they still load, as [`EdgeSkin::from_weights`].
 //!
@@ -28,8 +35,11 @@ use serde::{Deserialize, Serialize};
 use super::ModelError;
 use super::file::{Container, ContainerWriter, ModelKind, Tag};
 use super::rig::Rig;
+use crate::mesh::subdivision::subdivided_vertex_count;
+use crate::runtime::displacement::{DetailInput, DetailRegressor};
 use crate::runtime::edge_skin::EdgeSkin;
-use crate::runtime::predict::RotationModel;
+use crate::runtime::kernel::Kernel;
+use crate::runtime::predict::{LinearOperator, RotationModel};
 use crate::runtime::skin::SkinWeights;
 
 const CTRL: Tag = Tag(*b"CTRL");
@@ -38,6 +48,31 @@ const EDGE: Tag = Tag(*b"EDGE");
 const EDBI: Tag = Tag(*b"EDBI");
 const EDBW: Tag = Tag(*b"EDBW");
 const EDVC: Tag = Tag(*b"EDVC");
+const DTLM: Tag = Tag(*b"DTLM");
+const DTLX: Tag = Tag(*b"DTLX");
+const DTLD: Tag = Tag(*b"DTLD");
+const DTLB: Tag = Tag(*b"DTLB");
+
+/// The detail layer of a model (HZY11 §5.2-§5.3): the base mesh Loop-subdivided `levels` times
+/// (`S`, rebuilt from the rest topology), and the regressor of the displacements along the
+/// subdivided normals.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DetailLayer {
+    /// Loop subdivision levels of `S` (1 or 2).
+    pub levels: u32,
+    /// `h(x) = D xi(x) + b`, one row per subdivided vertex.
+    pub regressor: DetailRegressor,
+}
+
+#[derive(Serialize, Deserialize)]
+struct DetailMeta {
+    levels: u32,
+    input: DetailInput,
+    kernel: Kernel,
+    d_in: u64,
+    examples: u64,
+    vertices: u64,
+}
 
 /// One control point: a mesh vertex the user moves (a marker on the surface).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -65,6 +100,8 @@ pub struct TrainedModel {
     pub edge_skin: EdgeSkin,
     /// Default control-point weight of the translation solve (FKY08 eq. 11).
     pub beta: f32,
+    /// The detail layer, when the model was trained on detailed examples.
+    pub detail: Option<DetailLayer>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -125,6 +162,37 @@ impl TrainedModel {
         if !(self.beta.is_finite() && self.beta >= 0.0) {
             return bad(format!("beta is {}", self.beta));
         }
+        if let Some(d) = &self.detail {
+            self.validate_detail(d)?;
+        }
+        Ok(())
+    }
+
+    fn validate_detail(&self, d: &DetailLayer) -> Result<(), ModelError> {
+        let bad = |m: String| Err(ModelError::InvalidRig(format!("detail layer: {m}")));
+        if !(1..=3).contains(&d.levels) {
+            return bad(format!("{} subdivision levels (expected 1 to 3)", d.levels));
+        }
+        d.regressor.validate().map_err(ModelError::InvalidRig)?;
+        let expected = subdivided_vertex_count(&self.rig.rest, d.levels);
+        if d.regressor.vertex_count() != expected {
+            return bad(format!(
+                "{} displacement rows, the rest mesh subdivided {} times has {expected} vertices",
+                d.regressor.vertex_count(),
+                d.levels
+            ));
+        }
+        let d_in = match d.regressor.input {
+            DetailInput::Controls => 3 * self.controls.len(),
+            DetailInput::Rotations => 4 * self.rig.bone_count,
+        };
+        if d.regressor.d_in != d_in {
+            return bad(format!(
+                "input of dimension {} from {}, expected {d_in}",
+                d.regressor.d_in,
+                d.regressor.input.name()
+            ));
+        }
         Ok(())
     }
 
@@ -147,6 +215,23 @@ impl TrainedModel {
         w.add_u32s(EDGE, bytemuck::cast_slice(&self.edges));
         w.add_u32s(EDBI, self.edge_skin.indices());
         w.add_f32s(EDVC, bytemuck::cast_slice(self.edge_skin.vectors()));
+        if let Some(d) = &self.detail {
+            let r = &d.regressor;
+            w.add_json(
+                DTLM,
+                &DetailMeta {
+                    levels: d.levels,
+                    input: r.input,
+                    kernel: r.kernel,
+                    d_in: r.d_in as u64,
+                    examples: r.example_count() as u64,
+                    vertices: r.vertex_count() as u64,
+                },
+            )?;
+            w.add_f32s(DTLX, &r.examples);
+            w.add_f32s(DTLD, &r.operator.m);
+            w.add_f32s(DTLB, &r.operator.b);
+        }
         Ok(w.to_bytes())
     }
 
@@ -183,6 +268,10 @@ impl TrainedModel {
             let weights = SkinWeights::new(k, indices, c.f32s(EDBW, ek, &what)?)?;
             EdgeSkin::from_weights(&rig.rest.positions, &edges, &weights).map_err(invalid)?
         };
+        let detail = match c.section(DTLM) {
+            None => None,
+            Some(_) => Some(read_detail(&c)?),
+        };
         let model = TrainedModel {
             rig,
             controls: meta.controls,
@@ -191,9 +280,15 @@ impl TrainedModel {
             edges,
             edge_skin,
             beta: meta.beta,
+            detail,
         };
         model.validate()?;
         Ok(model)
+    }
+
+    /// Vertices of the detailed output, when the model has a detail layer.
+    pub fn detail_vertex_count(&self) -> Option<usize> {
+        self.detail.as_ref().map(|d| d.regressor.vertex_count())
     }
 
     /// Writes the model atomically.
@@ -205,4 +300,40 @@ impl TrainedModel {
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ModelError> {
         Self::from_bytes(&super::read_bytes(path.as_ref())?)
     }
+}
+
+fn read_detail(c: &Container<'_>) -> Result<DetailLayer, ModelError> {
+    let meta: DetailMeta = c.json(DTLM)?;
+    let too_big =
+        |what: &str| ModelError::InvalidRig(format!("detail layer: {what} does not fit in memory"));
+    let size = |v: u64, what: &str| usize::try_from(v).map_err(|_| too_big(what));
+    let (d_in, n, rows) = (
+        size(meta.d_in, "d_in")?,
+        size(meta.examples, "examples")?,
+        size(meta.vertices, "vertices")?,
+    );
+    let nx = n
+        .checked_mul(d_in)
+        .ok_or_else(|| too_big("examples x d_in"))?;
+    let nd = rows
+        .checked_mul(n)
+        .ok_or_else(|| too_big("vertices x examples"))?;
+    let examples = c.f32s(DTLX, nx, &format!("{n} examples x {d_in} inputs"))?;
+    let m = c.f32s(DTLD, nd, &format!("{rows} vertices x {n} examples"))?;
+    let b = c.f32s(DTLB, rows, &format!("{rows} vertices"))?;
+    Ok(DetailLayer {
+        levels: meta.levels,
+        regressor: DetailRegressor {
+            input: meta.input,
+            kernel: meta.kernel,
+            d_in,
+            examples,
+            operator: LinearOperator {
+                rows,
+                cols: n,
+                m,
+                b,
+            },
+        },
+    })
 }

@@ -30,6 +30,8 @@
 //! rayon pool when the pool has more than one thread; otherwise the same kernels run on the
 //! calling thread (as in [`super::skin`]).
 
+use std::sync::Arc;
+
 use glam::{Vec3, Vec3A};
 
 use super::fill_rows;
@@ -337,12 +339,20 @@ pub enum NormalsMethod {
     Gather,
 }
 
-/// The per-frame detail synthesis of HZY11 eq. 4 (module docs): `S`, the subdivided topology,
-/// and reusable buffers for `S · base` and the normals.
-#[derive(Clone, Debug)]
-pub struct DetailSynth {
+/// `S` and the one-ring table: the immutable part of a [`DetailSynth`], shared between its
+/// clones (one per stream of frames) through an `Arc`.
+#[derive(Debug)]
+struct DetailTopology {
     subdivision: LoopSubdivision,
     fans: VertexFans,
+}
+
+/// The per-frame detail synthesis of HZY11 eq. 4 (module docs): `S`, the subdivided topology,
+/// and reusable buffers for `S · base` and the normals. Cloning shares `S` and the topology and
+/// copies only the buffers, so each stream of frames clones its own from one built per model.
+#[derive(Clone, Debug)]
+pub struct DetailSynth {
+    topology: Arc<DetailTopology>,
     method: NormalsMethod,
     /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
     high: Vec<Vec3>,
@@ -356,8 +366,7 @@ impl DetailSynth {
         let n = subdivision.vertex_count();
         let fans = VertexFans::new(n, subdivision.triangles());
         DetailSynth {
-            subdivision,
-            fans,
+            topology: Arc::new(DetailTopology { subdivision, fans }),
             method: NormalsMethod::Auto,
             high: vec![Vec3::ZERO; n],
             normals: vec![Vec3::ZERO; n],
@@ -383,22 +392,22 @@ impl DetailSynth {
 
     /// The subdivision: `S` and the subdivided triangles (the index buffer to render `out`).
     pub fn subdivision(&self) -> &LoopSubdivision {
-        &self.subdivision
+        &self.topology.subdivision
     }
 
     /// The one-ring table of [`NormalsMethod::Gather`].
     pub fn fans(&self) -> &VertexFans {
-        &self.fans
+        &self.topology.fans
     }
 
     /// Number of subdivided vertices: the length of `h` and `out`.
     pub fn vertex_count(&self) -> usize {
-        self.subdivision.vertex_count()
+        self.topology.subdivision.vertex_count()
     }
 
     /// Number of base vertices: the length of `base`.
     pub fn base_vertex_count(&self) -> usize {
-        self.subdivision.base_vertex_count()
+        self.topology.subdivision.base_vertex_count()
     }
 
     /// The unit normals of the undisplaced subdivided mesh `S · base` from the last
@@ -409,7 +418,7 @@ impl DetailSynth {
 
     /// `out = S · base` (rows split over the pool with the `parallel` feature).
     pub fn subdivide(&self, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
-        subdivide_into(self.subdivision.matrix(), base, out)
+        subdivide_into(self.topology.subdivision.matrix(), base, out)
     }
 
     /// HZY11 eq. 4: `out = S · base + h ⊙ n(S · base)`. `base` has
@@ -424,13 +433,18 @@ impl DetailSynth {
     ) -> Result<(), DetailError> {
         check_len("displacements h", self.vertex_count(), h.len())?;
         check_len("output", self.vertex_count(), out.len())?;
-        subdivide_into(self.subdivision.matrix(), base, &mut self.high)?;
+        subdivide_into(self.topology.subdivision.matrix(), base, &mut self.high)?;
         if self.gathers() {
             return self
+                .topology
                 .fans
                 .normals_and_displace(&self.high, h, &mut self.normals, out);
         }
-        accumulate_face_normals(&self.high, self.subdivision.triangles(), &mut self.normals);
+        accumulate_face_normals(
+            &self.high,
+            self.topology.subdivision.triangles(),
+            &mut self.normals,
+        );
         normalize_and_displace(&self.high, h, &mut self.normals, out);
         Ok(())
     }

@@ -11,8 +11,10 @@
 //!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
+//! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
 
 pub mod detail;
+pub mod displacement;
 pub mod edge_skin;
 pub mod kernel;
 pub mod predict;

@@ -3,7 +3,13 @@
 //! ```text
 //! controls (+ validity) -> hold last valid -> rotations (predict) -> translations (eq. 11)
 //!                       -> bone palette -> LBS into the context's vertex buffer
+//! [on request, for models with a detail layer]
+//!   -> h = D xi(c) + b (displacement) -> S · base, normals, + h n (detail) into the context
 //! ```
+//!
+//! The detail layer is a separate call ([`Predictor::predict_detail`]) after the base frame, so
+//! a server synthesises it only while someone asked for it. Its buffers (~5 MB for a 150K-vertex
+//! output) are allocated by the first detail frame of a context, never again.
 //!
 //! A [`Predictor`] is shared, immutable state (an `Arc` of the model plus the translation
 //! system factored for one beta); a [`FrameContext`] holds everything one stream of frames
@@ -18,6 +24,8 @@ use std::sync::Arc;
 
 use glam::{Quat, Vec3};
 
+use super::detail::{DetailError, DetailSynth};
+use super::displacement::{DetailInput, DetailRegressor, rotations_input};
 use super::predict::RotationScratch;
 use super::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
 use super::translations::{TranslationError, TranslationScratch, TranslationSolver};
@@ -51,6 +59,15 @@ pub enum PredictError {
     /// Skinning failed (model inconsistency; validated models cannot).
     #[error(transparent)]
     Skin(#[from] SkinError),
+    /// Detail was asked of a model without a detail layer.
+    #[error("the model has no detail layer (train it on detailed examples)")]
+    NoDetailLayer,
+    /// The detail layer's subdivision could not be built, or a buffer disagrees with it.
+    #[error(transparent)]
+    Detail(#[from] DetailError),
+    /// A detail regressor does not fit this model.
+    #[error("detail regressor: {0}")]
+    DetailRegressor(String),
 }
 
 /// Shared per-model state of the per-frame pipeline.
@@ -61,6 +78,23 @@ pub struct Predictor {
     skin: PackedSkin,
     solver: TranslationSolver,
     beta: f32,
+    /// `S` and its topology for the detail layer (cloned, buffers and all, into a context by
+    /// its first detail frame; the topology is shared).
+    detail: Option<DetailSynth>,
+}
+
+/// The detail layer's per-stream buffers.
+#[derive(Clone, Debug)]
+struct DetailFrame {
+    synth: DetailSynth,
+    /// The regressor's input (controls or rotations).
+    x: Vec<f32>,
+    /// Kernel vector.
+    xi: Vec<f32>,
+    /// Displacements.
+    h: Vec<f32>,
+    /// The detailed vertices.
+    out: Vec<Vec3>,
 }
 
 /// Reusable per-stream buffers; one per room or per synthesis job.
@@ -75,6 +109,7 @@ pub struct FrameContext {
     palette: BonePalette,
     positions: Vec<Vec3>,
     held: usize,
+    detail: Option<Box<DetailFrame>>,
 }
 
 impl FrameContext {
@@ -97,6 +132,16 @@ impl FrameContext {
     pub fn held_controls(&self) -> usize {
         self.held
     }
+
+    /// The displacements `h` of the last detail frame (empty before the first).
+    pub fn displacements(&self) -> &[f32] {
+        self.detail.as_deref().map_or(&[], |d| &d.h)
+    }
+
+    /// The detailed vertices of the last detail frame (empty before the first).
+    pub fn detail_positions(&self) -> &[Vec3] {
+        self.detail.as_deref().map_or(&[], |d| &d.out)
+    }
 }
 
 impl Predictor {
@@ -115,12 +160,28 @@ impl Predictor {
             beta,
         )?;
         let skin = PackedSkin::new(&model.rig.skin)?;
+        let detail = match &model.detail {
+            Some(d) => Some(DetailSynth::from_mesh(&model.rig.rest, d.levels)?),
+            None => None,
+        };
         Ok(Self {
             model,
             skin,
             solver,
             beta,
+            detail,
         })
+    }
+
+    /// The triangles of the detailed output (the subdivided base topology), when the model has
+    /// a detail layer.
+    pub fn detail_triangles(&self) -> Option<&[[u32; 3]]> {
+        self.detail.as_ref().map(|d| d.subdivision().triangles())
+    }
+
+    /// Vertices of the detailed output, when the model has a detail layer.
+    pub fn detail_vertex_count(&self) -> Option<usize> {
+        self.detail.as_ref().map(DetailSynth::vertex_count)
     }
 
     /// The model.
@@ -159,6 +220,7 @@ impl Predictor {
             palette: BonePalette::from_transforms(&vec![RigidTransform::IDENTITY; bones]),
             positions: m.rig.rest.positions.clone(),
             held: 0,
+            detail: None,
         }
     }
 
@@ -277,6 +339,84 @@ impl Predictor {
         self.predict_transforms(ctx, controls, valid)?;
         self.skin(ctx)?;
         Ok(&ctx.positions)
+    }
+
+    /// The detail layer of the context's last frame (after [`Predictor::predict`]): the
+    /// model's displacements `h(c)` on the subdivided base mesh (HZY11 eq. 4). The first call
+    /// on a context allocates its detail buffers; later ones allocate nothing.
+    ///
+    /// # Errors
+    /// [`PredictError::NoDetailLayer`] for a model without one.
+    pub fn predict_detail<'c>(
+        &self,
+        ctx: &'c mut FrameContext,
+    ) -> Result<&'c [Vec3], PredictError> {
+        let regressor = &self
+            .model
+            .detail
+            .as_ref()
+            .ok_or(PredictError::NoDetailLayer)?
+            .regressor;
+        self.predict_detail_with(ctx, regressor)
+    }
+
+    /// [`Predictor::predict_detail`] with another regressor of the same layer (the evaluation's
+    /// static and cascaded baselines).
+    ///
+    /// # Errors
+    /// [`PredictError::NoDetailLayer`] for a model without one;
+    /// [`PredictError::DetailRegressor`] when `regressor` has the wrong vertex count or input.
+    pub fn predict_detail_with<'c>(
+        &self,
+        ctx: &'c mut FrameContext,
+        regressor: &DetailRegressor,
+    ) -> Result<&'c [Vec3], PredictError> {
+        let template = self.detail.as_ref().ok_or(PredictError::NoDetailLayer)?;
+        let nv = template.vertex_count();
+        if regressor.vertex_count() != nv {
+            return Err(PredictError::DetailRegressor(format!(
+                "{} displacement rows, the detailed mesh has {nv} vertices",
+                regressor.vertex_count()
+            )));
+        }
+        let d_in = match regressor.input {
+            DetailInput::Controls => 3 * ctx.controls.len(),
+            DetailInput::Rotations => 4 * ctx.rotations.len(),
+        };
+        if regressor.d_in != d_in {
+            return Err(PredictError::DetailRegressor(format!(
+                "input of dimension {} from {}, this model gives {d_in}",
+                regressor.d_in,
+                regressor.input.name()
+            )));
+        }
+        let frame = ctx.detail.get_or_insert_with(|| {
+            Box::new(DetailFrame {
+                synth: template.clone(),
+                x: Vec::new(),
+                xi: Vec::new(),
+                h: vec![0.0; nv],
+                out: vec![Vec3::ZERO; nv],
+            })
+        });
+        // Resized only when a regressor of another shape comes (evaluation), never per frame.
+        frame.x.resize(d_in, 0.0);
+        frame
+            .xi
+            .resize(regressor.example_count().max(frame.xi.len()), 0.0);
+        match regressor.input {
+            DetailInput::Controls => {
+                for (x, c) in frame.x.chunks_exact_mut(3).zip(&ctx.controls) {
+                    x.copy_from_slice(&c.to_array());
+                }
+            }
+            DetailInput::Rotations => rotations_input(&ctx.rotations, &mut frame.x),
+        }
+        regressor.predict(&frame.x, &mut frame.xi, &mut frame.h);
+        frame
+            .synth
+            .synthesize(&ctx.positions, &frame.h, &mut frame.out)?;
+        Ok(&frame.out)
     }
 }
 

@@ -361,6 +361,8 @@ pub fn write_dataset(
             write_text(&path, &text)?;
         }
     }
+    // Base manifests name their detailed twins (read by `ExampleSet::load_detailed`).
+    let with_detailed = resolutions.contains(&Resolution::Detailed);
     for &resolution in resolutions {
         progress(DatasetProgress::Building(resolution));
         let rig = HandRig::build(resolution)?;
@@ -451,12 +453,18 @@ pub fn write_dataset(
                 let _ = writeln!(text, "control_points = [{}]", ids.join(", "));
                 let names: Vec<String> = lms.iter().map(|l| format!("{:?}", l.name)).collect();
                 let _ = writeln!(text, "control_point_names = [{}]", names.join(", "));
+                if with_detailed {
+                    let _ = writeln!(text, "detailed = \"detailed/train.toml\"");
+                }
                 write_text(&dir.join(format!("train-{}.toml", layout.name())), &text)?;
             }
             if let Some(tr) = &test_rest {
-                let text = format!(
+                let mut text = format!(
                     "{header}# Held-out poses: every mesh of this set is evaluated.\nrest = \"base/{tr}\"\nexamples = [\"base/test/*.ply\"]\n"
                 );
+                if with_detailed {
+                    text.push_str("detailed = \"detailed/test.toml\"\n");
+                }
                 write_text(&dir.join("test.toml"), &text)?;
             }
         } else {
