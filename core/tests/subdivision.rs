@@ -638,17 +638,25 @@ fn synthesize_with_zero_displacement_is_s_times_base() {
         .matrix()
         .apply(&hand.positions, &mut want)
         .unwrap();
-    let reference = reference_normals(&want, synth.subdivision().triangles());
-    let mut scatter = vec![Vec3::ZERO; n];
-    scatter_normals(&want, synth.subdivision().triangles(), &mut scatter).unwrap();
     for method in METHODS {
         let mut synth = synth.clone().with_normals_method(method);
         let mut out = vec![Vec3::NAN; n];
         synth
             .synthesize(&hand.positions, &vec![0.0; n], &mut out)
             .unwrap();
-        assert_eq!(out, want, "{method:?}");
-        // The normals it used (scatter, or gather possibly on the pool) match the reference.
+        // The synthesis applies the one-level matrices in turn, `want` the composed S: equal
+        // up to f32 rounding (the hand is ~0.2 m; one f32 ulp there is ~1.5e-8).
+        for (i, (o, w)) in out.iter().zip(&want).enumerate() {
+            assert!(
+                (*o - *w).length() < 1e-7,
+                "{method:?} vertex {i}: {o} vs {w}"
+            );
+        }
+        // The normals it used (scatter, or gather possibly on the pool) are those of the mesh it
+        // produced (h = 0: `out` is `S · base`), computed independently.
+        let reference = reference_normals(&out, synth.subdivision().triangles());
+        let mut scatter = vec![Vec3::ZERO; n];
+        scatter_normals(&out, synth.subdivision().triangles(), &mut scatter).unwrap();
         for i in 0..n {
             let got = synth.normals()[i];
             assert!((got - scatter[i]).length() < 1e-5, "{method:?} vertex {i}");

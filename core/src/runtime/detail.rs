@@ -4,8 +4,9 @@
 //! subdivision procedure for detail extraction" (§4), each subdivided vertex gets its normal
 //! `n(v)`, and the regressed per-vertex displacement `h(c)` moves it along that normal. Per frame
 //! (DESIGN step 9):
-//! 1. `high = S · base`: one sparse mat-vec with the fixed Loop matrix
-//!    ([`LoopSubdivision`], [`SparseMatrix::apply`]);
+//! 1. `high = S · base` with the fixed Loop matrices ([`LoopSubdivision`]): [`DetailSynth`]
+//!    applies the one-level matrices in turn ([`LoopSubdivision::steps`], fewer entries than
+//!    the composed `S`), [`DetailSynth::subdivide`] the composed `S` in one product;
 //! 2. area-weighted unit vertex normals of `high`, the definition of
 //!    [`crate::mesh::compute_vertex_normals`] (which training uses to measure `h`);
 //! 3. `out = high + h ⊙ n` ([`displace`]).
@@ -356,6 +357,8 @@ pub struct DetailSynth {
     method: NormalsMethod,
     /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
     high: Vec<Vec3>,
+    /// The intermediate levels' vertices (`levels - 1` buffers) of the factored product.
+    stages: Vec<Vec<Vec3>>,
     normals: Vec<Vec3>,
 }
 
@@ -365,7 +368,13 @@ impl DetailSynth {
     pub fn new(subdivision: LoopSubdivision) -> DetailSynth {
         let n = subdivision.vertex_count();
         let fans = VertexFans::new(n, subdivision.triangles());
+        let steps = subdivision.steps();
+        let stages = steps[..steps.len().saturating_sub(1)]
+            .iter()
+            .map(|s| vec![Vec3::ZERO; s.rows()])
+            .collect();
         DetailSynth {
+            stages,
             topology: Arc::new(DetailTopology { subdivision, fans }),
             method: NormalsMethod::Auto,
             high: vec![Vec3::ZERO; n],
@@ -433,7 +442,7 @@ impl DetailSynth {
     ) -> Result<(), DetailError> {
         check_len("displacements h", self.vertex_count(), h.len())?;
         check_len("output", self.vertex_count(), out.len())?;
-        subdivide_into(self.topology.subdivision.matrix(), base, &mut self.high)?;
+        self.subdivide_steps(base)?;
         if self.gathers() {
             return self
                 .topology
@@ -447,6 +456,20 @@ impl DetailSynth {
         );
         normalize_and_displace(&self.high, h, &mut self.normals, out);
         Ok(())
+    }
+
+    /// `self.high = S · base` as the one-level products in turn
+    /// ([`LoopSubdivision::steps`]).
+    fn subdivide_steps(&mut self, base: &[Vec3]) -> Result<(), DetailError> {
+        let steps = self.topology.subdivision.steps();
+        let last = steps.len() - 1;
+        for k in 0..last {
+            let (done, rest) = self.stages.split_at_mut(k);
+            let input = done.last().map_or(base, Vec::as_slice);
+            subdivide_into(&steps[k], input, &mut rest[0])?;
+        }
+        let input = self.stages.last().map_or(base, Vec::as_slice);
+        subdivide_into(&steps[last], input, &mut self.high)
     }
 
     /// Whether this frame's normals are gathered (resolves [`NormalsMethod::Auto`]).
