@@ -78,11 +78,19 @@ fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
     assert_eq!(test.rest.triangles, train.rest.triangles, "shared topology");
     assert!((6_000..=10_000).contains(&train.rest.vertex_count()));
 
-    // Detailed manifests: same poses, >= 150K vertices, shared topology.
-    let detailed = ExampleSet::load(out.join("detailed/train.toml")).expect("detailed");
+    // Detailed manifests, named by the base ones (`detailed = ...`): same poses, >= 150K
+    // vertices, shared topology.
+    let detailed = train
+        .load_detailed()
+        .expect("detailed")
+        .expect("train-back.toml names its detailed set");
     assert_eq!(detailed.examples.len(), 12);
     assert!(detailed.rest.vertex_count() >= 150_000);
-    let dtest = ExampleSet::load(out.join("detailed/test.toml")).expect("detailed test");
+    let dtest = test
+        .load_detailed()
+        .expect("detailed test")
+        .expect("test.toml names its detailed set");
+    assert_eq!(dtest.examples.len(), test.examples.len());
     assert_eq!(dtest.rest.triangles, detailed.rest.triangles);
 
     // glove13 geometry against the recording's layout: hand_left/hand_right ~3 cm apart near

@@ -245,6 +245,74 @@ fn manifest_control_point_names_must_match_the_points() {
 }
 
 #[test]
+fn manifest_detailed_set_is_paired_by_file_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    populate(tmp.path(), &["base/a.obj", "base/b.obj", "base/c.obj"]);
+    populate(
+        tmp.path(),
+        &[
+            "hi/a.obj",
+            "hi/b.obj",
+            "hi/c.obj",
+            "other/a.obj",
+            "other/x.obj",
+            "other/c.obj",
+        ],
+    );
+    let write = |name: &str, body: &str| {
+        let p = tmp.path().join(name);
+        std::fs::write(&p, body).unwrap();
+        p
+    };
+    write(
+        "hi.toml",
+        "rest = \"hi/a.obj\"\nexamples = [\"hi/*.obj\"]\n",
+    );
+    write(
+        "other.toml",
+        "rest = \"other/a.obj\"\nexamples = [\"other/*.obj\"]\n",
+    );
+    write(
+        "two.toml",
+        "rest = \"hi/a.obj\"\nexamples = [\"hi/b.obj\"]\n",
+    );
+    let base = |detailed: &str| {
+        let m = write(
+            "set.toml",
+            &format!(
+                "rest = \"base/a.obj\"\nexamples = [\"base/*.obj\"]\ndetailed = \"{detailed}\"\n"
+            ),
+        );
+        ExampleSet::load(m).unwrap()
+    };
+    let set = base("hi.toml");
+    assert_eq!(set.detailed, Some(tmp.path().join("hi.toml")));
+    let d = set.load_detailed().unwrap().expect("a detailed set");
+    assert_eq!(names(&d), ["hi/a.obj", "hi/b.obj", "hi/c.obj"]);
+    // In natural order pose 1 is c.obj in the detailed set (a, c, x), b.obj in the base set:
+    // refused by name.
+    let e = base("other.toml").load_detailed().unwrap_err().to_string();
+    assert!(
+        e.contains("\"other/c.obj\"") && e.contains("\"base/b.obj\""),
+        "{e}"
+    );
+    let e = base("two.toml").load_detailed().unwrap_err().to_string();
+    assert!(e.contains("2 detailed examples for 3 base examples"), "{e}");
+    // Without the key there is nothing to load.
+    let plain = write(
+        "plain.toml",
+        "rest = \"base/a.obj\"\nexamples = [\"base/*.obj\"]\n",
+    );
+    assert!(
+        ExampleSet::load(plain)
+            .unwrap()
+            .load_detailed()
+            .unwrap()
+            .is_none()
+    );
+}
+
+#[test]
 fn manifest_errors_are_clear() {
     let files = &["reference.obj", "a/1.obj"];
     let (m, e, _t) = manifest_error("examples = [\"a/*.obj\"]\n", files);

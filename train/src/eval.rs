@@ -139,8 +139,8 @@ struct FoldDetail<'a> {
     cascaded: DetailRegressor,
     /// `S B + h n` of each evaluated frame.
     truth: &'a [Truth],
-    /// The crease-region vertices.
-    crease: &'a [u32],
+    /// The crease-region vertices, from this fold's training displacements.
+    crease: Vec<u32>,
     synth: DetailSynth,
 }
 
@@ -225,8 +225,8 @@ struct Truth {
     h: Vec<f32>,
 }
 
-/// The detail data shared by the folds: the synthesis, every training frame's `h`, the crease
-/// regions, and the ground truth of the test frames.
+/// The detail data shared by the folds: the synthesis, every training frame's `h` and ground
+/// truth, and the ground truth of the test frames.
 struct PreparedDetail<'a> {
     options: &'a DetailOptions,
     synth: DetailSynth,
@@ -234,7 +234,6 @@ struct PreparedDetail<'a> {
     /// `S B + h n` of every training frame (leave-one-out's ground truth).
     train_truth: Vec<Truth>,
     test_truth: Vec<Truth>,
-    crease: Vec<u32>,
 }
 
 impl<'a> PreparedDetail<'a> {
@@ -277,18 +276,17 @@ impl<'a> PreparedDetail<'a> {
             }
             None => Vec::new(),
         };
-        let crease = detail_layer::crease_vertices(&train_h, CREASE_FRACTION);
         Ok(Self {
             options,
             synth,
             train_h,
             train_truth,
             test_truth,
-            crease,
         })
     }
 
-    /// The regressors of a fold trained on every training frame but `held`.
+    /// The regressors and crease regions of a fold trained on every training frame but `held`
+    /// (the held-out pose takes no part in either).
     fn fold<'t>(
         &'t self,
         base: &TrainedBase,
@@ -319,7 +317,7 @@ impl<'a> PreparedDetail<'a> {
             pose,
             fixed,
             truth,
-            crease: &self.crease,
+            crease: detail_layer::crease_vertices(&h, CREASE_FRACTION),
             synth: self.synth.clone(),
         })
     }
@@ -453,7 +451,7 @@ fn evaluate_frames(
                     .synthesize(f, &h, &mut out)
                     .map_err(|e| TrainError::Detail(e.into()))?;
                 push(table, row, 0.0, 0.0);
-                push_detail(table, row, 0.0, &out, &h, &d.truth[k], d.crease, scale);
+                push_detail(table, row, 0.0, &out, &h, &d.truth[k], &d.crease, scale);
             }
         }
     }
@@ -514,7 +512,7 @@ fn evaluate_frames(
                     push(table, row, e, 0.0);
                 }
                 let (out, h) = (ctx.detail_positions(), ctx.displacements());
-                push_detail(table, row, e, out, h, &d.truth[k], d.crease, scale);
+                push_detail(table, row, e, out, h, &d.truth[k], &d.crease, scale);
             }
         }
     }

@@ -114,6 +114,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             test: test_detail.as_ref().map(layers::frames),
             options: &detail_options,
         });
+        if let Some(d) = &detail {
+            eprintln!(
+                "detail layer: {} Loop levels; resampling {} training and {} test detailed examples",
+                d.options.levels,
+                frames.len(),
+                tf.len()
+            );
+        }
         let table = eval::evaluate_test_layers(
             input,
             HeldOut {
@@ -133,6 +141,13 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             test: None,
             options: &detail_options,
         });
+        if let Some(d) = &detail {
+            eprintln!(
+                "detail layer: {} Loop levels; resampling {} training detailed examples",
+                d.options.levels,
+                frames.len()
+            );
+        }
         let table = eval::evaluate_loo_layers(input, detail, &options, &mut |i, n| {
             progress.line(
                 "loo",
