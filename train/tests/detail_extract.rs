@@ -5,6 +5,7 @@
 //! triangle; the maximum distance is respected; bad input is refused by index; and the base
 //! sweep hand measured against the detailed one gives sub-millimetre displacements (timed).
 
+mod common;
 use std::time::Instant;
 
 use crease_core::glam::Vec3;
@@ -15,67 +16,10 @@ use crease_train::detail::{
     DetailError, DetailExample, DisplacementSource, DisplacementTarget, ExtractStats, extract_all,
 };
 
-/// A unit icosphere: the icosahedron with every triangle split in four `level` times, the
-/// new vertices pushed onto the sphere. Outward counter-clockwise triangles.
+/// The unit icosphere of `common` as positions and triangles.
 fn icosphere(level: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let g = (1.0 + 5f32.sqrt()) / 2.0;
-    let mut p: Vec<Vec3> = [
-        [-1.0, g, 0.0],
-        [1.0, g, 0.0],
-        [-1.0, -g, 0.0],
-        [1.0, -g, 0.0],
-        [0.0, -1.0, g],
-        [0.0, 1.0, g],
-        [0.0, -1.0, -g],
-        [0.0, 1.0, -g],
-        [g, 0.0, -1.0],
-        [g, 0.0, 1.0],
-        [-g, 0.0, -1.0],
-        [-g, 0.0, 1.0],
-    ]
-    .iter()
-    .map(|&a| Vec3::from_array(a).normalize())
-    .collect();
-    let mut t: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mid = std::collections::HashMap::new();
-        let mut next = Vec::with_capacity(t.len() * 4);
-        let mut midpoint = |a: u32, b: u32, p: &mut Vec<Vec3>| -> u32 {
-            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
-                (p.len() - 1) as u32
-            })
-        };
-        for &[a, b, c] in &t {
-            let ab = midpoint(a, b, &mut p);
-            let bc = midpoint(b, c, &mut p);
-            let ca = midpoint(c, a, &mut p);
-            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        t = next;
-    }
-    (p, t)
+    let m = common::icosphere(level);
+    (m.positions, m.triangles)
 }
 
 /// A UV sphere of `radius`: `slices` around z, `stacks` rows from the north pole down to the
