@@ -20,7 +20,7 @@
 //! rest-pose position). A control coordinate that is NaN or infinite counts as invalid too, so
 //! no frame ever produces a non-finite mesh.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use glam::{Quat, Vec3};
 
@@ -78,9 +78,10 @@ pub struct Predictor {
     skin: PackedSkin,
     solver: TranslationSolver,
     beta: f32,
-    /// `S` and its topology for the detail layer (cloned, buffers and all, into a context by
-    /// its first detail frame; the topology is shared).
-    detail: Option<DetailSynth>,
+    /// `S` and its topology for the detail layer, built by the first call that needs it (a
+    /// predictor nobody asks for detail never builds it), then cloned, buffers and all, into a
+    /// context by its first detail frame; the topology is shared.
+    detail: OnceLock<Result<DetailSynth, DetailError>>,
 }
 
 /// The detail layer's per-stream buffers.
@@ -160,28 +161,46 @@ impl Predictor {
             beta,
         )?;
         let skin = PackedSkin::new(&model.rig.skin)?;
-        let detail = match &model.detail {
-            Some(d) => Some(DetailSynth::from_mesh(&model.rig.rest, d.levels)?),
-            None => None,
-        };
         Ok(Self {
             model,
             skin,
             solver,
             beta,
-            detail,
+            detail: OnceLock::new(),
         })
     }
 
-    /// The triangles of the detailed output (the subdivided base topology), when the model has
-    /// a detail layer.
-    pub fn detail_triangles(&self) -> Option<&[[u32; 3]]> {
-        self.detail.as_ref().map(|d| d.subdivision().triangles())
+    /// The detail layer's synthesis: `Ok(None)` for a model without one; built on first use.
+    fn detail_synth(&self) -> Result<Option<&DetailSynth>, PredictError> {
+        let Some(layer) = &self.model.detail else {
+            return Ok(None);
+        };
+        let built = self
+            .detail
+            .get_or_init(|| DetailSynth::from_mesh(&self.model.rig.rest, layer.levels));
+        match built {
+            Ok(synth) => Ok(Some(synth)),
+            Err(e) => Err(e.clone().into()),
+        }
     }
 
-    /// Vertices of the detailed output, when the model has a detail layer.
+    /// The triangles of the detailed output (the subdivided base topology), when the model has
+    /// a detail layer (`None` too if its subdivision cannot be built, which
+    /// [`Predictor::predict_detail`] reports).
+    pub fn detail_triangles(&self) -> Option<&[[u32; 3]]> {
+        self.detail_synth()
+            .ok()
+            .flatten()
+            .map(|d| d.subdivision().triangles())
+    }
+
+    /// Vertices of the detailed output, when the model has a detail layer (without building
+    /// the subdivision).
     pub fn detail_vertex_count(&self) -> Option<usize> {
-        self.detail.as_ref().map(DetailSynth::vertex_count)
+        self.model
+            .detail
+            .as_ref()
+            .map(|d| d.regressor.vertex_count())
     }
 
     /// The model.
@@ -371,7 +390,7 @@ impl Predictor {
         ctx: &'c mut FrameContext,
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
-        let template = self.detail.as_ref().ok_or(PredictError::NoDetailLayer)?;
+        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
         let nv = template.vertex_count();
         if regressor.vertex_count() != nv {
             return Err(PredictError::DetailRegressor(format!(
