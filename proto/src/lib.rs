@@ -1,3 +1,265 @@
 //! crease-proto: the one wire contract, `proto/crease/v1/crease.proto` (package `crease.v1`),
-//! compiled from `build.rs` with protox + tonic-prost-build, plus every `From`/`TryFrom` between
-//! wire and core types. Built by issue 6; today the crate only holds its place.
+//! compiled from `build.rs` with protox + tonic-prost-build (no system `protoc`), plus every
+//! conversion between wire and core types. Conversions that can fail name the field and say
+//! what was expected and what came ([`WireError`]); they become `InvalidArgument` statuses.
+//!
+//! - [`v1`]: the generated messages, the `Crease` client and server, and the encoded file
+//!   descriptor set for gRPC reflection ([`v1::FILE_DESCRIPTOR_SET`]).
+//! - [`read_control_frame`]: a `ControlFrame` into caller buffers (positions + validity), no
+//!   allocation per frame.
+//! - [`model_info`]: a trained model's public description.
+//! - [`encode_valid_mask`] / [`valid_bit`]: the validity bitmask.
+
+use crease_core::glam::Vec3;
+use crease_core::model::TrainedModel;
+
+/// The generated `crease.v1` package.
+#[allow(missing_docs, clippy::all, missing_debug_implementations)]
+pub mod v1 {
+    tonic::include_proto!("crease.v1");
+
+    /// The encoded `FileDescriptorSet` of `crease.proto`, for server reflection.
+    pub const FILE_DESCRIPTOR_SET: &[u8] = tonic::include_file_descriptor_set!("crease_descriptor");
+}
+
+/// A wire message that does not fit the model: the field and what is wrong with it.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct WireError {
+    /// The offending field, e.g. `positions[7]` or `valid`.
+    pub field: String,
+    /// What was wrong: expected vs got.
+    pub message: String,
+}
+
+impl WireError {
+    fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}
+
+impl From<WireError> for tonic::Status {
+    fn from(e: WireError) -> Self {
+        tonic::Status::invalid_argument(e.to_string())
+    }
+}
+
+/// The wire form of a point.
+impl From<Vec3> for v1::Vec3 {
+    fn from(p: Vec3) -> Self {
+        Self {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        }
+    }
+}
+
+/// A wire point as a core point.
+impl From<v1::Vec3> for Vec3 {
+    fn from(p: v1::Vec3) -> Self {
+        Vec3::new(p.x, p.y, p.z)
+    }
+}
+
+/// A box from its corners.
+pub fn box3(min: Vec3, max: Vec3) -> v1::Box3 {
+    v1::Box3 {
+        min: Some(min.into()),
+        max: Some(max.into()),
+    }
+}
+
+/// Whether bit `i` of a validity mask is set; an empty mask means every point is valid.
+pub fn valid_bit(mask: &[u8], i: usize) -> bool {
+    mask.is_empty() || mask.get(i / 8).is_some_and(|b| b & (1 << (i % 8)) != 0)
+}
+
+/// The validity bitmask of `valid` (bit `i` = `valid[i]`, least significant bit first), into
+/// `out` (cleared first).
+pub fn encode_valid_mask(valid: &[bool], out: &mut Vec<u8>) {
+    out.clear();
+    out.resize(valid.len().div_ceil(8), 0);
+    for (i, _) in valid.iter().enumerate().filter(|(_, v)| **v) {
+        out[i / 8] |= 1 << (i % 8);
+    }
+}
+
+/// Reads a control frame for a model with `positions.len()` control points into `positions`
+/// and `valid`, and returns how many points are invalid. A point marked invalid may carry any
+/// value (it is held at its last valid position by the predictor); a valid one must be finite.
+///
+/// # Errors
+/// A [`WireError`] naming `positions` (count), `positions[i]` (non-finite coordinate of a valid
+/// point) or `valid` (mask length). Nothing is written on error.
+pub fn read_control_frame(
+    frame: &v1::ControlFrame,
+    positions: &mut [Vec3],
+    valid: &mut [bool],
+) -> Result<usize, WireError> {
+    let n = positions.len();
+    assert_eq!(valid.len(), n, "one validity flag per control point");
+    if frame.positions.len() != 3 * n {
+        return Err(WireError::new(
+            "positions",
+            format!(
+                "{} values, expected {} (x, y, z of {n} control points)",
+                frame.positions.len(),
+                3 * n
+            ),
+        ));
+    }
+    let mask = &frame.valid;
+    if !mask.is_empty() && mask.len() != n.div_ceil(8) {
+        return Err(WireError::new(
+            "valid",
+            format!(
+                "{} bytes, expected {} (one bit per control point, {n} points) or none",
+                mask.len(),
+                n.div_ceil(8)
+            ),
+        ));
+    }
+    for (i, c) in frame.positions.chunks_exact(3).enumerate() {
+        if valid_bit(mask, i) && !c.iter().all(|v| v.is_finite()) {
+            return Err(WireError::new(
+                format!("positions[{i}]"),
+                format!(
+                    "({}, {}, {}) is not finite; mark the point invalid in `valid` instead",
+                    c[0], c[1], c[2]
+                ),
+            ));
+        }
+    }
+    let mut invalid = 0;
+    for (i, (c, (p, v))) in frame
+        .positions
+        .chunks_exact(3)
+        .zip(positions.iter_mut().zip(valid.iter_mut()))
+        .enumerate()
+    {
+        *v = valid_bit(mask, i);
+        *p = if *v {
+            Vec3::new(c[0], c[1], c[2])
+        } else {
+            invalid += 1;
+            Vec3::NAN
+        };
+    }
+    Ok(invalid)
+}
+
+/// The public description of a trained model named `name`.
+pub fn model_info(name: &str, model: &TrainedModel) -> v1::ModelInfo {
+    let rest = &model.rig.rest;
+    let (min, max) = rest.bounding_box();
+    let (detail_vertices, detail_triangles) = match &model.detail {
+        Some(d) => (
+            d.regressor.vertex_count() as u32,
+            (rest.triangles.len() << (2 * d.levels)) as u32,
+        ),
+        None => (0, 0),
+    };
+    v1::ModelInfo {
+        name: name.to_owned(),
+        base_vertices: rest.vertex_count() as u32,
+        base_triangles: rest.triangles.len() as u32,
+        detail_vertices,
+        detail_triangles,
+        control_points: model
+            .controls
+            .iter()
+            .enumerate()
+            .map(|(i, c)| v1::ControlPoint {
+                id: i as u32,
+                name: c.name.clone(),
+                vertex: c.vertex,
+                rest: Some(rest.positions[c.vertex as usize].into()),
+            })
+            .collect(),
+        bounds: Some(box3(min, max)),
+        method: model.method.clone(),
+        default_beta: model.beta,
+        bones: model.rig.bone_count as u32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(positions: Vec<f32>, valid: Vec<u8>) -> v1::ControlFrame {
+        v1::ControlFrame {
+            room: "r".into(),
+            seq: 1,
+            capture_time_us: 0,
+            positions,
+            valid,
+        }
+    }
+
+    #[test]
+    fn mask_round_trips_and_empty_means_all_valid() {
+        let valid = [
+            true, false, true, true, false, false, false, false, true, false,
+        ];
+        let mut mask = Vec::new();
+        encode_valid_mask(&valid, &mut mask);
+        assert_eq!(mask, [0b0000_1101, 0b0000_0001]);
+        for (i, &v) in valid.iter().enumerate() {
+            assert_eq!(valid_bit(&mask, i), v, "bit {i}");
+        }
+        assert!((0..20).all(|i| valid_bit(&[], i)));
+    }
+
+    #[test]
+    fn control_frames_are_read_and_errors_name_the_field() {
+        let mut p = [Vec3::ZERO; 2];
+        let mut v = [false; 2];
+        let f = frame(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0], vec![]);
+        assert_eq!(read_control_frame(&f, &mut p, &mut v), Ok(0));
+        assert_eq!(p, [Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)]);
+        assert_eq!(v, [true, true]);
+        // An occluded point may carry NaN.
+        let f = frame(vec![f32::NAN, 0.0, 0.0, 4.0, 5.0, 6.0], vec![0b10]);
+        assert_eq!(read_control_frame(&f, &mut p, &mut v), Ok(1));
+        assert_eq!(v, [false, true]);
+        // Errors name the field, and leave the buffers alone.
+        let f = frame(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0], vec![0b11]);
+        assert_eq!(read_control_frame(&f, &mut p, &mut v), Ok(0));
+        let before = (p, v);
+        let e = read_control_frame(&frame(vec![1.0; 5], vec![]), &mut p, &mut v).unwrap_err();
+        assert_eq!(e.field, "positions");
+        assert!(e.message.contains("5 values, expected 6"), "{e}");
+        let e = read_control_frame(
+            &frame(vec![0.0, 0.0, 0.0, 1.0, f32::INFINITY, 0.0], vec![]),
+            &mut p,
+            &mut v,
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "positions[1]");
+        let e = read_control_frame(&frame(vec![0.0; 6], vec![1, 1]), &mut p, &mut v).unwrap_err();
+        assert_eq!(e.field, "valid");
+        assert_eq!((p, v), before);
+        let status: tonic::Status = e.into();
+        assert_eq!(status.code(), tonic::Code::InvalidArgument);
+        assert!(status.message().starts_with("valid: 2 bytes"));
+    }
+
+    #[test]
+    fn descriptor_set_names_the_service() {
+        use prost::Message;
+        let fds = String::from_utf8_lossy(v1::FILE_DESCRIPTOR_SET);
+        assert!(fds.contains("crease.v1"), "package missing");
+        assert!(fds.contains("Crease"), "service missing");
+        // Decodes as a protobuf message at all.
+        assert!(EmptyMessage::decode(v1::FILE_DESCRIPTOR_SET).is_ok());
+    }
+
+    /// An empty message: decoding any valid protobuf into it skips every field.
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct EmptyMessage {}
+}

@@ -225,7 +225,7 @@ pub fn fit_kcca_per_block_centred(
     let n = example_count(x, d_in);
     assert!(n > 0, "no examples");
     assert!(
-        y.len() % n == 0 && (y.len() / n) % block == 0,
+        y.len().is_multiple_of(n) && (y.len() / n).is_multiple_of(block),
         "y must be {n} rows of a multiple of block = {block} values, got {} values",
         y.len()
     );

@@ -182,7 +182,7 @@ fn mesh_from_document(
             indices
         }
     };
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(fail(format!(
             "{} indices is not a multiple of 3 (Triangles mode)",
             indices.len()

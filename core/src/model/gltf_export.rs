@@ -494,7 +494,7 @@ impl<'a> AnimationGlb<'a> {
         if n == 0 || triangles.is_empty() {
             return export("the rest mesh has no triangles".into());
         }
-        if frames.is_empty() || frames.len() % n != 0 {
+        if frames.is_empty() || !frames.len().is_multiple_of(n) {
             return export(format!(
                 "{} frame positions are not a positive multiple of the {n} rest vertices",
                 frames.len()

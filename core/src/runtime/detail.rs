@@ -462,14 +462,14 @@ impl DetailSynth {
     /// ([`LoopSubdivision::steps`]).
     fn subdivide_steps(&mut self, base: &[Vec3]) -> Result<(), DetailError> {
         let steps = self.topology.subdivision.steps();
-        let last = steps.len() - 1;
-        for k in 0..last {
+        let (last, inner) = steps.split_last().expect("at least one level");
+        for (k, step) in inner.iter().enumerate() {
             let (done, rest) = self.stages.split_at_mut(k);
             let input = done.last().map_or(base, Vec::as_slice);
-            subdivide_into(&steps[k], input, &mut rest[0])?;
+            subdivide_into(step, input, &mut rest[0])?;
         }
         let input = self.stages.last().map_or(base, Vec::as_slice);
-        subdivide_into(&steps[last], input, &mut self.high)
+        subdivide_into(last, input, &mut self.high)
     }
 
     /// Whether this frame's normals are gathered (resolves [`NormalsMethod::Auto`]).

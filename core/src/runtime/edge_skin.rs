@@ -105,7 +105,7 @@ impl EdgeSkin {
         if !(1..=MAX_INFLUENCES).contains(&k) {
             return Err(EdgeSkinError::BadK { k });
         }
-        if indices.len() != vectors.len() || indices.len() % k != 0 {
+        if indices.len() != vectors.len() || !indices.len().is_multiple_of(k) {
             return Err(EdgeSkinError::BadLength {
                 k,
                 indices: indices.len(),

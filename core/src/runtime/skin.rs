@@ -264,7 +264,7 @@ impl SkinWeights {
         if !(1..=MAX_INFLUENCES).contains(&k) {
             return Err(SkinError::BadK { k });
         }
-        if indices.len() != weights.len() || indices.len() % k != 0 {
+        if indices.len() != weights.len() || !indices.len().is_multiple_of(k) {
             return Err(SkinError::BadLength {
                 k,
                 indices: indices.len(),
@@ -514,7 +514,7 @@ pub const PACKED_MAX_BONES: usize = u16::MAX as usize;
 const U8_MAX_BONES: usize = u8::MAX as usize;
 
 // Parallel chunks must start on a block boundary.
-const _: () = assert!(PARALLEL_CHUNK % LANES == 0);
+const _: () = assert!(PARALLEL_CHUNK.is_multiple_of(LANES));
 
 /// One influence slot of a block of [`LANES`] consecutive vertices: the weight and the bone-row
 /// index (`bone + 1`; 0 names the zero row) of each vertex. 20 bytes with `u8` indices.

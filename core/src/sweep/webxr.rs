@@ -668,7 +668,7 @@ fn read_glb(bytes: &[u8], file: &str) -> Result<Glb, WebXrError> {
         Some(ix) => ix.into_u32().collect(),
         None => (0..n as u32).collect(),
     };
-    if indices.len() % 3 != 0 {
+    if !indices.len().is_multiple_of(3) {
         return Err(fail(format!(
             "{} indices, expected a multiple of 3",
             indices.len()

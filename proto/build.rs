@@ -1,0 +1,18 @@
+//! Compiles `crease/v1/crease.proto` without a system `protoc`: protox parses it into a
+//! descriptor set, tonic-prost-build generates the messages and the service from that, and the
+//! encoded set is kept in `OUT_DIR` for gRPC server reflection.
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    println!("cargo:rerun-if-changed=crease");
+    let fds = protox::compile(["crease/v1/crease.proto"], ["."])?;
+    let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
+    std::fs::write(
+        out.join("crease_descriptor.bin"),
+        prost::Message::encode_to_vec(&fds),
+    )?;
+    tonic_prost_build::configure()
+        .build_client(true)
+        .build_server(true)
+        .compile_fds(fds)?;
+    Ok(())
+}
