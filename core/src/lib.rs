@@ -9,8 +9,11 @@
 //! - [`model`]: the on-disk container (versioned header, checksummed sections, atomic writes),
 //!   the [`model::Rig`] it stores, and the skinned-glTF export of a rig.
 //! - [`sweep`]: the LYK06 sweep hand; today its skeleton, poses and forward kinematics.
+//! - [`codec`]: compact per-frame vertex buffers for streaming (16-bit quantisation, octahedral
+//!   normals, keyframes and deltas, meshopt's vertex and index codecs, a self-describing header).
 
 mod atomic;
+pub mod codec;
 pub mod mesh;
 pub mod model;
 pub mod render;

@@ -1,3 +1,141 @@
-//! crease-server: hosts live rooms on loaded models and streams encoded frames (gRPC via tonic,
-//! HTTP + WebSocket via axum) — built by issue 6. Today this crate only fixes its place in the
-//! workspace and its dependency rule: `crease-core` + `crease-proto`, nothing else of ours.
+//! crease-server: hosts live rooms on loaded models and streams predicted meshes (issue 6).
+//!
+//! - [`registry`]: the models of a model directory, loaded once.
+//! - [`room`]: a live session on one model: control frames in, meshes out to every subscriber
+//!   (latest-wins), detail only while asked for.
+//! - [`grpc`]: the `crease.v1.Crease` service (tonic), with gRPC health and reflection.
+//! - [`serve`]: binds the listeners and runs until shut down.
+//!
+//! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md).
+
+pub mod grpc;
+pub mod registry;
+pub mod room;
+pub mod stream;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::{Arc, RwLock};
+
+use registry::ModelRegistry;
+use room::Room;
+
+/// Limits that protect the server from its clients.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Most rooms open at once.
+    pub rooms: usize,
+    /// Largest gRPC message accepted, bytes.
+    pub message_bytes: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            rooms: 64,
+            message_bytes: 4 << 20,
+        }
+    }
+}
+
+/// Server configuration.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// gRPC listen address (port 0: any free port).
+    pub grpc: SocketAddr,
+    /// Token required to open and close rooms (`None`: nobody can).
+    pub admin_token: Option<String>,
+    /// Limits.
+    pub limits: Limits,
+}
+
+/// What the services share: the models and the open rooms.
+#[derive(Debug)]
+pub struct AppState {
+    /// The hosted models.
+    pub models: ModelRegistry,
+    /// Open rooms by id.
+    pub rooms: RwLock<HashMap<String, Arc<Room>>>,
+    /// The configuration.
+    pub config: Config,
+    /// Set to `true` when the server shuts down: streams end.
+    closing: tokio::sync::watch::Sender<bool>,
+}
+
+impl AppState {
+    /// State with `models` and no rooms.
+    pub fn new(models: ModelRegistry, config: Config) -> Arc<Self> {
+        Arc::new(Self {
+            models,
+            rooms: RwLock::new(HashMap::new()),
+            config,
+            closing: tokio::sync::watch::channel(false).0,
+        })
+    }
+
+    /// Resolves when the server starts shutting down (long-lived streams select on it).
+    pub fn closing(&self) -> impl std::future::Future<Output = ()> + Send + 'static {
+        let mut rx = self.closing.subscribe();
+        async move {
+            let _ = rx.wait_for(|closing| *closing).await;
+        }
+    }
+
+    /// The room `id`.
+    pub fn room(&self, id: &str) -> Option<Arc<Room>> {
+        self.rooms
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(id)
+            .cloned()
+    }
+}
+
+/// A running server: its bound address and a handle to stop it.
+#[derive(Debug)]
+pub struct Running {
+    /// The gRPC address actually bound.
+    pub grpc: SocketAddr,
+    shutdown: Option<tokio::sync::oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<Result<(), tonic::transport::Error>>,
+}
+
+impl Running {
+    /// Stops accepting, ends the mesh streams, lets in-flight calls finish for up to `drain`,
+    /// then drops what is left (a client that stopped reading cannot hold the server up).
+    pub async fn shutdown(
+        mut self,
+        drain: std::time::Duration,
+    ) -> Result<(), tonic::transport::Error> {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        match tokio::time::timeout(drain, &mut self.task).await {
+            Ok(done) => done.unwrap_or(Ok(())),
+            Err(_) => {
+                tracing::warn!(?drain, "calls still open after the drain period: dropped");
+                self.task.abort();
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Binds the gRPC listener and serves `state` until [`Running::shutdown`].
+pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
+    let listener = tokio::net::TcpListener::bind(state.config.grpc).await?;
+    let grpc = listener.local_addr()?;
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let router = grpc::router(Arc::clone(&state))?;
+    let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
+    let task = tokio::spawn(router.serve_with_incoming_shutdown(incoming, async move {
+        let _ = rx.await;
+        state.closing.send_replace(true);
+    }));
+    tracing::info!(%grpc, "gRPC listening");
+    Ok(Running {
+        grpc,
+        shutdown: Some(tx),
+        task,
+    })
+}

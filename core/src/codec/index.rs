@@ -1,0 +1,92 @@
+//! Topology: triangle lists through meshopt's index codec (version 1), sent once at the start
+//! of a subscription. The counts travel beside the bytes (in the subscription's first message).
+//!
+//! The round trip keeps the triangle order and each triangle's winding, but meshopt's encoder may
+//! start a triangle at another corner (`[a, b, c]` can come back as `[b, c, a]`): it rotates
+//! triangles to match edges it has seen, which is where its compression comes from. Renderers do
+//! not care; code that compares triangle lists should compare rotations.
+
+use super::{CodecError, meshopt_code};
+
+/// The first byte of a meshopt index buffer of codec version 1 (`0xE0 | version`).
+const MESHOPT_INDEX_V1: u8 = 0xE1;
+
+/// The smallest encoded size meshopt accepts for `triangles` triangles: a header byte, one code
+/// byte per triangle, and a 16-byte table.
+fn min_encoded_len(triangles: usize) -> usize {
+    triangles.saturating_add(17)
+}
+
+/// Encodes `triangles` (indices into `vertex_count` vertices) with meshopt's index codec into
+/// `out` (cleared first). Compresses best after vertex-cache optimisation.
+///
+/// # Errors
+/// [`CodecError::IndexOutOfRange`] for an index `>= vertex_count` (checked first: meshopt sizes
+/// its output by the vertex count).
+pub fn encode_indices(
+    triangles: &[[u32; 3]],
+    vertex_count: usize,
+    out: &mut Vec<u8>,
+) -> Result<(), CodecError> {
+    for (t, tri) in triangles.iter().enumerate() {
+        if let Some(&index) = tri.iter().find(|&&i| i as usize >= vertex_count) {
+            return Err(CodecError::IndexOutOfRange {
+                triangle: t,
+                index,
+                vertex_count,
+            });
+        }
+    }
+    let bytes = meshopt::encode_index_buffer(bytemuck::cast_slice(triangles), vertex_count)
+        .map_err(|_| CodecError::EncoderFailed("index buffer"))?;
+    // meshopt 1.3 writes index codec version 1 by default; its setter is `unsafe`, so check.
+    if bytes.first() != Some(&MESHOPT_INDEX_V1) {
+        return Err(CodecError::EncoderFailed("index buffer"));
+    }
+    out.clear();
+    out.extend_from_slice(&bytes);
+    Ok(())
+}
+
+/// Decodes `triangle_count` triangles from meshopt's index codec into `out` (cleared first; left
+/// empty on error) and checks every index is below `vertex_count`. Triangles may come back
+/// rotated (see the module docs). Never panics; memory is bounded by the input's
+/// length (meshopt needs at least one byte per triangle).
+///
+/// # Errors
+/// [`CodecError::IndexTruncated`], [`CodecError::IndexVersion`], [`CodecError::IndexCorrupt`],
+/// [`CodecError::IndexOutOfRange`].
+pub fn decode_indices(
+    bytes: &[u8],
+    triangle_count: usize,
+    vertex_count: usize,
+    out: &mut Vec<[u32; 3]>,
+) -> Result<(), CodecError> {
+    let needed = min_encoded_len(triangle_count);
+    if bytes.len() < needed {
+        return Err(CodecError::IndexTruncated {
+            len: bytes.len(),
+            triangles: triangle_count,
+            needed,
+        });
+    }
+    if bytes[0] != MESHOPT_INDEX_V1 {
+        return Err(CodecError::IndexVersion(bytes[0]));
+    }
+    // triangle_count < bytes.len(), so the product cannot overflow.
+    let flat = meshopt::decode_index_buffer::<u32>(bytes, triangle_count * 3)
+        .map_err(|e| CodecError::IndexCorrupt(meshopt_code(e)))?;
+    out.clear();
+    out.extend(flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+    for (t, tri) in out.iter().enumerate() {
+        if let Some(&index) = tri.iter().find(|&&i| i as usize >= vertex_count) {
+            out.clear();
+            return Err(CodecError::IndexOutOfRange {
+                triangle: t,
+                index,
+                vertex_count,
+            });
+        }
+    }
+    Ok(())
+}

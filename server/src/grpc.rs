@@ -1,0 +1,273 @@
+//! The `crease.v1.Crease` gRPC service (tonic), plus grpc.health.v1 and server reflection so
+//! generic gRPC tools work.
+
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Instant;
+
+use crease_proto::v1::crease_server::{Crease, CreaseServer};
+use crease_proto::v1::{self, FrameError};
+use tokio::sync::mpsc;
+use tokio_stream::Stream;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::AppState;
+use crate::room::{Level, Room, RoomError};
+
+/// Frames buffered per response stream before the sender waits (acks, batch frames).
+const STREAM_BUFFER: usize = 4;
+
+/// The service over shared state.
+#[derive(Clone, Debug)]
+pub struct CreaseService {
+    state: Arc<AppState>,
+}
+
+/// The tonic router: the Crease service, health (SERVING for `crease.v1.Crease`) and reflection.
+pub fn router(state: Arc<AppState>) -> std::io::Result<tonic::transport::server::Router> {
+    let max = state.config.limits.message_bytes;
+    let (reporter, health) = tonic_health::server::health_reporter();
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(v1::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(std::io::Error::other)?;
+    let service = CreaseServer::new(CreaseService { state })
+        .max_decoding_message_size(max)
+        .max_encoding_message_size(max);
+    tokio::spawn(async move {
+        reporter.set_serving::<CreaseServer<CreaseService>>().await;
+    });
+    Ok(tonic::transport::Server::builder()
+        .add_service(health)
+        .add_service(reflection)
+        .add_service(service))
+}
+
+/// The bearer token of a request's `authorization` metadata.
+fn bearer<T>(req: &Request<T>) -> Option<String> {
+    let v = req.metadata().get("authorization")?.to_str().ok()?;
+    v.strip_prefix("Bearer ").map(|t| t.trim().to_owned())
+}
+
+fn level(l: i32) -> Result<Level, Status> {
+    match v1::Level::try_from(l) {
+        Ok(v1::Level::Unspecified | v1::Level::Base) => Ok(Level::Base),
+        Ok(v1::Level::Detail) => Ok(Level::Detail),
+        Err(_) => Err(Status::invalid_argument(format!(
+            "level: {l} is not a Level (0 unspecified, 1 base, 2 detail)"
+        ))),
+    }
+}
+
+impl CreaseService {
+    fn require_admin<T>(&self, req: &Request<T>) -> Result<(), Status> {
+        let Some(admin) = &self.state.config.admin_token else {
+            return Err(Status::permission_denied(
+                "this server has no admin token: rooms are opened at start only",
+            ));
+        };
+        match bearer(req) {
+            Some(t) if t == *admin => Ok(()),
+            Some(_) => Err(Status::permission_denied("wrong admin token")),
+            None => Err(Status::unauthenticated(
+                "missing `authorization: Bearer <admin token>`",
+            )),
+        }
+    }
+
+    fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
+        self.state
+            .room(id)
+            .ok_or_else(|| Status::not_found(format!("room: no room {id:?}")))
+    }
+}
+
+type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send + 'static>>;
+
+#[tonic::async_trait]
+impl Crease for CreaseService {
+    async fn list_models(
+        &self,
+        _req: Request<v1::ListModelsRequest>,
+    ) -> Result<Response<v1::ListModelsResponse>, Status> {
+        Ok(Response::new(v1::ListModelsResponse {
+            models: self.state.models.iter().map(|m| m.info.clone()).collect(),
+        }))
+    }
+
+    async fn get_model(
+        &self,
+        req: Request<v1::GetModelRequest>,
+    ) -> Result<Response<v1::ModelInfo>, Status> {
+        let name = &req.get_ref().model;
+        self.state
+            .models
+            .get(name)
+            .map(|m| Response::new(m.info.clone()))
+            .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
+    }
+
+    async fn open_room(
+        &self,
+        req: Request<v1::OpenRoomRequest>,
+    ) -> Result<Response<v1::OpenRoomResponse>, Status> {
+        self.require_admin(&req)?;
+        let r = req.into_inner();
+        let model = self
+            .state
+            .models
+            .get(&r.model)
+            .cloned()
+            .ok_or_else(|| Status::not_found(format!("model: no model {:?}", r.model)))?;
+        let beta = (r.beta != 0.0).then_some(r.beta);
+        let room = Room::open(&r.room, model, beta).map_err(|e| match e {
+            RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
+            RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
+        })?;
+        let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
+        if rooms.contains_key(&r.room) {
+            return Err(Status::already_exists(format!(
+                "room: {:?} is open",
+                r.room
+            )));
+        }
+        if rooms.len() >= self.state.config.limits.rooms {
+            return Err(Status::resource_exhausted(format!(
+                "rooms: {} open, the limit",
+                rooms.len()
+            )));
+        }
+        let response = v1::OpenRoomResponse {
+            room: room.id.clone(),
+            publish_token: room.token().to_owned(),
+            model: Some(room.model.info.clone()),
+        };
+        tracing::info!(room = %room.id, model = %room.model.name, beta = room.beta(), "room opened");
+        rooms.insert(r.room, Arc::new(room));
+        Ok(Response::new(response))
+    }
+
+    async fn close_room(
+        &self,
+        req: Request<v1::CloseRoomRequest>,
+    ) -> Result<Response<v1::CloseRoomResponse>, Status> {
+        self.require_admin(&req)?;
+        let id = &req.get_ref().room;
+        let removed = self
+            .state
+            .rooms
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(id);
+        match removed {
+            Some(_) => Ok(Response::new(v1::CloseRoomResponse {})),
+            None => Err(Status::not_found(format!("room: no room {id:?}"))),
+        }
+    }
+
+    type PublishStream = BoxStream<v1::PublishAck>;
+
+    async fn publish(
+        &self,
+        req: Request<Streaming<v1::ControlFrame>>,
+    ) -> Result<Response<Self::PublishStream>, Status> {
+        let token = bearer(&req);
+        let mut frames = req.into_inner();
+        let state = Arc::clone(&self.state);
+        let (tx, rx) = mpsc::channel(STREAM_BUFFER);
+        tokio::spawn(async move {
+            while let Ok(Some(frame)) = frames.message().await {
+                let received = Instant::now();
+                let ack = match state.room(&frame.room) {
+                    None => error_ack(frame.seq, 5, format!("room: no room {:?}", frame.room)),
+                    Some(room) if !room.accepts(token.as_deref()) => error_ack(
+                        frame.seq,
+                        7,
+                        format!("authorization: not the publish token of room {:?}", room.id),
+                    ),
+                    Some(room) => {
+                        let seq = frame.seq;
+                        let done =
+                            tokio::task::spawn_blocking(move || room.publish(&frame, received))
+                                .await;
+                        match done {
+                            Ok(Ok(p)) => v1::PublishAck {
+                                seq,
+                                server_latency_us: p.latency_us,
+                                held_controls: p.held,
+                                error: None,
+                            },
+                            Ok(Err(e)) => error_ack(seq, 3, e.to_string()),
+                            Err(e) => error_ack(seq, 13, format!("internal: {e}")),
+                        }
+                    }
+                };
+                if tx.send(Ok(ack)).await.is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    type SubscribeStream = BoxStream<v1::MeshFrame>;
+
+    async fn subscribe(
+        &self,
+        req: Request<v1::SubscribeRequest>,
+    ) -> Result<Response<Self::SubscribeStream>, Status> {
+        let r = req.into_inner();
+        let level = level(r.level)?;
+        let room = self.room(&r.room)?;
+        if level == Level::Detail && !room.has_detail() {
+            return Err(Status::failed_precondition(format!(
+                "level: model {:?} has no detail layer",
+                room.model.name
+            )));
+        }
+        Ok(Response::new(Box::pin(crate::stream::subscribe(
+            room,
+            level,
+            self.state.closing(),
+        ))))
+    }
+
+    type SynthesizeStream = BoxStream<v1::MeshFrame>;
+
+    async fn synthesize(
+        &self,
+        req: Request<v1::SynthesizeRequest>,
+    ) -> Result<Response<Self::SynthesizeStream>, Status> {
+        let r = req.into_inner();
+        let level = level(r.level)?;
+        let model = self
+            .state
+            .models
+            .get(&r.model)
+            .cloned()
+            .ok_or_else(|| Status::not_found(format!("model: no model {:?}", r.model)))?;
+        let beta = (r.beta != 0.0).then_some(r.beta);
+        let room = Room::open("batch", model, beta)
+            .map_err(|e| Status::invalid_argument(format!("beta: {e}")))?;
+        if level == Level::Detail && !room.has_detail() {
+            return Err(Status::failed_precondition(format!(
+                "level: model {:?} has no detail layer",
+                room.model.name
+            )));
+        }
+        Ok(Response::new(Box::pin(crate::stream::batch(
+            room, level, r.frames,
+        ))))
+    }
+}
+
+fn error_ack(seq: u64, code: i32, message: String) -> v1::PublishAck {
+    v1::PublishAck {
+        seq,
+        server_latency_us: 0,
+        held_controls: 0,
+        error: Some(FrameError { code, message }),
+    }
+}

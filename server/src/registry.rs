@@ -1,0 +1,130 @@
+//! The models a server hosts: every `*.crease` file of a model directory, loaded and validated
+//! once at start; rooms hold an `Arc` of theirs.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crease_core::glam::Vec3;
+use crease_core::model::TrainedModel;
+use crease_core::runtime::skin::{BonePalette, skin_lbs};
+use crease_proto::{model_info, v1};
+
+/// One loaded model.
+#[derive(Debug)]
+pub struct LoadedModel {
+    /// Its name: the file stem.
+    pub name: String,
+    /// The model.
+    pub model: Arc<TrainedModel>,
+    /// Its public description (`GetModel`).
+    pub info: v1::ModelInfo,
+    /// The box around the rest pose and every training pose (skinned by the rig): where the
+    /// model's meshes live, the basis of the streams' quantisation box.
+    pub pose_bounds: (Vec3, Vec3),
+}
+
+/// The box around the rest mesh and the rig's training poses.
+fn pose_bounds(model: &TrainedModel) -> (Vec3, Vec3) {
+    let rest = &model.rig.rest;
+    let (mut lo, mut hi) = rest.bounding_box();
+    let mut posed = vec![Vec3::ZERO; rest.vertex_count()];
+    for example in &model.rig.examples {
+        let palette = BonePalette::from_transforms(&example.transforms);
+        if skin_lbs(&rest.positions, &model.rig.skin, &palette, &mut posed).is_ok() {
+            for p in posed.iter().filter(|p| p.is_finite()) {
+                lo = lo.min(*p);
+                hi = hi.max(*p);
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// Errors loading the model directory.
+#[derive(Debug, thiserror::Error)]
+pub enum RegistryError {
+    /// The directory could not be read.
+    #[error("model directory {path}: {source}")]
+    Io {
+        /// The directory.
+        path: PathBuf,
+        /// What failed.
+        source: std::io::Error,
+    },
+    /// A model file is invalid.
+    #[error("model {path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: crease_core::model::ModelError,
+    },
+}
+
+/// The hosted models, by name.
+#[derive(Debug, Default)]
+pub struct ModelRegistry {
+    models: BTreeMap<String, Arc<LoadedModel>>,
+}
+
+impl ModelRegistry {
+    /// Loads every `*.crease` file of `dir` (not recursive), in name order.
+    pub fn load_dir(dir: &Path) -> Result<Self, RegistryError> {
+        let io = |source| RegistryError::Io {
+            path: dir.to_path_buf(),
+            source,
+        };
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(io)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "crease") && p.is_file())
+            .collect();
+        paths.sort();
+        let mut registry = Self::default();
+        for path in paths {
+            let model = TrainedModel::load(&path).map_err(|source| RegistryError::Model {
+                path: path.clone(),
+                source,
+            })?;
+            let name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            registry.insert(&name, model);
+        }
+        Ok(registry)
+    }
+
+    /// Adds (or replaces) a model under `name`.
+    pub fn insert(&mut self, name: &str, model: TrainedModel) -> Arc<LoadedModel> {
+        let loaded = Arc::new(LoadedModel {
+            name: name.to_owned(),
+            info: model_info(name, &model),
+            pose_bounds: pose_bounds(&model),
+            model: Arc::new(model),
+        });
+        self.models.insert(name.to_owned(), Arc::clone(&loaded));
+        loaded
+    }
+
+    /// The model named `name`.
+    pub fn get(&self, name: &str) -> Option<&Arc<LoadedModel>> {
+        self.models.get(name)
+    }
+
+    /// Every model, in name order.
+    pub fn iter(&self) -> impl Iterator<Item = &Arc<LoadedModel>> {
+        self.models.values()
+    }
+
+    /// Number of models.
+    pub fn len(&self) -> usize {
+        self.models.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.models.is_empty()
+    }
+}

@@ -1,0 +1,196 @@
+//! Mesh streams: the topology message, then encoded frames (`core::codec`).
+//!
+//! A subscription's task waits on its room's `watch` channel, so it always encodes the newest
+//! frame and skips what it was too slow for (`Frame.skipped` counts them); each task encodes with
+//! its own [`FrameEncoder`], so its deltas are always against the frame that subscriber received.
+//! A batch runs its frames through a private room, in order, with a bounded response buffer.
+
+use std::sync::Arc;
+
+use crease_core::codec::{DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, QuantBox, encode_indices};
+use crease_core::glam::Vec3;
+use crease_proto::{box3, v1};
+use tokio::sync::mpsc;
+use tokio_stream::Stream;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::Status;
+
+use crate::room::{Level, Room};
+
+/// Frames buffered per mesh stream: one in flight, one ready.
+const BUFFER: usize = 2;
+/// Quantisation box margin around the box of the model's training poses, as a fraction of its
+/// largest side: new poses leave it a little (a position outside the box is clamped to it).
+const BOX_MARGIN: f32 = 0.25;
+/// Quantisation bits per coordinate.
+const BITS: u8 = 16;
+
+fn level_wire(level: Level) -> v1::Level {
+    match level {
+        Level::Base => v1::Level::Base,
+        Level::Detail => v1::Level::Detail,
+    }
+}
+
+/// Vertices of `level`'s mesh.
+fn vertex_count(room: &Room, level: Level) -> usize {
+    match level {
+        Level::Base => room.model.model.rig.rest.vertex_count(),
+        Level::Detail => room.model.model.detail_vertex_count().unwrap_or(0),
+    }
+}
+
+/// The first message of a mesh stream and the encoder of its frames.
+fn start(room: &Room, level: Level) -> Result<(v1::MeshFrame, FrameEncoder), Status> {
+    let (lo, hi) = room.model.pose_bounds;
+    let qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, BITS)
+        .map_err(|e| Status::internal(format!("quantisation box: {e}")))?;
+    let triangles = room.triangles(level);
+    let n = vertex_count(room, level);
+    let mut indices = Vec::new();
+    encode_indices(triangles, n, &mut indices)
+        .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
+    let topology = v1::MeshFrame {
+        body: Some(v1::mesh_frame::Body::Topology(v1::Topology {
+            model: room.model.name.clone(),
+            level: level_wire(level) as i32,
+            vertex_count: n as u32,
+            triangle_count: triangles.len() as u32,
+            indices,
+            quantization: Some(box3(qbox.min(), qbox.max())),
+        })),
+    };
+    let encoder = FrameEncoder::new(n, qbox, DEFAULT_KEYFRAME_INTERVAL)
+        .map_err(|e| Status::internal(format!("encoder: {e}")))?;
+    Ok((topology, encoder))
+}
+
+fn frame_message(
+    seq: u64,
+    capture_time_us: i64,
+    latency_us: u32,
+    skipped: u32,
+    data: Vec<u8>,
+) -> v1::MeshFrame {
+    v1::MeshFrame {
+        body: Some(v1::mesh_frame::Body::Frame(v1::Frame {
+            seq,
+            capture_time_us,
+            server_latency_us: latency_us,
+            data,
+            skipped,
+        })),
+    }
+}
+
+/// The live stream of a room at `level` (module docs).
+pub fn subscribe(
+    room: Arc<Room>,
+    level: Level,
+    closing: impl std::future::Future<Output = ()> + Send + 'static,
+) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
+    let (tx, rx) = mpsc::channel(BUFFER);
+    let stream = async move {
+        let (topology, mut encoder) = match start(&room, level) {
+            Ok(s) => s,
+            Err(e) => {
+                let _ = tx.send(Err(e)).await;
+                return;
+            }
+        };
+        if tx.send(Ok(topology)).await.is_err() {
+            return;
+        }
+        let mut sub = room.subscribe(level);
+        let mut last_seq: Option<u64> = None;
+        // The current frame first (if any), then every change.
+        sub.rx.mark_changed();
+        while sub.rx.changed().await.is_ok() {
+            let Some(update) = sub.rx.borrow_and_update().clone() else {
+                continue;
+            };
+            let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
+            last_seq = Some(update.seq);
+            let mut data = Vec::new();
+            if let Err(e) = encoder.encode(&update.positions, None, &mut data) {
+                let _ = tx
+                    .send(Err(Status::internal(format!("encoding: {e}"))))
+                    .await;
+                return;
+            }
+            let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
+            let msg = frame_message(update.seq, update.capture_time_us, latency, skipped, data);
+            if tx.send(Ok(msg)).await.is_err() {
+                return;
+            }
+        }
+    };
+    // The stream ends (and its sender drops) when the server shuts down, even while it waits
+    // for a frame or for a subscriber who stopped reading.
+    tokio::spawn(async move {
+        tokio::select! {
+            () = stream => {}
+            () = closing => {}
+        }
+    });
+    ReceiverStream::new(rx)
+}
+
+/// A batch: every control frame in order through `room` (module docs). A bad frame ends the
+/// stream with `InvalidArgument` naming the frame and field.
+pub fn batch(
+    room: Room,
+    level: Level,
+    frames: Vec<v1::ControlFrame>,
+) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
+    let (tx, rx) = mpsc::channel(BUFFER);
+    let room = Arc::new(room);
+    tokio::spawn(async move {
+        let (topology, mut encoder) = match start(&room, level) {
+            Ok(s) => s,
+            Err(e) => {
+                let _ = tx.send(Err(e)).await;
+                return;
+            }
+        };
+        if tx.send(Ok(topology)).await.is_err() {
+            return;
+        }
+        let mut sub = room.subscribe(level);
+        for (k, frame) in frames.into_iter().enumerate() {
+            let r = Arc::clone(&room);
+            let received = std::time::Instant::now();
+            let seq = frame.seq;
+            let done = tokio::task::spawn_blocking(move || r.publish(&frame, received)).await;
+            let latency = match done {
+                Ok(Ok(p)) => p.latency_us,
+                Ok(Err(e)) => {
+                    let _ = tx
+                        .send(Err(Status::invalid_argument(format!("frames[{k}].{e}"))))
+                        .await;
+                    return;
+                }
+                Err(e) => {
+                    let _ = tx.send(Err(Status::internal(e.to_string()))).await;
+                    return;
+                }
+            };
+            let positions: Vec<Vec3> = match sub.rx.borrow_and_update().as_ref() {
+                Some(u) => u.positions.clone(),
+                None => continue,
+            };
+            let mut data = Vec::new();
+            if let Err(e) = encoder.encode(&positions, None, &mut data) {
+                let _ = tx
+                    .send(Err(Status::internal(format!("encoding: {e}"))))
+                    .await;
+                return;
+            }
+            let msg = frame_message(seq, 0, latency, 0, data);
+            if tx.send(Ok(msg)).await.is_err() {
+                return;
+            }
+        }
+    });
+    ReceiverStream::new(rx)
+}

@@ -1,0 +1,374 @@
+//! The gRPC service end to end over a real socket (port 0): a model trained in-process on a
+//! bending tube; rooms are opened with the admin token; frames published over a client stream
+//! come back to a subscriber as encoded frames that decode to the in-process prediction within
+//! the quantisation bound; bad frames are answered with the field named and the room goes on;
+//! publishing without the token is refused; a batch returns every frame in order; shutdown
+//! drains.
+
+use std::sync::Arc;
+
+use crease_core::codec::{FrameDecoder, decode_indices};
+use crease_core::glam::{Quat, Vec3};
+use crease_core::mesh::Mesh;
+use crease_core::model::TrainedModel;
+use crease_core::runtime::predictor::Predictor;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use crease_server::registry::ModelRegistry;
+use crease_server::{AppState, Config, Limits};
+use crease_train::bones::FitOptions;
+use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
+use tonic::Request;
+
+const ADMIN: &str = "admin-secret";
+const RINGS: usize = 8;
+const AROUND: usize = 6;
+
+fn tube() -> Mesh {
+    let mut positions = Vec::new();
+    for r in 0..RINGS {
+        for a in 0..AROUND {
+            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
+            positions.push(Vec3::new(phi.cos(), phi.sin(), r as f32));
+        }
+    }
+    let mut triangles = Vec::new();
+    for r in 0..RINGS - 1 {
+        for a in 0..AROUND {
+            let i0 = (r * AROUND + a) as u32;
+            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
+            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
+            triangles.push([i0, i1, j1]);
+            triangles.push([i0, j1, j0]);
+        }
+    }
+    Mesh {
+        positions,
+        triangles,
+    }
+}
+
+fn bent(rest: &Mesh, angle: f32) -> Vec<Vec3> {
+    let q = Quat::from_rotation_x(angle);
+    let pivot = Vec3::new(0.0, 0.0, 3.5);
+    rest.positions
+        .iter()
+        .map(|&p| {
+            if p.z > pivot.z {
+                pivot + q * (p - pivot)
+            } else {
+                p
+            }
+        })
+        .collect()
+}
+
+fn model() -> TrainedModel {
+    let rest = tube();
+    let frames: Vec<Vec<Vec3>> = (0..6).map(|k| bent(&rest, 0.25 * k as f32)).collect();
+    let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
+    let names: Vec<String> = (0..frames.len()).map(|k| format!("f{k}")).collect();
+    let options = TrainOptions {
+        fit: FitOptions {
+            bones: 4,
+            max_influences: 2,
+            ..FitOptions::default()
+        },
+        controls: ControlSpec::Vertices(vec![0, 45, 42]),
+        ..TrainOptions::default()
+    };
+    pipeline::train(
+        TrainInput {
+            rest: &rest,
+            frames: &refs,
+            names: &names,
+        },
+        &options,
+        &mut |_| {},
+    )
+    .unwrap()
+    .0
+}
+
+fn authed<T>(msg: T, token: &str) -> Request<T> {
+    let mut r = Request::new(msg);
+    r.metadata_mut()
+        .insert("authorization", format!("Bearer {token}").parse().unwrap());
+    r
+}
+
+fn control_frame(model: &TrainedModel, room: &str, seq: u64, angle: f32) -> v1::ControlFrame {
+    let p = bent(&model.rig.rest, angle);
+    v1::ControlFrame {
+        room: room.into(),
+        seq,
+        capture_time_us: 0,
+        positions: model
+            .controls
+            .iter()
+            .flat_map(|c| p[c.vertex as usize].to_array())
+            .collect(),
+        valid: Vec::new(),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn publish_subscribe_batch_and_errors_over_a_socket() {
+    let model = model();
+    let mut registry = ModelRegistry::default();
+    registry.insert("tube", model.clone());
+    let state = AppState::new(
+        registry,
+        Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            admin_token: Some(ADMIN.into()),
+            limits: Limits::default(),
+        },
+    );
+    let running = crease_server::serve(state).await.unwrap();
+    let url = format!("http://{}", running.grpc);
+    let mut client = CreaseClient::connect(url.clone()).await.unwrap();
+
+    // grpc.health.v1 reports the service as serving.
+    let channel = tonic::transport::Channel::from_shared(url.clone())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+    let status = health
+        .check(tonic_health::pb::HealthCheckRequest {
+            service: "crease.v1.Crease".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .status;
+    assert_eq!(
+        status,
+        tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+    );
+
+    let models = client
+        .list_models(v1::ListModelsRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(models.models.len(), 1);
+    assert_eq!(models.models[0].control_points.len(), 3);
+
+    // Opening needs the admin token.
+    let open = v1::OpenRoomRequest {
+        room: "r1".into(),
+        model: "tube".into(),
+        beta: 0.0,
+    };
+    let err = client.open_room(open.clone()).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::Unauthenticated);
+    let opened = client
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap()
+        .into_inner();
+    let token = opened.publish_token;
+
+    // Subscribe first: topology, then frames.
+    let mut sub = client
+        .subscribe(v1::SubscribeRequest {
+            room: "r1".into(),
+            level: v1::Level::Base as i32,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let first = sub.message().await.unwrap().unwrap();
+    let Some(v1::mesh_frame::Body::Topology(topo)) = first.body else {
+        panic!("first message is not the topology: {first:?}");
+    };
+    assert_eq!(topo.vertex_count as usize, model.rig.rest.vertex_count());
+    let mut tris = Vec::new();
+    decode_indices(
+        &topo.indices,
+        topo.triangle_count as usize,
+        topo.vertex_count as usize,
+        &mut tris,
+    )
+    .unwrap();
+    // meshopt's index codec keeps the triangle order and orientation but may rotate corners.
+    let canonical = |t: &[u32; 3]| {
+        let k = (0..3).min_by_key(|&k| t[k]).unwrap();
+        [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+    };
+    let got: Vec<[u32; 3]> = tris.iter().map(canonical).collect();
+    let want: Vec<[u32; 3]> = model.rig.rest.triangles.iter().map(canonical).collect();
+    assert_eq!(got, want);
+
+    // Publish: one good frame, one with a wrong count, one without the token's room, one good.
+    let frames = vec![
+        control_frame(&model, "r1", 1, 0.4),
+        v1::ControlFrame {
+            positions: vec![0.0; 5],
+            ..control_frame(&model, "r1", 2, 0.4)
+        },
+        control_frame(&model, "nowhere", 3, 0.4),
+        control_frame(&model, "r1", 4, 0.9),
+    ];
+    let acks: Vec<v1::PublishAck> = {
+        let mut s = client
+            .publish(authed(tokio_stream::iter(frames.clone()), &token))
+            .await
+            .unwrap()
+            .into_inner();
+        let mut acks = Vec::new();
+        while let Some(a) = s.message().await.unwrap() {
+            acks.push(a);
+        }
+        acks
+    };
+    assert_eq!(acks.len(), 4);
+    assert!(acks[0].error.is_none(), "{:?}", acks[0]);
+    let e = acks[1].error.as_ref().unwrap();
+    assert_eq!(e.code, 3);
+    assert!(
+        e.message.starts_with("positions: 5 values, expected 9"),
+        "{}",
+        e.message
+    );
+    assert_eq!(acks[2].error.as_ref().unwrap().code, 5);
+    assert!(acks[3].error.is_none(), "the room survived the bad frame");
+
+    // Without the token: refused.
+    let mut s = client
+        .publish(tokio_stream::iter(vec![control_frame(
+            &model, "r1", 5, 0.1,
+        )]))
+        .await
+        .unwrap()
+        .into_inner();
+    let ack = s.message().await.unwrap().unwrap();
+    assert_eq!(ack.error.unwrap().code, 7);
+
+    // The subscriber sees the latest frame (seq 4) and it decodes to the in-process prediction.
+    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+    let mut ctx = predictor.new_context();
+    let c: Vec<Vec3> = frames[3]
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    let want = predictor.predict(&mut ctx, &c, None).unwrap().to_vec();
+    let mut decoder = FrameDecoder::new(topo.vertex_count as usize);
+    let mut got = Vec::new();
+    let bound = loop {
+        let msg = sub.message().await.unwrap().unwrap();
+        let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+            panic!("expected a frame")
+        };
+        let header = decoder.decode(&f.data).unwrap();
+        if f.seq == 4 {
+            decoder.positions(&mut got);
+            break header.qbox.error_bound();
+        }
+    };
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(&want) {
+        let d = (*g - *w).abs();
+        assert!(
+            d.cmple(bound * 1.001 + 1e-6).all(),
+            "{g} vs {w} (bound {bound})"
+        );
+    }
+
+    // A batch: every frame, in order.
+    let batch: Vec<v1::ControlFrame> = (0..5)
+        .map(|k| control_frame(&model, "", 10 + k, 0.2 * k as f32))
+        .collect();
+    let mut s = client
+        .synthesize(v1::SynthesizeRequest {
+            model: "tube".into(),
+            level: 0,
+            beta: 0.0,
+            frames: batch,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut seqs = Vec::new();
+    while let Some(m) = s.message().await.unwrap() {
+        if let Some(v1::mesh_frame::Body::Frame(f)) = m.body {
+            seqs.push(f.seq);
+        }
+    }
+    assert_eq!(seqs, [10, 11, 12, 13, 14]);
+
+    // A stalled subscriber (never reads) does not slow a fast one or the room. Each on its own
+    // connection, as separate viewers are: HTTP/2 flow control is per connection too, and a
+    // stream nobody reads holds its connection's window.
+    let subscribe = |mut c: CreaseClient<tonic::transport::Channel>| async move {
+        c.subscribe(v1::SubscribeRequest {
+            room: "r1".into(),
+            level: 0,
+        })
+        .await
+        .unwrap()
+        .into_inner()
+    };
+    let _stalled = subscribe(CreaseClient::connect(url.clone()).await.unwrap()).await;
+    let mut fast = subscribe(CreaseClient::connect(url.clone()).await.unwrap()).await;
+    let reader = tokio::spawn(async move {
+        let mut frames = 0usize;
+        let mut last = 0;
+        while let Ok(Some(m)) = fast.message().await {
+            if let Some(v1::mesh_frame::Body::Frame(f)) = m.body {
+                frames += 1;
+                last = f.seq;
+                if f.seq == 1199 {
+                    break;
+                }
+            }
+        }
+        (frames, last)
+    });
+    let burst: Vec<v1::ControlFrame> = (1000..1200)
+        .map(|k| control_frame(&model, "r1", k, 0.004 * (k - 1000) as f32))
+        .collect();
+    let mut s = client
+        .publish(authed(tokio_stream::iter(burst), &token))
+        .await
+        .unwrap()
+        .into_inner();
+    let mut acked = 0;
+    while let Some(a) = s.message().await.unwrap() {
+        assert!(a.error.is_none(), "{a:?}");
+        acked += 1;
+    }
+    assert_eq!(
+        acked, 200,
+        "every frame acknowledged although one subscriber is stalled"
+    );
+    let (frames, last) = tokio::time::timeout(std::time::Duration::from_secs(10), reader)
+        .await
+        .expect("the fast subscriber reached the last frame")
+        .unwrap();
+    assert_eq!(last, 1199);
+    assert!(frames >= 1, "fast subscriber got {frames} frames");
+    eprintln!("fast subscriber: {frames} of 200 frames (latest-wins), stalled one: 0 read");
+
+    // Shutdown ends the streams, the stalled one included, within the drain period.
+    let t = std::time::Instant::now();
+    running
+        .shutdown(std::time::Duration::from_secs(5))
+        .await
+        .unwrap();
+    assert!(
+        t.elapsed().as_secs_f32() < 5.0,
+        "drained in {:?}",
+        t.elapsed()
+    );
+    // The first subscription ends too (after whatever was already buffered for it).
+    let ended = tokio::time::timeout(std::time::Duration::from_secs(5), async {
+        while let Ok(Some(_)) = sub.message().await {}
+    })
+    .await;
+    assert!(ended.is_ok(), "the subscription did not end after shutdown");
+}
