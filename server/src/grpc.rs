@@ -125,6 +125,7 @@ impl Crease for CreaseService {
         let room = Room::open(&r.room, model, beta).map_err(|e| match e {
             RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
             RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
+            RoomError::Codec(e) => Status::internal(format!("model: {e}")),
         })?;
         let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
         if rooms.contains_key(&r.room) {

@@ -4,11 +4,19 @@
 //! slow or stalled subscriber skips frames and never delays the room or the others, and memory
 //! stays one frame per level however many subscribers there are. The detail layer is
 //! synthesised only while at least one subscriber asked for it, once per frame for all of them.
+//!
+//! Frames are encoded once, in the room, for everyone (`core::codec`): each [`MeshUpdate`]
+//! carries the room encoder's frame (a keyframe, or a delta against the room's previous frame),
+//! and a keyframe of the same frame made on demand (once, shared) for subscribers that did not
+//! receive that previous frame (they joined late, or skipped it).
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
+use crease_core::codec::{
+    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_keyframe,
+};
 use crease_core::glam::Vec3;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
 use crease_proto::{WireError, read_control_frame, v1};
@@ -16,7 +24,13 @@ use tokio::sync::watch;
 
 use crate::registry::LoadedModel;
 
-/// One predicted mesh, shared by every subscriber of its level.
+/// Quantisation box margin around the box of the model's training poses, as a fraction of its
+/// largest side: new poses leave it a little (a position outside the box is clamped to it).
+const BOX_MARGIN: f32 = 0.25;
+/// Quantisation bits per coordinate.
+const BITS: u8 = 16;
+
+/// One predicted mesh, encoded once and shared by every subscriber of its level.
 #[derive(Debug)]
 pub struct MeshUpdate {
     /// The publisher's sequence number.
@@ -25,8 +39,40 @@ pub struct MeshUpdate {
     pub capture_time_us: i64,
     /// When the control frame arrived.
     pub received: Instant,
-    /// The vertices.
-    pub positions: Vec<Vec3>,
+    /// The room encoder's frame: a keyframe, or a delta against codec frame `base_seq`.
+    frame: Vec<u8>,
+    /// This frame's codec sequence number.
+    codec_seq: u32,
+    /// The codec frame a delta applies to (`codec_seq` for a keyframe).
+    base_seq: u32,
+    qbox: QuantBox,
+    /// The vertices, for the on-demand keyframe.
+    positions: Vec<Vec3>,
+    key: OnceLock<Result<Vec<u8>, CodecError>>,
+}
+
+impl MeshUpdate {
+    /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).
+    pub fn codec_seq(&self) -> u32 {
+        self.codec_seq
+    }
+
+    /// The bytes to send a subscriber whose last received codec frame is `last_sent`: the
+    /// shared frame when it is a keyframe or a delta against `last_sent`, else a keyframe of
+    /// this frame (encoded once, on first need).
+    pub fn frame_for(&self, last_sent: Option<u32>) -> Result<&[u8], CodecError> {
+        if self.base_seq == self.codec_seq || last_sent == Some(self.base_seq) {
+            return Ok(&self.frame);
+        }
+        self.key
+            .get_or_init(|| {
+                let mut out = Vec::new();
+                encode_keyframe(&self.qbox, self.codec_seq, &self.positions, None, &mut out)
+                    .map(|_| out)
+            })
+            .as_deref()
+            .map_err(Clone::clone)
+    }
 }
 
 /// What publishing one frame did.
@@ -44,6 +90,9 @@ pub enum RoomError {
     /// The room id is not 1-64 characters of `[A-Za-z0-9_-]`.
     #[error("room id {0:?}: expected 1-64 characters of A-Z, a-z, 0-9, _ and -")]
     BadId(String),
+    /// The model's meshes cannot be encoded (a degenerate box, too many vertices).
+    #[error("frame encoder: {0}")]
+    Codec(#[from] CodecError),
     /// The predictor could not be built (e.g. beta out of range).
     #[error(transparent)]
     Predictor(#[from] PredictError),
@@ -62,6 +111,8 @@ struct RoomState {
     ctx: FrameContext,
     controls: Vec<Vec3>,
     valid: Vec<bool>,
+    base_encoder: FrameEncoder,
+    detail_encoder: FrameEncoder,
 }
 
 /// A live session on one model (module docs).
@@ -71,6 +122,7 @@ pub struct Room {
     /// The model.
     pub model: Arc<LoadedModel>,
     token: String,
+    qbox: QuantBox,
     predictor: Predictor,
     state: Mutex<RoomState>,
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
@@ -107,13 +159,21 @@ impl Room {
         let predictor = Predictor::new(Arc::clone(&model.model), beta)?;
         let ctx = predictor.new_context();
         let n = model.model.controls.len();
+        let (lo, hi) = model.pose_bounds;
+        let qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, BITS)?;
+        let encoder = |vertices| FrameEncoder::new(vertices, qbox, DEFAULT_KEYFRAME_INTERVAL);
+        let base_encoder = encoder(model.model.rig.rest.vertex_count())?;
+        let detail_encoder = encoder(model.model.detail_vertex_count().unwrap_or(0))?;
         Ok(Room {
             id: id.to_owned(),
             token: new_token(),
+            qbox,
             state: Mutex::new(RoomState {
                 ctx,
                 controls: vec![Vec3::ZERO; n],
                 valid: vec![true; n],
+                base_encoder,
+                detail_encoder,
             }),
             predictor,
             model,
@@ -144,6 +204,19 @@ impl Room {
         self.frames.load(Ordering::Relaxed)
     }
 
+    /// The quantisation box of the room's frames.
+    pub fn qbox(&self) -> &QuantBox {
+        &self.qbox
+    }
+
+    /// Vertices of `level`'s mesh.
+    pub fn vertex_count(&self, level: Level) -> usize {
+        match level {
+            Level::Base => self.model.model.rig.rest.vertex_count(),
+            Level::Detail => self.model.model.detail_vertex_count().unwrap_or(0),
+        }
+    }
+
     /// Predicts one control frame and hands the meshes to the subscribers. Blocking (run it off
     /// the async threads). A bad frame changes nothing.
     ///
@@ -157,27 +230,44 @@ impl Room {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let state = &mut *guard;
         let held = read_control_frame(frame, &mut state.controls, &mut state.valid)?;
+        let internal = |what: &str, e: &dyn std::fmt::Display| WireError {
+            field: what.into(),
+            message: e.to_string(),
+        };
         let positions = self
             .predictor
             .predict(&mut state.ctx, &state.controls, Some(&state.valid))
-            .map_err(|e| WireError {
-                field: "positions".into(),
-                message: e.to_string(),
-            })?
+            .map_err(|e| internal("positions", &e))?
             .to_vec();
-        let update = |positions| {
-            Some(Arc::new(MeshUpdate {
+        let qbox = self.qbox;
+        let update = |encoder: &mut FrameEncoder, positions: Vec<Vec3>| {
+            let mut bytes = Vec::new();
+            let header = encoder
+                .encode(&positions, None, &mut bytes)
+                .map_err(|e| internal("encoding", &e))?;
+            Ok::<_, WireError>(Some(Arc::new(MeshUpdate {
                 seq: frame.seq,
                 capture_time_us: frame.capture_time_us,
                 received,
+                frame: bytes,
+                codec_seq: header.seq,
+                base_seq: match header.kind {
+                    FrameKind::Key => header.seq,
+                    FrameKind::Delta => header.base_seq,
+                },
+                qbox,
                 positions,
-            }))
+                key: OnceLock::new(),
+            })))
         };
-        self.base.send_replace(update(positions));
+        self.base
+            .send_replace(update(&mut state.base_encoder, positions)?);
         if self.detail_subscribers.load(Ordering::Relaxed) > 0
             && let Ok(detail) = self.predictor.predict_detail(&mut state.ctx)
         {
-            self.detail.send_replace(update(detail.to_vec()));
+            let detail = detail.to_vec();
+            self.detail
+                .send_replace(update(&mut state.detail_encoder, detail)?);
         }
         self.frames.fetch_add(1, Ordering::Relaxed);
         Ok(Published {

@@ -1,14 +1,14 @@
 //! Mesh streams: the topology message, then encoded frames (`core::codec`).
 //!
-//! A subscription's task waits on its room's `watch` channel, so it always encodes the newest
-//! frame and skips what it was too slow for (`Frame.skipped` counts them); each task encodes with
-//! its own [`FrameEncoder`], so its deltas are always against the frame that subscriber received.
-//! A batch runs its frames through a private room, in order, with a bounded response buffer.
+//! A subscription's task waits on its room's `watch` channel, so it always sends the newest
+//! frame and skips what it was too slow for (`Frame.skipped` counts them). Frames are encoded
+//! once by the room; the task sends the shared delta when it has the delta's base, else the
+//! frame's shared keyframe ([`crate::room::MeshUpdate::frame_for`]). A batch runs its frames
+//! through a private room, in order, with a bounded response buffer.
 
 use std::sync::Arc;
 
-use crease_core::codec::{DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, QuantBox, encode_indices};
-use crease_core::glam::Vec3;
+use crease_core::codec::encode_indices;
 use crease_proto::{box3, v1};
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
@@ -19,12 +19,6 @@ use crate::room::{Level, Room};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
-/// Quantisation box margin around the box of the model's training poses, as a fraction of its
-/// largest side: new poses leave it a little (a position outside the box is clamped to it).
-const BOX_MARGIN: f32 = 0.25;
-/// Quantisation bits per coordinate.
-const BITS: u8 = 16;
-
 fn level_wire(level: Level) -> v1::Level {
     match level {
         Level::Base => v1::Level::Base,
@@ -32,25 +26,15 @@ fn level_wire(level: Level) -> v1::Level {
     }
 }
 
-/// Vertices of `level`'s mesh.
-fn vertex_count(room: &Room, level: Level) -> usize {
-    match level {
-        Level::Base => room.model.model.rig.rest.vertex_count(),
-        Level::Detail => room.model.model.detail_vertex_count().unwrap_or(0),
-    }
-}
-
-/// The first message of a mesh stream and the encoder of its frames.
-fn start(room: &Room, level: Level) -> Result<(v1::MeshFrame, FrameEncoder), Status> {
-    let (lo, hi) = room.model.pose_bounds;
-    let qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, BITS)
-        .map_err(|e| Status::internal(format!("quantisation box: {e}")))?;
+/// The first message of a mesh stream.
+fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
     let triangles = room.triangles(level);
-    let n = vertex_count(room, level);
+    let n = room.vertex_count(level);
     let mut indices = Vec::new();
     encode_indices(triangles, n, &mut indices)
         .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
-    let topology = v1::MeshFrame {
+    let qbox = room.qbox();
+    Ok(v1::MeshFrame {
         body: Some(v1::mesh_frame::Body::Topology(v1::Topology {
             model: room.model.name.clone(),
             level: level_wire(level) as i32,
@@ -59,10 +43,7 @@ fn start(room: &Room, level: Level) -> Result<(v1::MeshFrame, FrameEncoder), Sta
             indices,
             quantization: Some(box3(qbox.min(), qbox.max())),
         })),
-    };
-    let encoder = FrameEncoder::new(n, qbox, DEFAULT_KEYFRAME_INTERVAL)
-        .map_err(|e| Status::internal(format!("encoder: {e}")))?;
-    Ok((topology, encoder))
+    })
 }
 
 fn frame_message(
@@ -91,18 +72,14 @@ pub fn subscribe(
 ) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
     let stream = async move {
-        let (topology, mut encoder) = match start(&room, level) {
-            Ok(s) => s,
-            Err(e) => {
-                let _ = tx.send(Err(e)).await;
-                return;
-            }
-        };
-        if tx.send(Ok(topology)).await.is_err() {
+        let first = topology(&room, level);
+        let failed = first.is_err();
+        if tx.send(first).await.is_err() || failed {
             return;
         }
         let mut sub = room.subscribe(level);
         let mut last_seq: Option<u64> = None;
+        let mut last_sent: Option<u32> = None;
         // The current frame first (if any), then every change.
         sub.rx.mark_changed();
         while sub.rx.changed().await.is_ok() {
@@ -111,13 +88,16 @@ pub fn subscribe(
             };
             let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
             last_seq = Some(update.seq);
-            let mut data = Vec::new();
-            if let Err(e) = encoder.encode(&update.positions, None, &mut data) {
-                let _ = tx
-                    .send(Err(Status::internal(format!("encoding: {e}"))))
-                    .await;
-                return;
-            }
+            let data = match update.frame_for(last_sent) {
+                Ok(bytes) => bytes.to_vec(),
+                Err(e) => {
+                    let _ = tx
+                        .send(Err(Status::internal(format!("encoding: {e}"))))
+                        .await;
+                    return;
+                }
+            };
+            last_sent = Some(update.codec_seq());
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
             let msg = frame_message(update.seq, update.capture_time_us, latency, skipped, data);
             if tx.send(Ok(msg)).await.is_err() {
@@ -146,17 +126,13 @@ pub fn batch(
     let (tx, rx) = mpsc::channel(BUFFER);
     let room = Arc::new(room);
     tokio::spawn(async move {
-        let (topology, mut encoder) = match start(&room, level) {
-            Ok(s) => s,
-            Err(e) => {
-                let _ = tx.send(Err(e)).await;
-                return;
-            }
-        };
-        if tx.send(Ok(topology)).await.is_err() {
+        let first = topology(&room, level);
+        let failed = first.is_err();
+        if tx.send(first).await.is_err() || failed {
             return;
         }
         let mut sub = room.subscribe(level);
+        let mut last_sent: Option<u32> = None;
         for (k, frame) in frames.into_iter().enumerate() {
             let r = Arc::clone(&room);
             let received = std::time::Instant::now();
@@ -175,17 +151,19 @@ pub fn batch(
                     return;
                 }
             };
-            let positions: Vec<Vec3> = match sub.rx.borrow_and_update().as_ref() {
-                Some(u) => u.positions.clone(),
-                None => continue,
+            let Some(update) = sub.rx.borrow_and_update().clone() else {
+                continue;
             };
-            let mut data = Vec::new();
-            if let Err(e) = encoder.encode(&positions, None, &mut data) {
-                let _ = tx
-                    .send(Err(Status::internal(format!("encoding: {e}"))))
-                    .await;
-                return;
-            }
+            let data = match update.frame_for(last_sent) {
+                Ok(bytes) => bytes.to_vec(),
+                Err(e) => {
+                    let _ = tx
+                        .send(Err(Status::internal(format!("encoding: {e}"))))
+                        .await;
+                    return;
+                }
+            };
+            last_sent = Some(update.codec_seq());
             let msg = frame_message(seq, 0, latency, 0, data);
             if tx.send(Ok(msg)).await.is_err() {
                 return;

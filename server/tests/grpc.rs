@@ -315,11 +315,18 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     };
     let _stalled = subscribe(CreaseClient::connect(url.clone()).await.unwrap()).await;
     let mut fast = subscribe(CreaseClient::connect(url.clone()).await.unwrap()).await;
+    let vertices = model.rig.rest.vertex_count();
     let reader = tokio::spawn(async move {
         let mut frames = 0usize;
         let mut last = 0;
+        // Every frame decodes: a subscriber that skipped frames gets a keyframe, not a delta
+        // against a frame it never saw.
+        let mut decoder = FrameDecoder::new(vertices);
         while let Ok(Some(m)) = fast.message().await {
             if let Some(v1::mesh_frame::Body::Frame(f)) = m.body {
+                decoder
+                    .decode(&f.data)
+                    .unwrap_or_else(|e| panic!("frame {}: {e}", f.seq));
                 frames += 1;
                 last = f.seq;
                 if f.seq == 1199 {
