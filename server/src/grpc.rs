@@ -147,6 +147,7 @@ impl Crease for CreaseService {
         };
         tracing::info!(room = %room.id, model = %room.model.name, beta = room.beta(), "room opened");
         rooms.insert(r.room, Arc::new(room));
+        self.state.metrics.rooms.set(rooms.len() as i64);
         Ok(Response::new(response))
     }
 
@@ -156,12 +157,12 @@ impl Crease for CreaseService {
     ) -> Result<Response<v1::CloseRoomResponse>, Status> {
         self.require_admin(&req)?;
         let id = &req.get_ref().room;
-        let removed = self
-            .state
-            .rooms
-            .write()
-            .unwrap_or_else(|e| e.into_inner())
-            .remove(id);
+        let removed = {
+            let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
+            let removed = rooms.remove(id);
+            self.state.metrics.rooms.set(rooms.len() as i64);
+            removed
+        };
         match removed {
             Some(_) => Ok(Response::new(v1::CloseRoomResponse {})),
             None => Err(Status::not_found(format!("room: no room {id:?}"))),
@@ -205,6 +206,14 @@ impl Crease for CreaseService {
                         }
                     }
                 };
+                let m = &state.metrics;
+                if ack.error.is_some() {
+                    m.frames_refused.inc();
+                } else {
+                    m.frames_published.inc();
+                    m.frame_latency
+                        .observe(f64::from(ack.server_latency_us) * 1e-6);
+                }
                 if tx.send(Ok(ack)).await.is_err() {
                     break;
                 }
@@ -229,9 +238,9 @@ impl Crease for CreaseService {
             )));
         }
         Ok(Response::new(Box::pin(crate::stream::subscribe(
+            Arc::clone(&self.state),
             room,
             level,
-            self.state.closing(),
         ))))
     }
 
@@ -259,7 +268,10 @@ impl Crease for CreaseService {
             )));
         }
         Ok(Response::new(Box::pin(crate::stream::batch(
-            room, level, r.frames,
+            Arc::clone(&self.state),
+            room,
+            level,
+            r.frames,
         ))))
     }
 }

@@ -4,16 +4,20 @@
 //! - [`room`]: a live session on one model: control frames in, meshes out to every subscriber
 //!   (latest-wins), detail only while asked for.
 //! - [`grpc`]: the `crease.v1.Crease` service (tonic), with gRPC health and reflection.
+//! - [`http`]: `/healthz`, `/readyz`, `/metrics` (axum); [`metrics`]: the Prometheus metrics.
 //! - [`serve`]: binds the listeners and runs until shut down.
 //!
 //! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md).
 
 pub mod grpc;
+pub mod http;
+pub mod metrics;
 pub mod registry;
 pub mod room;
 pub mod stream;
 
 use std::collections::HashMap;
+use std::future::IntoFuture;
 use std::net::SocketAddr;
 use std::sync::{Arc, RwLock};
 
@@ -43,6 +47,8 @@ impl Default for Limits {
 pub struct Config {
     /// gRPC listen address (port 0: any free port).
     pub grpc: SocketAddr,
+    /// HTTP listen address (port 0: any free port).
+    pub http: SocketAddr,
     /// Token required to open and close rooms (`None`: nobody can).
     pub admin_token: Option<String>,
     /// Limits.
@@ -60,6 +66,8 @@ pub struct AppState {
     pub config: Config,
     /// Set to `true` when the server shuts down: streams end.
     closing: tokio::sync::watch::Sender<bool>,
+    /// Prometheus metrics.
+    pub metrics: metrics::Metrics,
 }
 
 impl AppState {
@@ -70,7 +78,13 @@ impl AppState {
             rooms: RwLock::new(HashMap::new()),
             config,
             closing: tokio::sync::watch::channel(false).0,
+            metrics: metrics::Metrics::default(),
         })
+    }
+
+    /// Whether the server is shutting down.
+    pub fn is_closing(&self) -> bool {
+        *self.closing.borrow()
     }
 
     /// Resolves when the server starts shutting down (long-lived streams select on it).
@@ -91,13 +105,16 @@ impl AppState {
     }
 }
 
-/// A running server: its bound address and a handle to stop it.
+/// A running server: its bound addresses and a handle to stop it.
 #[derive(Debug)]
 pub struct Running {
     /// The gRPC address actually bound.
     pub grpc: SocketAddr,
+    /// The HTTP address actually bound.
+    pub http: SocketAddr,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<Result<(), tonic::transport::Error>>,
+    http_task: tokio::task::JoinHandle<std::io::Result<()>>,
 }
 
 impl Running {
@@ -110,7 +127,14 @@ impl Running {
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
         }
-        match tokio::time::timeout(drain, &mut self.task).await {
+        let deadline = tokio::time::Instant::now() + drain;
+        if tokio::time::timeout_at(deadline, &mut self.http_task)
+            .await
+            .is_err()
+        {
+            self.http_task.abort();
+        }
+        match tokio::time::timeout_at(deadline, &mut self.task).await {
             Ok(done) => done.unwrap_or(Ok(())),
             Err(_) => {
                 tracing::warn!(?drain, "calls still open after the drain period: dropped");
@@ -121,10 +145,19 @@ impl Running {
     }
 }
 
-/// Binds the gRPC listener and serves `state` until [`Running::shutdown`].
+/// Binds the gRPC and HTTP listeners and serves `state` until [`Running::shutdown`].
 pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     let listener = tokio::net::TcpListener::bind(state.config.grpc).await?;
     let grpc = listener.local_addr()?;
+    let http_listener = tokio::net::TcpListener::bind(state.config.http).await?;
+    let http = http_listener.local_addr()?;
+    let closing = state.closing();
+    let http_task = tokio::spawn(
+        axum::serve(http_listener, http::router(Arc::clone(&state)))
+            .with_graceful_shutdown(closing)
+            .into_future(),
+    );
+    tracing::info!(%http, "HTTP listening");
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let router = grpc::router(Arc::clone(&state))?;
     let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
@@ -135,7 +168,9 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     tracing::info!(%grpc, "gRPC listening");
     Ok(Running {
         grpc,
+        http,
         shutdown: Some(tx),
         task,
+        http_task,
     })
 }

@@ -18,6 +18,9 @@ struct Args {
     /// gRPC listen address.
     #[arg(long, default_value = "0.0.0.0:50051")]
     grpc: SocketAddr,
+    /// HTTP listen address (/healthz, /readyz, /metrics).
+    #[arg(long, default_value = "0.0.0.0:8080")]
+    http: SocketAddr,
     /// Token that opens and closes rooms (`authorization: Bearer <token>`); without it rooms
     /// cannot be opened remotely. Also read from CREASE_ADMIN_TOKEN.
     #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
@@ -47,6 +50,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         models,
         Config {
             grpc: args.grpc,
+            http: args.http,
             admin_token: args.admin_token,
             limits: Limits {
                 rooms: args.max_rooms,
@@ -55,7 +59,10 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     );
     let running = crease_server::serve(state).await?;
-    eprintln!("crease-server: gRPC on {}", running.grpc);
+    eprintln!(
+        "crease-server: gRPC on {}, HTTP on {} (/healthz /readyz /metrics)",
+        running.grpc, running.http
+    );
     tokio::signal::ctrl_c().await?;
     eprintln!("shutting down");
     running.shutdown(std::time::Duration::from_secs(5)).await?;

@@ -15,6 +15,7 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
+use crate::AppState;
 use crate::room::{Level, Room};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
@@ -66,12 +67,15 @@ fn frame_message(
 
 /// The live stream of a room at `level` (module docs).
 pub fn subscribe(
+    state: Arc<AppState>,
     room: Arc<Room>,
     level: Level,
-    closing: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
+    let closing = state.closing();
+    let gauge = state.metrics.subscribers.clone();
     let stream = async move {
+        let metrics = &state.metrics;
         let first = topology(&room, level);
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
@@ -99,6 +103,8 @@ pub fn subscribe(
             };
             last_sent = Some(update.codec_seq());
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
+            metrics.bytes_out.inc_by(data.len() as u64);
+            metrics.frames_out.inc();
             let msg = frame_message(update.seq, update.capture_time_us, latency, skipped, data);
             if tx.send(Ok(msg)).await.is_err() {
                 return;
@@ -108,10 +114,12 @@ pub fn subscribe(
     // The stream ends (and its sender drops) when the server shuts down, even while it waits
     // for a frame or for a subscriber who stopped reading.
     tokio::spawn(async move {
+        gauge.inc();
         tokio::select! {
             () = stream => {}
             () = closing => {}
         }
+        gauge.dec();
     });
     ReceiverStream::new(rx)
 }
@@ -119,6 +127,7 @@ pub fn subscribe(
 /// A batch: every control frame in order through `room` (module docs). A bad frame ends the
 /// stream with `InvalidArgument` naming the frame and field.
 pub fn batch(
+    state: Arc<AppState>,
     room: Room,
     level: Level,
     frames: Vec<v1::ControlFrame>,
@@ -164,6 +173,8 @@ pub fn batch(
                 }
             };
             last_sent = Some(update.codec_seq());
+            state.metrics.bytes_out.inc_by(data.len() as u64);
+            state.metrics.frames_out.inc();
             let msg = frame_message(seq, 0, latency, 0, data);
             if tx.send(Ok(msg)).await.is_err() {
                 return;

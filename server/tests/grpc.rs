@@ -90,6 +90,35 @@ fn model() -> TrainedModel {
     .0
 }
 
+/// A plain HTTP/1.1 GET: status code and body.
+async fn http_get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(
+        format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
+    )
+    .await
+    .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).await.unwrap();
+    let status = text[9..12].parse().unwrap();
+    let body = text
+        .split_once("\r\n\r\n")
+        .map_or("", |(_, b)| b)
+        .to_owned();
+    (status, body)
+}
+
+/// The value of a metric line `name value` in a Prometheus exposition.
+fn metric(text: &str, name: &str) -> f64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name).and_then(|r| r.strip_prefix(' ')))
+        .unwrap_or_else(|| panic!("{name} missing from:\n{text}"))
+        .trim()
+        .parse()
+        .unwrap()
+}
+
 fn authed<T>(msg: T, token: &str) -> Request<T> {
     let mut r = Request::new(msg);
     r.metadata_mut()
@@ -121,6 +150,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         registry,
         Config {
             grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
             admin_token: Some(ADMIN.into()),
             limits: Limits::default(),
         },
@@ -360,6 +390,25 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     assert_eq!(last, 1199);
     assert!(frames >= 1, "fast subscriber got {frames} frames");
     eprintln!("fast subscriber: {frames} of 200 frames (latest-wins), stalled one: 0 read");
+
+    // HTTP: liveness, readiness, and metrics that counted what happened above.
+    assert_eq!(http_get(running.http, "/healthz").await.0, 200);
+    assert_eq!(
+        http_get(running.http, "/readyz").await,
+        (200, "ready\n".into())
+    );
+    let (status, text) = http_get(running.http, "/metrics").await;
+    assert_eq!(status, 200);
+    // Published: seq 1 and 4, then the burst of 200; refused: bad count, unknown room, no token.
+    assert!(
+        metric(&text, "crease_frames_published_total") >= 202.0,
+        "{text}"
+    );
+    assert_eq!(metric(&text, "crease_frames_refused_total"), 3.0);
+    assert_eq!(metric(&text, "crease_rooms"), 1.0);
+    assert!(metric(&text, "crease_subscribers") >= 2.0, "{text}");
+    assert!(metric(&text, "crease_bytes_out_total") > 0.0);
+    assert!(metric(&text, "crease_frame_latency_seconds_count") >= 202.0);
 
     // Shutdown ends the streams, the stalled one included, within the drain period.
     let t = std::time::Instant::now();

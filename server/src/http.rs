@@ -1,0 +1,42 @@
+//! The HTTP side: `GET /healthz` (the process is up), `GET /readyz` (models loaded and not
+//! shutting down: send traffic), `GET /metrics` (Prometheus). The WebSocket endpoints and the
+//! viewer's static files join this router next (issue 6).
+
+use std::sync::Arc;
+
+use axum::Router;
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::IntoResponse;
+use axum::routing::get;
+
+use crate::AppState;
+
+/// The HTTP router over shared state.
+pub fn router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/healthz", get(|| async { "ok\n" }))
+        .route("/readyz", get(readyz))
+        .route("/metrics", get(metrics))
+        .with_state(state)
+}
+
+async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    if state.is_closing() {
+        (StatusCode::SERVICE_UNAVAILABLE, "shutting down\n")
+    } else if state.models.is_empty() {
+        (StatusCode::SERVICE_UNAVAILABLE, "no models loaded\n")
+    } else {
+        (StatusCode::OK, "ready\n")
+    }
+}
+
+async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        state.metrics.render(),
+    )
+}

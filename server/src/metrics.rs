@@ -1,0 +1,79 @@
+//! Prometheus metrics (`GET /metrics`, text exposition format): frame latency, frames and bytes,
+//! rooms and subscribers. Counters are shared atomics, updated from any thread.
+
+use prometheus_client::encoding::text::encode;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::Registry;
+
+/// The server's metrics.
+#[derive(Debug)]
+pub struct Metrics {
+    registry: Registry,
+    /// Control frames predicted and handed to the subscribers.
+    pub frames_published: Counter,
+    /// Control frames refused (bad field, unknown room, wrong token).
+    pub frames_refused: Counter,
+    /// Seconds from a control frame's arrival to its meshes being ready.
+    pub frame_latency: Histogram,
+    /// Encoded mesh bytes sent to subscribers and batch clients.
+    pub bytes_out: Counter,
+    /// Mesh frames sent.
+    pub frames_out: Counter,
+    /// Open rooms.
+    pub rooms: Gauge,
+    /// Live mesh subscriptions.
+    pub subscribers: Gauge,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        let mut registry = Registry::with_prefix("crease");
+        let m = Metrics {
+            frames_published: Counter::default(),
+            frames_refused: Counter::default(),
+            // 25 µs to ~51 ms.
+            frame_latency: Histogram::new(exponential_buckets(25e-6, 2.0, 12)),
+            bytes_out: Counter::default(),
+            frames_out: Counter::default(),
+            rooms: Gauge::default(),
+            subscribers: Gauge::default(),
+            registry: Registry::default(),
+        };
+        registry.register(
+            "frames_published",
+            "Control frames predicted and handed to the subscribers",
+            m.frames_published.clone(),
+        );
+        registry.register(
+            "frames_refused",
+            "Control frames refused (bad field, unknown room, wrong token)",
+            m.frames_refused.clone(),
+        );
+        registry.register(
+            "frame_latency_seconds",
+            "From a control frame's arrival to its meshes being ready",
+            m.frame_latency.clone(),
+        );
+        registry.register("bytes_out", "Encoded mesh bytes sent", m.bytes_out.clone());
+        registry.register("frames_out", "Mesh frames sent", m.frames_out.clone());
+        registry.register("rooms", "Open rooms", m.rooms.clone());
+        registry.register(
+            "subscribers",
+            "Live mesh subscriptions",
+            m.subscribers.clone(),
+        );
+        Metrics { registry, ..m }
+    }
+}
+
+impl Metrics {
+    /// The text exposition of every metric.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        // Writing into a String cannot fail.
+        let _ = encode(&mut out, &self.registry);
+        out
+    }
+}
