@@ -181,39 +181,7 @@ impl Crease for CreaseService {
         let (tx, rx) = mpsc::channel(STREAM_BUFFER);
         tokio::spawn(async move {
             while let Ok(Some(frame)) = frames.message().await {
-                let received = Instant::now();
-                let ack = match state.room(&frame.room) {
-                    None => error_ack(frame.seq, 5, format!("room: no room {:?}", frame.room)),
-                    Some(room) if !room.accepts(token.as_deref()) => error_ack(
-                        frame.seq,
-                        7,
-                        format!("authorization: not the publish token of room {:?}", room.id),
-                    ),
-                    Some(room) => {
-                        let seq = frame.seq;
-                        let done =
-                            tokio::task::spawn_blocking(move || room.publish(&frame, received))
-                                .await;
-                        match done {
-                            Ok(Ok(p)) => v1::PublishAck {
-                                seq,
-                                server_latency_us: p.latency_us,
-                                held_controls: p.held,
-                                error: None,
-                            },
-                            Ok(Err(e)) => error_ack(seq, 3, e.to_string()),
-                            Err(e) => error_ack(seq, 13, format!("internal: {e}")),
-                        }
-                    }
-                };
-                let m = &state.metrics;
-                if ack.error.is_some() {
-                    m.frames_refused.inc();
-                } else {
-                    m.frames_published.inc();
-                    m.frame_latency
-                        .observe(f64::from(ack.server_latency_us) * 1e-6);
-                }
+                let ack = publish_one(&state, token.as_deref(), frame).await;
                 if tx.send(Ok(ack)).await.is_err() {
                     break;
                 }
@@ -274,6 +242,48 @@ impl Crease for CreaseService {
             r.frames,
         ))))
     }
+}
+
+/// Publishes one control frame (any transport): finds the room, checks the token, predicts off
+/// the async threads, counts it in the metrics, and answers with the ack (an error ack for a
+/// refused frame; the room is unchanged then).
+pub(crate) async fn publish_one(
+    state: &Arc<AppState>,
+    token: Option<&str>,
+    frame: v1::ControlFrame,
+) -> v1::PublishAck {
+    let received = Instant::now();
+    let ack = match state.room(&frame.room) {
+        None => error_ack(frame.seq, 5, format!("room: no room {:?}", frame.room)),
+        Some(room) if !room.accepts(token) => error_ack(
+            frame.seq,
+            7,
+            format!("authorization: not the publish token of room {:?}", room.id),
+        ),
+        Some(room) => {
+            let seq = frame.seq;
+            let done = tokio::task::spawn_blocking(move || room.publish(&frame, received)).await;
+            match done {
+                Ok(Ok(p)) => v1::PublishAck {
+                    seq,
+                    server_latency_us: p.latency_us,
+                    held_controls: p.held,
+                    error: None,
+                },
+                Ok(Err(e)) => error_ack(seq, 3, e.to_string()),
+                Err(e) => error_ack(seq, 13, format!("internal: {e}")),
+            }
+        }
+    };
+    let m = &state.metrics;
+    if ack.error.is_some() {
+        m.frames_refused.inc();
+    } else {
+        m.frames_published.inc();
+        m.frame_latency
+            .observe(f64::from(ack.server_latency_us) * 1e-6);
+    }
+    ack
 }
 
 fn error_ack(seq: u64, code: i32, message: String) -> v1::PublishAck {

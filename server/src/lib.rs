@@ -4,7 +4,8 @@
 //! - [`room`]: a live session on one model: control frames in, meshes out to every subscriber
 //!   (latest-wins), detail only while asked for.
 //! - [`grpc`]: the `crease.v1.Crease` service (tonic), with gRPC health and reflection.
-//! - [`http`]: `/healthz`, `/readyz`, `/metrics` (axum); [`metrics`]: the Prometheus metrics.
+//! - [`http`]: `/healthz`, `/readyz`, `/metrics` (axum); [`metrics`]: the Prometheus metrics;
+//!   [`ws`]: `/ws/rooms/{id}`, subscribe and publish over WebSocket.
 //! - [`serve`]: binds the listeners and runs until shut down.
 //!
 //! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md).
@@ -15,6 +16,7 @@ pub mod metrics;
 pub mod registry;
 pub mod room;
 pub mod stream;
+pub mod ws;
 
 use std::collections::HashMap;
 use std::future::IntoFuture;

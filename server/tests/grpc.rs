@@ -331,6 +331,83 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     }
     assert_eq!(seqs, [10, 11, 12, 13, 14]);
 
+    // WebSocket: subscribe (binary MeshFrames) and publish (JSON and protobuf) on one socket.
+    {
+        use futures_util::{SinkExt, StreamExt};
+        use prost::Message as _;
+        use tokio_tungstenite::tungstenite::Message;
+        let url = format!("ws://{}/ws/rooms/r1?token={token}", running.http);
+        let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        let next_binary = |m: Message| match m {
+            Message::Binary(b) => Some(v1::MeshFrame::decode(b.as_ref()).unwrap()),
+            _ => None,
+        };
+        let first = loop {
+            if let Some(f) = next_binary(ws.next().await.unwrap().unwrap()) {
+                break f;
+            }
+        };
+        assert!(matches!(
+            first.body,
+            Some(v1::mesh_frame::Body::Topology(_))
+        ));
+        let json = |seq: u64, angle: f32| {
+            let f = control_frame(&model, "", seq, angle);
+            format!("{{\"seq\": {seq}, \"positions\": {:?}}}", f.positions)
+        };
+        let mut acks = Vec::new();
+        let mut seqs = Vec::new();
+        ws.send(Message::Text(json(500, 0.3).into())).await.unwrap();
+        ws.send(Message::Text("{\"positions\": [1, 2]}".into()))
+            .await
+            .unwrap();
+        let bin = control_frame(&model, "ignored", 501, 0.6).encode_to_vec();
+        ws.send(Message::Binary(bin.into())).await.unwrap();
+        while acks.len() < 3 || !seqs.contains(&501) {
+            match ws.next().await.unwrap().unwrap() {
+                Message::Text(t) => {
+                    acks.push(serde_json::from_str::<serde_json::Value>(&t).unwrap())
+                }
+                m => {
+                    if let Some(v1::mesh_frame::Body::Frame(f)) =
+                        next_binary(m).and_then(|f| f.body)
+                    {
+                        seqs.push(f.seq);
+                    }
+                }
+            }
+        }
+        assert_eq!(acks[0]["seq"], 500);
+        assert!(acks[0]["error"].is_null(), "{}", acks[0]);
+        assert_eq!(acks[1]["error"]["code"], 3);
+        assert!(
+            acks[1]["error"]["message"]
+                .as_str()
+                .unwrap()
+                .starts_with("positions: 2 values"),
+            "{}",
+            acks[1]
+        );
+        assert_eq!(acks[2]["seq"], 501);
+        assert!(acks[2]["error"].is_null(), "{}", acks[2]);
+        ws.close(None).await.unwrap();
+        // Without the token: refused, socket open.
+        let url = format!("ws://{}/ws/rooms/r1?subscribe=false", running.http);
+        let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        ws.send(Message::Text(json(502, 0.1).into())).await.unwrap();
+        let ack = loop {
+            if let Message::Text(t) = ws.next().await.unwrap().unwrap() {
+                break serde_json::from_str::<serde_json::Value>(&t).unwrap();
+            }
+        };
+        assert_eq!(ack["error"]["code"], 7);
+        // An unknown room is a 404 before the upgrade.
+        let err = tokio_tungstenite::connect_async(format!("ws://{}/ws/rooms/none", running.http))
+            .await
+            .unwrap_err();
+        assert!(err.to_string().contains("404"), "{err}");
+    }
+
     // A stalled subscriber (never reads) does not slow a fast one or the room. Each on its own
     // connection, as separate viewers are: HTTP/2 flow control is per connection too, and a
     // stream nobody reads holds its connection's window.
@@ -399,16 +476,17 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     );
     let (status, text) = http_get(running.http, "/metrics").await;
     assert_eq!(status, 200);
-    // Published: seq 1 and 4, then the burst of 200; refused: bad count, unknown room, no token.
+    // Published: seq 1 and 4, two over WebSocket, the burst of 200. Refused: over gRPC a bad
+    // count, an unknown room and a missing token; over WebSocket a bad count and a missing token.
     assert!(
-        metric(&text, "crease_frames_published_total") >= 202.0,
+        metric(&text, "crease_frames_published_total") >= 204.0,
         "{text}"
     );
-    assert_eq!(metric(&text, "crease_frames_refused_total"), 3.0);
+    assert_eq!(metric(&text, "crease_frames_refused_total"), 5.0);
     assert_eq!(metric(&text, "crease_rooms"), 1.0);
     assert!(metric(&text, "crease_subscribers") >= 2.0, "{text}");
     assert!(metric(&text, "crease_bytes_out_total") > 0.0);
-    assert!(metric(&text, "crease_frame_latency_seconds_count") >= 202.0);
+    assert!(metric(&text, "crease_frame_latency_seconds_count") >= 204.0);
 
     // Shutdown ends the streams, the stalled one included, within the drain period.
     let t = std::time::Instant::now();

@@ -1,0 +1,200 @@
+//! The WebSocket endpoint `GET /ws/rooms/{id}` on the HTTP server, for browsers:
+//!
+//! - **Subscribe**: every binary message the server sends is one protobuf `crease.v1.MeshFrame`
+//!   (the topology first, then frames), exactly as gRPC's `Subscribe` streams them.
+//!   `?level=detail` asks for the detail layer; `?subscribe=false` publishes only.
+//! - **Publish**: a binary message is a protobuf `ControlFrame`, a text message the same as JSON
+//!   (`{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...], "valid": [true, ...]}`,
+//!   `valid` optional); the room is the path's. Publishing needs the room's token in
+//!   `?token=`. Each frame is answered by a text message, the ack as JSON
+//!   (`{"seq": 1, "server_latency_us": 120, "held_controls": 0, "error": null}` or with
+//!   `"error": {"code": 3, "message": "positions: ..."}`).
+//!
+//! A bad message is answered by an error ack and the socket stays open.
+
+use std::sync::Arc;
+
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use crease_proto::{encode_valid_mask, v1};
+use futures_util::{SinkExt, StreamExt};
+use prost::Message as _;
+use tokio::sync::mpsc;
+
+use crate::AppState;
+use crate::grpc::publish_one;
+use crate::room::{Level, Room};
+
+/// Query parameters of `/ws/rooms/{id}`.
+#[derive(Debug, serde::Deserialize)]
+pub struct Params {
+    /// `base` (default) or `detail`.
+    level: Option<String>,
+    /// The room's publish token (needed to publish).
+    token: Option<String>,
+    /// `false`: publish only, no mesh frames.
+    subscribe: Option<bool>,
+}
+
+/// A control frame as JSON.
+#[derive(Debug, serde::Deserialize)]
+struct JsonFrame {
+    #[serde(default)]
+    seq: u64,
+    #[serde(default)]
+    capture_time_us: i64,
+    positions: Vec<f32>,
+    #[serde(default)]
+    valid: Option<Vec<bool>>,
+}
+
+/// An ack as JSON.
+#[derive(Debug, serde::Serialize)]
+struct JsonAck {
+    seq: u64,
+    server_latency_us: u32,
+    held_controls: u32,
+    error: Option<JsonError>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct JsonError {
+    code: i32,
+    message: String,
+}
+
+/// `GET /ws/rooms/{id}`: upgrades to a session on the room (module docs).
+pub async fn room_socket(
+    Path(id): Path<String>,
+    Query(params): Query<Params>,
+    State(state): State<Arc<AppState>>,
+    ws: WebSocketUpgrade,
+) -> Response {
+    let Some(room) = state.room(&id) else {
+        return (StatusCode::NOT_FOUND, format!("room: no room {id:?}\n")).into_response();
+    };
+    let level = match params.level.as_deref() {
+        None | Some("base") => Level::Base,
+        Some("detail") if room.has_detail() => Level::Detail,
+        Some("detail") => {
+            return (
+                StatusCode::BAD_REQUEST,
+                format!("level: model {:?} has no detail layer\n", room.model.name),
+            )
+                .into_response();
+        }
+        Some(other) => {
+            return (
+                StatusCode::BAD_REQUEST,
+                format!("level: {other:?}, expected base or detail\n"),
+            )
+                .into_response();
+        }
+    };
+    let subscribe = params.subscribe != Some(false);
+    ws.max_message_size(state.config.limits.message_bytes)
+        .on_upgrade(move |socket| session(state, room, level, params.token, subscribe, socket))
+}
+
+async fn session(
+    state: Arc<AppState>,
+    room: Arc<Room>,
+    level: Level,
+    token: Option<String>,
+    subscribe: bool,
+    socket: WebSocket,
+) {
+    let (mut sink, mut source) = socket.split();
+    let (out, mut outgoing) = mpsc::channel::<Message>(4);
+    let writer = tokio::spawn(async move {
+        while let Some(m) = outgoing.recv().await {
+            if sink.send(m).await.is_err() {
+                break;
+            }
+        }
+        let _ = sink.close().await;
+    });
+    let frames = subscribe.then(|| {
+        let out = out.clone();
+        let frames = crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), level);
+        tokio::spawn(async move {
+            let mut frames = std::pin::pin!(frames);
+            while let Some(Ok(msg)) = frames.next().await {
+                if out
+                    .send(Message::Binary(msg.encode_to_vec().into()))
+                    .await
+                    .is_err()
+                {
+                    break;
+                }
+            }
+        })
+    });
+    let mut closing = std::pin::pin!(state.closing());
+    loop {
+        let message = tokio::select! {
+            m = source.next() => m,
+            () = &mut closing => None,
+        };
+        let frame = match message {
+            Some(Ok(Message::Binary(bytes))) => v1::ControlFrame::decode(bytes.as_ref())
+                .map_err(|e| format!("message: not a crease.v1.ControlFrame: {e}")),
+            Some(Ok(Message::Text(text))) => serde_json::from_str::<JsonFrame>(text.as_str())
+                .map_err(|e| format!("message: not a JSON control frame: {e}"))
+                .and_then(|j| json_frame(&room.id, j)),
+            Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+            Some(Ok(_)) => continue,
+        };
+        let ack = match frame {
+            Ok(mut f) => {
+                f.room.clone_from(&room.id);
+                publish_one(&state, token.as_deref(), f).await
+            }
+            Err(message) => v1::PublishAck {
+                error: Some(v1::FrameError { code: 3, message }),
+                ..Default::default()
+            },
+        };
+        let text = serde_json::to_string(&JsonAck {
+            seq: ack.seq,
+            server_latency_us: ack.server_latency_us,
+            held_controls: ack.held_controls,
+            error: ack.error.map(|e| JsonError {
+                code: e.code,
+                message: e.message,
+            }),
+        })
+        .unwrap_or_default();
+        if out.send(Message::Text(text.into())).await.is_err() {
+            break;
+        }
+    }
+    if let Some(f) = frames {
+        f.abort();
+    }
+    drop(out);
+    let _ = writer.await;
+}
+
+fn json_frame(room: &str, j: JsonFrame) -> Result<v1::ControlFrame, String> {
+    let mut valid = Vec::new();
+    if let Some(v) = &j.valid {
+        if v.len() * 3 != j.positions.len() {
+            return Err(format!(
+                "valid: {} flags for {} position values (one flag per x, y, z triple)",
+                v.len(),
+                j.positions.len()
+            ));
+        }
+        encode_valid_mask(v, &mut valid);
+    }
+    Ok(v1::ControlFrame {
+        room: room.to_owned(),
+        seq: j.seq,
+        capture_time_us: j.capture_time_us,
+        positions: j.positions,
+        valid,
+    })
+}
