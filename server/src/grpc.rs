@@ -13,6 +13,7 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
+use crate::registry::LoadedModel;
 use crate::room::{Level, Room, RoomError};
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
@@ -77,6 +78,14 @@ impl CreaseService {
         }
     }
 
+    fn model(&self, name: &str) -> Result<Arc<LoadedModel>, Status> {
+        self.state
+            .models
+            .get(name)
+            .cloned()
+            .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
+    }
+
     fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
         self.state
             .room(id)
@@ -115,12 +124,7 @@ impl Crease for CreaseService {
     ) -> Result<Response<v1::OpenRoomResponse>, Status> {
         self.require_admin(&req)?;
         let r = req.into_inner();
-        let model = self
-            .state
-            .models
-            .get(&r.model)
-            .cloned()
-            .ok_or_else(|| Status::not_found(format!("model: no model {:?}", r.model)))?;
+        let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
         let room = Room::open(&r.room, model, beta).map_err(|e| match e {
             RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
@@ -199,12 +203,7 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let level = level(r.level)?;
         let room = self.room(&r.room)?;
-        if level == Level::Detail && !room.has_detail() {
-            return Err(Status::failed_precondition(format!(
-                "level: model {:?} has no detail layer",
-                room.model.name
-            )));
-        }
+        check_level(&room, level)?;
         Ok(Response::new(Box::pin(crate::stream::subscribe(
             Arc::clone(&self.state),
             room,
@@ -220,21 +219,11 @@ impl Crease for CreaseService {
     ) -> Result<Response<Self::SynthesizeStream>, Status> {
         let r = req.into_inner();
         let level = level(r.level)?;
-        let model = self
-            .state
-            .models
-            .get(&r.model)
-            .cloned()
-            .ok_or_else(|| Status::not_found(format!("model: no model {:?}", r.model)))?;
+        let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
         let room = Room::open("batch", model, beta)
             .map_err(|e| Status::invalid_argument(format!("beta: {e}")))?;
-        if level == Level::Detail && !room.has_detail() {
-            return Err(Status::failed_precondition(format!(
-                "level: model {:?} has no detail layer",
-                room.model.name
-            )));
-        }
+        check_level(&room, level)?;
         Ok(Response::new(Box::pin(crate::stream::batch(
             Arc::clone(&self.state),
             room,
@@ -284,6 +273,17 @@ pub(crate) async fn publish_one(
             .observe(f64::from(ack.server_latency_us) * 1e-6);
     }
     ack
+}
+
+/// Detail streams need a model with a detail layer.
+fn check_level(room: &Room, level: Level) -> Result<(), Status> {
+    if level == Level::Detail && !room.has_detail() {
+        return Err(Status::failed_precondition(format!(
+            "level: model {:?} has no detail layer",
+            room.model.name
+        )));
+    }
+    Ok(())
 }
 
 fn error_ack(seq: u64, code: i32, message: String) -> v1::PublishAck {

@@ -16,7 +16,7 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
 use crate::AppState;
-use crate::room::{Level, Room};
+use crate::room::{Level, MeshUpdate, Room};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
@@ -45,6 +45,17 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
             quantization: Some(box3(qbox.min(), qbox.max())),
         })),
     })
+}
+
+/// The bytes of `update` for a subscriber whose last received codec frame is `last_sent`
+/// (updated).
+fn bytes_for(update: &MeshUpdate, last_sent: &mut Option<u32>) -> Result<Vec<u8>, Status> {
+    let bytes = update
+        .frame_for(*last_sent)
+        .map_err(|e| Status::internal(format!("encoding: {e}")))?
+        .to_vec();
+    *last_sent = Some(update.codec_seq());
+    Ok(bytes)
 }
 
 fn frame_message(
@@ -92,16 +103,13 @@ pub fn subscribe(
             };
             let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
             last_seq = Some(update.seq);
-            let data = match update.frame_for(last_sent) {
-                Ok(bytes) => bytes.to_vec(),
+            let data = match bytes_for(&update, &mut last_sent) {
+                Ok(data) => data,
                 Err(e) => {
-                    let _ = tx
-                        .send(Err(Status::internal(format!("encoding: {e}"))))
-                        .await;
+                    let _ = tx.send(Err(e)).await;
                     return;
                 }
             };
-            last_sent = Some(update.codec_seq());
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
             metrics.bytes_out.inc_by(data.len() as u64);
             metrics.frames_out.inc();
@@ -163,16 +171,13 @@ pub fn batch(
             let Some(update) = sub.rx.borrow_and_update().clone() else {
                 continue;
             };
-            let data = match update.frame_for(last_sent) {
-                Ok(bytes) => bytes.to_vec(),
+            let data = match bytes_for(&update, &mut last_sent) {
+                Ok(data) => data,
                 Err(e) => {
-                    let _ = tx
-                        .send(Err(Status::internal(format!("encoding: {e}"))))
-                        .await;
+                    let _ = tx.send(Err(e)).await;
                     return;
                 }
             };
-            last_sent = Some(update.codec_seq());
             state.metrics.bytes_out.inc_by(data.len() as u64);
             state.metrics.frames_out.inc();
             let msg = frame_message(seq, 0, latency, 0, data);
