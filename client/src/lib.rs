@@ -42,6 +42,8 @@ pub enum Command {
     Handgen(commands::handgen::HandgenArgs),
     /// Write one posed sweep hand (a named pose or joint angles) as a mesh.
     Pose(commands::handgen::PoseArgs),
+    /// Watch a room on a server: decode its frames, report frames/s, bytes and latency.
+    Watch(commands::watch::WatchArgs),
 }
 
 /// Runs a parsed command line.
@@ -53,6 +55,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(args) => commands::eval::run(&args),
         Command::Handgen(args) => commands::handgen::run(&args),
         Command::Pose(args) => commands::handgen::run_pose(&args),
+        Command::Watch(args) => commands::watch::run(&args),
     }
 }
 

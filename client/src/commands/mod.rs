@@ -7,3 +7,4 @@ pub mod handgen;
 pub mod layers;
 pub mod synth;
 pub mod train;
+pub mod watch;

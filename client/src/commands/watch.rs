@@ -1,0 +1,157 @@
+//! `crease watch`: subscribe to a room over gRPC, decode every frame, and report frames per
+//! second, bytes per frame and latency percentiles; optionally dump frames as OBJ.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use crease_core::codec::{FrameDecoder, decode_indices};
+use crease_core::glam::Vec3;
+use crease_core::mesh::Mesh;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+
+/// Options of `crease watch`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct WatchArgs {
+    /// The server's gRPC address, e.g. `http://localhost:50051`.
+    #[arg(long, default_value = "http://localhost:50051")]
+    pub server: String,
+    /// The room to watch.
+    #[arg(long, default_value = "demo")]
+    pub room: String,
+    /// Watch the detail layer instead of the base mesh.
+    #[arg(long)]
+    pub detail: bool,
+    /// Stop after this many frames and print a one-line summary.
+    #[arg(long, value_name = "N")]
+    pub frames: Option<u64>,
+    /// Write every received frame as `DIR/frame_00000.obj`, ...
+    #[arg(long, value_name = "DIR")]
+    pub dump: Option<PathBuf>,
+}
+
+/// Percentile `p` (0..=100) of sorted values.
+fn percentile(sorted: &[u32], p: f64) -> u32 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    let i = ((sorted.len() - 1) as f64 * p / 100.0).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+/// Runs `crease watch`.
+pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
+    if args.frames == Some(0) {
+        bail!("--frames must be at least 1");
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the network runtime")?;
+    runtime.block_on(watch(args))
+}
+
+async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
+    let mut client = CreaseClient::connect(args.server.clone())
+        .await
+        .with_context(|| format!("connecting to {}", args.server))?;
+    let level = if args.detail {
+        v1::Level::Detail
+    } else {
+        v1::Level::Base
+    };
+    let mut stream = client
+        .subscribe(v1::SubscribeRequest {
+            room: args.room.clone(),
+            level: level as i32,
+        })
+        .await
+        .with_context(|| format!("subscribing to room {:?}", args.room))?
+        .into_inner();
+    let first = stream
+        .message()
+        .await?
+        .context("the server closed the stream before the topology")?;
+    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
+        bail!("the first message is not the topology");
+    };
+    let n = topology.vertex_count as usize;
+    let mut triangles = Vec::new();
+    decode_indices(
+        &topology.indices,
+        topology.triangle_count as usize,
+        n,
+        &mut triangles,
+    )
+    .context("decoding the topology")?;
+    eprintln!(
+        "watching room {:?} (model {:?}, {} vertices, {} triangles)",
+        args.room,
+        topology.model,
+        n,
+        triangles.len()
+    );
+    if let Some(dir) = &args.dump {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut decoder = FrameDecoder::new(n);
+    let mut positions: Vec<Vec3> = Vec::new();
+    let (mut frames, mut bytes, mut skipped) = (0u64, 0u64, 0u64);
+    let mut latencies: Vec<u32> = Vec::new();
+    let start = Instant::now();
+    let mut window = (Instant::now(), 0u64, 0u64);
+    while let Some(msg) = stream.message().await? {
+        let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+            continue;
+        };
+        decoder
+            .decode(&f.data)
+            .with_context(|| format!("decoding frame {}", f.seq))?;
+        frames += 1;
+        bytes += f.data.len() as u64;
+        skipped += u64::from(f.skipped);
+        latencies.push(f.server_latency_us);
+        if let Some(dir) = &args.dump {
+            decoder.positions(&mut positions);
+            let mesh = Mesh {
+                positions: std::mem::take(&mut positions),
+                triangles: triangles.clone(),
+            };
+            let path = dir.join(format!("frame_{:05}.obj", frames - 1));
+            mesh.write(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+            positions = mesh.positions;
+        }
+        window.1 += 1;
+        window.2 += f.data.len() as u64;
+        if window.0.elapsed() >= Duration::from_secs(1) {
+            let secs = window.0.elapsed().as_secs_f64();
+            eprintln!(
+                "{:.1} frames/s, {:.0} bytes/frame ({:.2} bytes/vertex), server latency p50 {} µs",
+                window.1 as f64 / secs,
+                window.2 as f64 / window.1.max(1) as f64,
+                window.2 as f64 / (window.1.max(1) * n.max(1) as u64) as f64,
+                f.server_latency_us
+            );
+            window = (Instant::now(), 0, 0);
+        }
+        if args.frames.is_some_and(|limit| frames >= limit) {
+            break;
+        }
+    }
+    latencies.sort_unstable();
+    let secs = start.elapsed().as_secs_f64();
+    println!(
+        "{frames} frames in {secs:.2} s ({:.1} frames/s), {:.0} bytes/frame ({:.2} bytes/vertex), {skipped} skipped, server latency p50 {} µs p99 {} µs",
+        frames as f64 / secs.max(1e-9),
+        bytes as f64 / frames.max(1) as f64,
+        bytes as f64 / (frames.max(1) * n.max(1) as u64) as f64,
+        percentile(&latencies, 50.0),
+        percentile(&latencies, 99.0)
+    );
+    if args.frames.is_some_and(|limit| frames < limit) {
+        bail!("the stream ended after {frames} frames");
+    }
+    Ok(())
+}

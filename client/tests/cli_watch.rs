@@ -1,0 +1,145 @@
+//! `crease watch` against a real server (in this process, port 0): a publisher streams control
+//! frames into a room; `crease watch --frames 5 --dump DIR` decodes five frames, prints the
+//! summary line and writes five OBJ meshes with the model's topology.
+
+mod common;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::{CONTROLS, bent, crease, train_model, tube};
+use crease_core::mesh::Mesh;
+use crease_core::model::TrainedModel;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use crease_server::registry::ModelRegistry;
+use crease_server::{AppState, Config, Limits};
+
+#[test]
+fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = TrainedModel::load(train_model(tmp.path())).unwrap();
+    let vertices = model.rig.rest.vertex_count();
+    let triangles = model.rig.rest.triangles.len();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let (addr, token) = runtime.block_on(async {
+        let mut registry = ModelRegistry::default();
+        registry.insert("tube", model);
+        let state = AppState::new(
+            registry,
+            Config {
+                grpc: "127.0.0.1:0".parse().unwrap(),
+                http: "127.0.0.1:0".parse().unwrap(),
+                admin_token: Some("admin".into()),
+                limits: Limits::default(),
+            },
+        );
+        let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
+        let addr = running.grpc;
+        std::mem::forget(running);
+        let mut client = CreaseClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+        let mut open = tonic::Request::new(v1::OpenRoomRequest {
+            room: "r1".into(),
+            model: "tube".into(),
+            beta: 0.0,
+        });
+        open.metadata_mut()
+            .insert("authorization", "Bearer admin".parse().unwrap());
+        let token = client
+            .open_room(open)
+            .await
+            .unwrap()
+            .into_inner()
+            .publish_token;
+        (addr, token)
+    });
+    // A publisher: a frame every 20 ms until the test ends.
+    let rest = tube();
+    runtime.spawn(async move {
+        let mut client = CreaseClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+        let frames = async_frames(rest);
+        let mut req = tonic::Request::new(frames);
+        req.metadata_mut()
+            .insert("authorization", format!("Bearer {token}").parse().unwrap());
+        let mut acks = client.publish(req).await.unwrap().into_inner();
+        while let Ok(Some(_)) = acks.message().await {}
+    });
+
+    let dump = tmp.path().join("dump");
+    let out = crease()
+        .args([
+            "watch",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            "r1",
+        ])
+        .args(["--frames", "5", "--dump"])
+        .arg(&dump)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "watch failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.starts_with("5 frames in "), "{stdout}");
+    assert!(
+        stdout.contains("bytes/vertex") && stdout.contains("p99"),
+        "{stdout}"
+    );
+    for k in 0..5 {
+        let m = Mesh::read(dump.join(format!("frame_{k:05}.obj"))).unwrap();
+        assert_eq!(m.vertex_count(), vertices);
+        assert_eq!(m.triangles.len(), triangles);
+        assert!(m.positions.iter().all(|p| p.is_finite()));
+    }
+
+    // An unknown room is a clear error.
+    let out = crease()
+        .args([
+            "watch",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            "none",
+        ])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no room"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Control frames of the tube bending back and forth, one every 20 ms, forever.
+fn async_frames(rest: Mesh) -> impl tokio_stream::Stream<Item = v1::ControlFrame> + Send + 'static {
+    let (tx, rx) = tokio::sync::mpsc::channel(4);
+    tokio::spawn(async move {
+        for seq in 0u64.. {
+            let pose = bent(&rest, 0.6 * (seq as f32 * 0.2).sin().abs());
+            let frame = v1::ControlFrame {
+                room: "r1".into(),
+                seq,
+                capture_time_us: 0,
+                positions: CONTROLS
+                    .iter()
+                    .flat_map(|&c| pose.positions[c].to_array())
+                    .collect(),
+                valid: Vec::new(),
+            };
+            if tx.send(frame).await.is_err() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    tokio_stream::wrappers::ReceiverStream::new(rx)
+}

@@ -1,0 +1,102 @@
+//! Helpers shared by the command-line tests: the `crease` binary and a bending tube trained
+//! into a small model.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::Command;
+
+use crease_core::glam::{Quat, Vec3};
+use crease_core::mesh::Mesh;
+
+pub fn crease() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_crease"))
+}
+
+pub const RINGS: usize = 8;
+pub const AROUND: usize = 6;
+/// Control points: a base vertex, two at mid height, two at the tip.
+pub const CONTROLS: [usize; 5] = [0, 4 * AROUND, 4 * AROUND + 3, 7 * AROUND, 7 * AROUND + 3];
+
+/// A tube along z from 0 to 7 (unit radius), `RINGS` rings of `AROUND` vertices.
+pub fn tube() -> Mesh {
+    let mut positions = Vec::new();
+    for r in 0..RINGS {
+        for a in 0..AROUND {
+            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
+            positions.push(Vec3::new(phi.cos(), phi.sin(), r as f32));
+        }
+    }
+    let mut triangles = Vec::new();
+    for r in 0..RINGS - 1 {
+        for a in 0..AROUND {
+            let i0 = (r * AROUND + a) as u32;
+            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
+            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
+            triangles.push([i0, i1, j1]);
+            triangles.push([i0, j1, j0]);
+        }
+    }
+    Mesh {
+        positions,
+        triangles,
+    }
+}
+
+/// The tube with its upper half rotated by `angle` about the x axis through z = 3.5.
+pub fn bent(rest: &Mesh, angle: f32) -> Mesh {
+    let q = Quat::from_rotation_x(angle);
+    let pivot = Vec3::new(0.0, 0.0, 3.5);
+    Mesh {
+        positions: rest
+            .positions
+            .iter()
+            .map(|&p| {
+                if p.z > pivot.z {
+                    pivot + q * (p - pivot)
+                } else {
+                    p
+                }
+            })
+            .collect(),
+        triangles: rest.triangles.clone(),
+    }
+}
+
+/// Writes the rest tube and six bent poses, trains a 2-bone global model on them and returns
+/// the model's path.
+pub fn train_model(dir: &Path) -> std::path::PathBuf {
+    let examples = dir.join("examples");
+    std::fs::create_dir_all(&examples).unwrap();
+    let rest = tube();
+    rest.write(examples.join("reference.obj")).unwrap();
+    for k in 1..=6 {
+        bent(&rest, 0.15 * k as f32)
+            .write(examples.join(format!("pose{k}.obj")))
+            .unwrap();
+    }
+    let model = dir.join("tube.crease");
+    let controls = CONTROLS.map(|c| c.to_string()).join(",");
+    let out = crease()
+        .args(["train", "--examples"])
+        .arg(&examples)
+        .args([
+            "--bones",
+            "2",
+            "--max-influences",
+            "2",
+            "--kc",
+            "3",
+            "--kp",
+            "3",
+        ])
+        .args(["--method", "global", "--control-points", &controls, "--out"])
+        .arg(&model)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "train failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    model
+}
