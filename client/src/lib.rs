@@ -44,6 +44,8 @@ pub enum Command {
     Pose(commands::handgen::PoseArgs),
     /// Watch a room on a server: decode its frames, report frames/s, bytes and latency.
     Watch(commands::watch::WatchArgs),
+    /// Publish a file of control frames into a room at a fixed rate.
+    Stream(commands::stream::StreamArgs),
 }
 
 /// Runs a parsed command line.
@@ -56,6 +58,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Handgen(args) => commands::handgen::run(&args),
         Command::Pose(args) => commands::handgen::run_pose(&args),
         Command::Watch(args) => commands::watch::run(&args),
+        Command::Stream(args) => commands::stream::run(&args),
     }
 }
 

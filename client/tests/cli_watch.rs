@@ -57,6 +57,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     });
     // A publisher: a frame every 20 ms until the test ends.
     let rest = tube();
+    let publish_token = token.clone();
     runtime.spawn(async move {
         let mut client = CreaseClient::connect(format!("http://{addr}"))
             .await
@@ -99,6 +100,62 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         assert_eq!(m.triangles.len(), triangles);
         assert!(m.positions.iter().all(|p| p.is_finite()));
     }
+
+    // `crease stream`: ten frames from a CSV (one with an occluded point) at 100 Hz.
+    let csv = tmp.path().join("frames.csv");
+    let mut text = String::new();
+    for k in 0..10 {
+        let pose = bent(&tube(), 0.05 * k as f32);
+        let mut fields: Vec<String> = CONTROLS
+            .iter()
+            .flat_map(|&c| pose.positions[c].to_array())
+            .map(|v| v.to_string())
+            .collect();
+        if k == 3 {
+            fields[0..3].iter_mut().for_each(|f| f.clear());
+        }
+        text.push_str(&fields.join(","));
+        text.push('\n');
+    }
+    std::fs::write(&csv, text).unwrap();
+    let out = crease()
+        .args([
+            "stream",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            "r1",
+        ])
+        .args(["--token", &publish_token, "--rate", "100", "--frames"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "stream failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.starts_with("10 frames in ")
+            && stdout.contains("10 acknowledged, 0 refused, 1 occluded"),
+        "{stdout}"
+    );
+    // A wrong token: every frame refused, and the command says so.
+    let out = crease()
+        .args([
+            "stream",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            "r1",
+        ])
+        .args(["--token", "wrong", "--frames"])
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not the publish token"));
 
     // An unknown room is a clear error.
     let out = crease()

@@ -5,6 +5,7 @@ pub mod eval;
 pub mod fit;
 pub mod handgen;
 pub mod layers;
+pub mod stream;
 pub mod synth;
 pub mod train;
 pub mod watch;
