@@ -70,15 +70,14 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         while let Ok(Some(_)) = acks.message().await {}
     });
 
+    // `crease CMD --server <this server> --room ROOM`.
+    let on_server = |cmd: &str, room: &str| {
+        let mut c = crease();
+        c.args([cmd, "--server", &format!("http://{addr}"), "--room", room]);
+        c
+    };
     let dump = tmp.path().join("dump");
-    let out = crease()
-        .args([
-            "watch",
-            "--server",
-            &format!("http://{addr}"),
-            "--room",
-            "r1",
-        ])
+    let out = on_server("watch", "r1")
         .args(["--frames", "5", "--dump"])
         .arg(&dump)
         .output()
@@ -118,14 +117,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         text.push('\n');
     }
     std::fs::write(&csv, text).unwrap();
-    let out = crease()
-        .args([
-            "stream",
-            "--server",
-            &format!("http://{addr}"),
-            "--room",
-            "r1",
-        ])
+    let out = on_server("stream", "r1")
         .args(["--token", &publish_token, "--rate", "100", "--frames"])
         .arg(&csv)
         .output()
@@ -142,14 +134,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         "{stdout}"
     );
     // A wrong token: every frame refused, and the command says so.
-    let out = crease()
-        .args([
-            "stream",
-            "--server",
-            &format!("http://{addr}"),
-            "--room",
-            "r1",
-        ])
+    let out = on_server("stream", "r1")
         .args(["--token", "wrong", "--frames"])
         .arg(&csv)
         .output()
@@ -158,16 +143,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("not the publish token"));
 
     // An unknown room is a clear error.
-    let out = crease()
-        .args([
-            "watch",
-            "--server",
-            &format!("http://{addr}"),
-            "--room",
-            "none",
-        ])
-        .output()
-        .unwrap();
+    let out = on_server("watch", "none").output().unwrap();
     assert!(!out.status.success());
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("no room"),

@@ -10,7 +10,7 @@
 //! and a keyframe of the same frame made on demand (once, shared) for subscribers that did not
 //! receive that previous frame (they joined late, or skipped it).
 
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
@@ -20,6 +20,7 @@ use crease_core::codec::{
 use crease_core::glam::Vec3;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
 use crease_proto::{WireError, read_control_frame, v1};
+use prost::bytes::Bytes;
 use tokio::sync::watch;
 
 use crate::registry::LoadedModel;
@@ -40,7 +41,7 @@ pub struct MeshUpdate {
     /// When the control frame arrived.
     pub received: Instant,
     /// The room encoder's frame: a keyframe, or a delta against codec frame `base_seq`.
-    frame: Vec<u8>,
+    frame: Bytes,
     /// This frame's codec sequence number.
     codec_seq: u32,
     /// The codec frame a delta applies to (`codec_seq` for a keyframe).
@@ -48,7 +49,7 @@ pub struct MeshUpdate {
     qbox: QuantBox,
     /// The vertices, for the on-demand keyframe.
     positions: Vec<Vec3>,
-    key: OnceLock<Result<Vec<u8>, CodecError>>,
+    key: OnceLock<Result<Bytes, CodecError>>,
 }
 
 impl MeshUpdate {
@@ -60,18 +61,17 @@ impl MeshUpdate {
     /// The bytes to send a subscriber whose last received codec frame is `last_sent`: the
     /// shared frame when it is a keyframe or a delta against `last_sent`, else a keyframe of
     /// this frame (encoded once, on first need).
-    pub fn frame_for(&self, last_sent: Option<u32>) -> Result<&[u8], CodecError> {
+    pub fn frame_for(&self, last_sent: Option<u32>) -> Result<Bytes, CodecError> {
         if self.base_seq == self.codec_seq || last_sent == Some(self.base_seq) {
-            return Ok(&self.frame);
+            return Ok(self.frame.clone());
         }
         self.key
             .get_or_init(|| {
                 let mut out = Vec::new();
                 encode_keyframe(&self.qbox, self.codec_seq, &self.positions, None, &mut out)
-                    .map(|_| out)
+                    .map(|_| Bytes::from(out))
             })
-            .as_deref()
-            .map_err(Clone::clone)
+            .clone()
     }
 }
 
@@ -128,7 +128,6 @@ pub struct Room {
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
     detail: watch::Sender<Option<Arc<MeshUpdate>>>,
     detail_subscribers: Arc<AtomicUsize>,
-    frames: AtomicU64,
 }
 
 impl std::fmt::Debug for Room {
@@ -136,7 +135,6 @@ impl std::fmt::Debug for Room {
         f.debug_struct("Room")
             .field("id", &self.id)
             .field("model", &self.model.name)
-            .field("frames", &self.frames.load(Ordering::Relaxed))
             .finish_non_exhaustive()
     }
 }
@@ -180,7 +178,6 @@ impl Room {
             base: watch::channel(None).0,
             detail: watch::channel(None).0,
             detail_subscribers: Arc::new(AtomicUsize::new(0)),
-            frames: AtomicU64::new(0),
         })
     }
 
@@ -197,11 +194,6 @@ impl Room {
     /// The translation-solve beta of this room.
     pub fn beta(&self) -> f32 {
         self.predictor.beta()
-    }
-
-    /// Frames published so far.
-    pub fn frames(&self) -> u64 {
-        self.frames.load(Ordering::Relaxed)
     }
 
     /// The quantisation box of the room's frames.
@@ -249,7 +241,7 @@ impl Room {
                 seq: frame.seq,
                 capture_time_us: frame.capture_time_us,
                 received,
-                frame: bytes,
+                frame: Bytes::from(bytes),
                 codec_seq: header.seq,
                 base_seq: match header.kind {
                     FrameKind::Key => header.seq,
@@ -269,7 +261,6 @@ impl Room {
             self.detail
                 .send_replace(update(&mut state.detail_encoder, detail)?);
         }
-        self.frames.fetch_add(1, Ordering::Relaxed);
         Ok(Published {
             held: held as u32,
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
@@ -306,11 +297,6 @@ impl Room {
             Level::Base => &self.model.model.rig.rest.triangles,
             Level::Detail => self.predictor.detail_triangles().unwrap_or_default(),
         }
-    }
-
-    /// Subscribers currently receiving frames, per level (base, detail).
-    pub fn subscriber_counts(&self) -> (usize, usize) {
-        (self.base.receiver_count(), self.detail.receiver_count())
     }
 }
 

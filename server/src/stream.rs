@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use crease_core::codec::encode_indices;
 use crease_proto::{box3, v1};
+use prost::bytes::Bytes;
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
@@ -48,12 +49,11 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
 }
 
 /// The bytes of `update` for a subscriber whose last received codec frame is `last_sent`
-/// (updated).
-fn bytes_for(update: &MeshUpdate, last_sent: &mut Option<u32>) -> Result<Vec<u8>, Status> {
+/// (updated): shared with the other subscribers, not copied.
+fn bytes_for(update: &MeshUpdate, last_sent: &mut Option<u32>) -> Result<Bytes, Status> {
     let bytes = update
         .frame_for(*last_sent)
-        .map_err(|e| Status::internal(format!("encoding: {e}")))?
-        .to_vec();
+        .map_err(|e| Status::internal(format!("encoding: {e}")))?;
     *last_sent = Some(update.codec_seq());
     Ok(bytes)
 }
@@ -63,7 +63,7 @@ fn frame_message(
     capture_time_us: i64,
     latency_us: u32,
     skipped: u32,
-    data: Vec<u8>,
+    data: Bytes,
 ) -> v1::MeshFrame {
     v1::MeshFrame {
         body: Some(v1::mesh_frame::Body::Frame(v1::Frame {

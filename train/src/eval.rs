@@ -293,12 +293,12 @@ impl<'a> PreparedDetail<'a> {
         held: Option<usize>,
         truth: &'t [Truth],
     ) -> Result<FoldDetail<'t>, TrainError> {
-        let h: Vec<Vec<f32>> = self
+        let h: Vec<&[f32]> = self
             .train_h
             .iter()
             .enumerate()
             .filter(|&(i, _)| Some(i) != held)
-            .map(|(_, h)| h.clone())
+            .map(|(_, h)| h.as_slice())
             .collect();
         let fit = |input: DetailInput| -> Result<DetailRegressor, TrainError> {
             let x = detail_layer::inputs(input, &base.example_controls, &base.rotations);
@@ -310,7 +310,7 @@ impl<'a> PreparedDetail<'a> {
             detail_layer::fit(&h, &x, d_in, &options).map_err(|e| TrainError::Detail(e.into()))
         };
         let pose = fit(DetailInput::Controls)?;
-        let fixed = DetailRegressor::fixed(DetailInput::Controls, pose.d_in, h[0].clone());
+        let fixed = DetailRegressor::fixed(DetailInput::Controls, pose.d_in, h[0].to_vec());
         Ok(FoldDetail {
             levels: self.options.levels,
             cascaded: fit(DetailInput::Rotations)?,

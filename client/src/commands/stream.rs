@@ -85,12 +85,15 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let (tx, rx) = tokio::sync::mpsc::channel(8);
     let start = Instant::now();
     tokio::spawn(async move {
-        let mut mask = Vec::new();
         let mut ticker = tokio::time::interval(period);
         for seq in 0..total {
             ticker.tick().await;
             let f = &frames[(seq % frames.len() as u64) as usize];
-            encode_valid_mask(&f.valid, &mut mask);
+            // An empty mask says every point is valid.
+            let mut valid = Vec::new();
+            if f.valid.iter().any(|v| !v) {
+                encode_valid_mask(&f.valid, &mut valid);
+            }
             let frame = v1::ControlFrame {
                 room: room.clone(),
                 seq,
@@ -108,11 +111,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                         }
                     })
                     .collect(),
-                valid: if f.valid.iter().all(|v| *v) {
-                    Vec::new()
-                } else {
-                    mask.clone()
-                },
+                valid,
             };
             if tx.send(frame).await.is_err() {
                 break;

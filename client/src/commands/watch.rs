@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use crease_core::codec::{FrameDecoder, decode_indices};
-use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
@@ -96,7 +95,11 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut decoder = FrameDecoder::new(n);
-    let mut positions: Vec<Vec3> = Vec::new();
+    // The dumped mesh: the topology once, each frame's positions decoded into it.
+    let mut mesh = Mesh {
+        positions: Vec::new(),
+        triangles,
+    };
     let (mut frames, mut bytes, mut skipped) = (0u64, 0u64, 0u64);
     let mut latencies: Vec<u32> = Vec::new();
     let start = Instant::now();
@@ -113,15 +116,10 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         skipped += u64::from(f.skipped);
         latencies.push(f.server_latency_us);
         if let Some(dir) = &args.dump {
-            decoder.positions(&mut positions);
-            let mesh = Mesh {
-                positions: std::mem::take(&mut positions),
-                triangles: triangles.clone(),
-            };
+            decoder.positions(&mut mesh.positions);
             let path = dir.join(format!("frame_{:05}.obj", frames - 1));
             mesh.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;
-            positions = mesh.positions;
         }
         window.1 += 1;
         window.2 += f.data.len() as u64;

@@ -197,10 +197,7 @@ impl Predictor {
     /// Vertices of the detailed output, when the model has a detail layer (without building
     /// the subdivision).
     pub fn detail_vertex_count(&self) -> Option<usize> {
-        self.model
-            .detail
-            .as_ref()
-            .map(|d| d.regressor.vertex_count())
+        self.model.detail_vertex_count()
     }
 
     /// The model.

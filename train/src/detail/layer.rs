@@ -166,8 +166,8 @@ pub fn inputs(
 
 /// Fits the detail layer's regressor on displacements `h` and inputs `x` (`h.len()` rows of
 /// `d_in` values) with `options`' kernel and input.
-pub fn fit(
-    h: &[Vec<f32>],
+pub fn fit<H: AsRef<[f32]>>(
+    h: &[H],
     x: &[f32],
     d_in: usize,
     options: &DetailOptions,
@@ -220,8 +220,8 @@ pub fn train(
 
 /// The crease regions of an evaluation: the `fraction` of detailed vertices whose `h` varies
 /// most (max - min) over the training examples, ascending. Chosen from training data only.
-pub fn crease_vertices(h: &[Vec<f32>], fraction: f64) -> Vec<u32> {
-    let Some(first) = h.first() else {
+pub fn crease_vertices<H: AsRef<[f32]>>(h: &[H], fraction: f64) -> Vec<u32> {
+    let Some(first) = h.first().map(AsRef::as_ref) else {
         return Vec::new();
     };
     let mut spread: Vec<(f32, u32)> = (0..first.len())
@@ -229,7 +229,8 @@ pub fn crease_vertices(h: &[Vec<f32>], fraction: f64) -> Vec<u32> {
             let (lo, hi) = h
                 .iter()
                 .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, u), hl| {
-                    (l.min(hl[v]), u.max(hl[v]))
+                    let x = hl.as_ref()[v];
+                    (l.min(x), u.max(x))
                 });
             (hi - lo, v as u32)
         })

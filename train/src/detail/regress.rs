@@ -44,13 +44,13 @@ pub enum DetailFitError {
 }
 
 /// Fits the detail regressor (module docs). `inputs` is `n x d_in` row-major, `h[l]` the
-/// displacements of example `l` (one per detailed vertex). A Gaussian kernel of width
+/// displacements of example `l` (one per detailed vertex; owned vectors or borrowed slices). A Gaussian kernel of width
 /// `default_sigma(inputs)` when `kernel` is `None`.
-pub fn fit(
+pub fn fit<H: AsRef<[f32]>>(
     input: DetailInput,
     inputs: &[f32],
     d_in: usize,
-    h: &[Vec<f32>],
+    h: &[H],
     kernel: Option<Kernel>,
     opts: &KccaOptions,
 ) -> Result<DetailRegressor, DetailFitError> {
@@ -61,8 +61,13 @@ pub fn fit(
             inputs.len()
         )));
     }
-    let vertices = h[0].len();
-    if let Some((l, hl)) = h.iter().enumerate().find(|(_, hl)| hl.len() != vertices) {
+    let vertices = h[0].as_ref().len();
+    if let Some((l, hl)) = h
+        .iter()
+        .map(AsRef::as_ref)
+        .enumerate()
+        .find(|(_, hl)| hl.len() != vertices)
+    {
         return Err(DetailFitError::Shape(format!(
             "example {l} has {} displacements, example 0 has {vertices}",
             hl.len()
@@ -77,7 +82,7 @@ pub fn fit(
     // y: n x vertices, row-major (one row per example).
     let mut y = Vec::with_capacity(n * vertices);
     for hl in h {
-        y.extend_from_slice(hl);
+        y.extend_from_slice(hl.as_ref());
     }
     if let Some(index) = y.iter().position(|v| !v.is_finite()) {
         return Err(DetailFitError::NotFinite {
