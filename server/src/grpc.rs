@@ -14,7 +14,7 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::AppState;
 use crate::registry::LoadedModel;
-use crate::room::{Level, Room, RoomError};
+use crate::room::{Level, Room, RoomError, StreamSettings};
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
 const STREAM_BUFFER: usize = 4;
@@ -126,7 +126,7 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let room = Room::open(&r.room, model, beta).map_err(|e| match e {
+        let room = Room::open(&r.room, model, beta, self.state.config.stream).map_err(|e| match e {
             RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
             RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
             RoomError::Codec(e) => Status::internal(format!("model: {e}")),
@@ -221,7 +221,7 @@ impl Crease for CreaseService {
         let level = level(r.level)?;
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let room = Room::open("batch", model, beta)
+        let room = Room::open("batch", model, beta, StreamSettings::full())
             .map_err(|e| Status::invalid_argument(format!("beta: {e}")))?;
         check_level(&room, level)?;
         Ok(Response::new(Box::pin(crate::stream::batch(

@@ -55,6 +55,25 @@ pub struct Config {
     pub admin_token: Option<String>,
     /// Limits.
     pub limits: Limits,
+    /// How live rooms stream their meshes (bits, vertex order).
+    pub stream: room::StreamSettings,
+}
+
+/// The default gRPC address: every interface, port 50051.
+pub const DEFAULT_GRPC: &str = "0.0.0.0:50051";
+/// The default HTTP (and WebSocket) address: every interface, port 8080.
+pub const DEFAULT_HTTP: &str = "0.0.0.0:8080";
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            grpc: DEFAULT_GRPC.parse().expect("a valid address"),
+            http: DEFAULT_HTTP.parse().expect("a valid address"),
+            admin_token: None,
+            limits: Limits::default(),
+            stream: room::StreamSettings::default(),
+        }
+    }
 }
 
 /// What the services share: the models and the open rooms.

@@ -56,6 +56,7 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
                 rooms: args.max_rooms,
                 ..Limits::default()
             },
+            ..Config::default()
         },
     );
     let running = crease_server::serve(state).await?;

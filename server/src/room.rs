@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use crease_core::codec::{
     CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_keyframe,
+    spatial_order,
 };
 use crease_core::glam::Vec3;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
@@ -28,8 +29,46 @@ use crate::registry::LoadedModel;
 /// Quantisation box margin around the box of the model's training poses, as a fraction of its
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
 const BOX_MARGIN: f32 = 0.25;
-/// Quantisation bits per coordinate.
-const BITS: u8 = 16;
+
+/// How a room's meshes are streamed: quantisation bits per level and the vertex order.
+///
+/// Live rooms default to 12 bits for the base mesh: its half-step error (1/8190 of the padded
+/// box, ~2e-4 of the model's size) is ~50x below the horse's prediction error (9.3e-3 RMS,
+/// BENCHMARKS.md) and invisible at any viewing distance, and it brings the gallop to ~1.5
+/// bytes per vertex per frame where 16 bits need ~3 (meshopt's vertex codec stores the low bits
+/// of every moving vertex nearly verbatim: each bit costs ~3/8 byte per vertex). The detail
+/// mesh carries wrinkles a few 1e-3 deep, so it keeps 14 bits. Batches (`Synthesize`) are for
+/// pipelines and default to the full 16.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamSettings {
+    /// Bits per coordinate of base frames, 1..=16.
+    pub base_bits: u8,
+    /// Bits per coordinate of detail frames, 1..=16.
+    pub detail_bits: u8,
+    /// Stream base vertices in a spatial order (`Topology.vertex_order`): 7-9% smaller frames.
+    pub spatial_order: bool,
+}
+
+impl Default for StreamSettings {
+    fn default() -> Self {
+        Self {
+            base_bits: 12,
+            detail_bits: 14,
+            spatial_order: true,
+        }
+    }
+}
+
+impl StreamSettings {
+    /// Full 16-bit precision at both levels (batches).
+    pub fn full() -> Self {
+        Self {
+            base_bits: 16,
+            detail_bits: 16,
+            ..Self::default()
+        }
+    }
+}
 
 /// One predicted mesh, encoded once and shared by every subscriber of its level.
 #[derive(Debug)]
@@ -122,7 +161,12 @@ pub struct Room {
     /// The model.
     pub model: Arc<LoadedModel>,
     token: String,
-    qbox: QuantBox,
+    base_qbox: QuantBox,
+    detail_qbox: QuantBox,
+    /// Streamed base vertex `i` is model vertex `base_order[i]` (empty: model order).
+    base_order: Vec<u32>,
+    /// The base triangles in the streamed order.
+    base_triangles: Vec<[u32; 3]>,
     predictor: Predictor,
     state: Mutex<RoomState>,
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
@@ -149,8 +193,13 @@ pub fn valid_room_id(id: &str) -> bool {
 
 impl Room {
     /// Opens a room on `model` with `beta` (the model's default when `None`) and a fresh random
-    /// publish token.
-    pub fn open(id: &str, model: Arc<LoadedModel>, beta: Option<f32>) -> Result<Room, RoomError> {
+    /// publish token, streaming as `settings` says.
+    pub fn open(
+        id: &str,
+        model: Arc<LoadedModel>,
+        beta: Option<f32>,
+        settings: StreamSettings,
+    ) -> Result<Room, RoomError> {
         if !valid_room_id(id) {
             return Err(RoomError::BadId(id.to_owned()));
         }
@@ -158,14 +207,38 @@ impl Room {
         let ctx = predictor.new_context();
         let n = model.model.controls.len();
         let (lo, hi) = model.pose_bounds;
-        let qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, BITS)?;
-        let encoder = |vertices| FrameEncoder::new(vertices, qbox, DEFAULT_KEYFRAME_INTERVAL);
-        let base_encoder = encoder(model.model.rig.rest.vertex_count())?;
-        let detail_encoder = encoder(model.model.detail_vertex_count().unwrap_or(0))?;
+        let base_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.base_bits)?;
+        let detail_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.detail_bits)?;
+        let encoder =
+            |vertices, qbox| FrameEncoder::new(vertices, qbox, DEFAULT_KEYFRAME_INTERVAL);
+        let rest = &model.model.rig.rest;
+        let base_encoder = encoder(rest.vertex_count(), base_qbox)?;
+        let detail_encoder = encoder(
+            model.model.detail_vertex_count().unwrap_or(0),
+            detail_qbox,
+        )?;
+        let (base_order, base_triangles) = if settings.spatial_order {
+            let order = spatial_order(&rest.positions);
+            let mut inverse = vec![0u32; order.len()];
+            for (i, &m) in order.iter().enumerate() {
+                inverse[m as usize] = i as u32;
+            }
+            let triangles = rest
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| inverse[v as usize]))
+                .collect();
+            (order, triangles)
+        } else {
+            (Vec::new(), rest.triangles.clone())
+        };
         Ok(Room {
             id: id.to_owned(),
             token: new_token(),
-            qbox,
+            base_qbox,
+            detail_qbox,
+            base_order,
+            base_triangles,
             state: Mutex::new(RoomState {
                 ctx,
                 controls: vec![Vec3::ZERO; n],
@@ -196,9 +269,20 @@ impl Room {
         self.predictor.beta()
     }
 
-    /// The quantisation box of the room's frames.
-    pub fn qbox(&self) -> &QuantBox {
-        &self.qbox
+    /// The quantisation box of `level`'s frames.
+    pub fn qbox(&self, level: Level) -> &QuantBox {
+        match level {
+            Level::Base => &self.base_qbox,
+            Level::Detail => &self.detail_qbox,
+        }
+    }
+
+    /// Streamed vertex `i` of `level` is model vertex `order[i]`; empty: the model's order.
+    pub fn vertex_order(&self, level: Level) -> &[u32] {
+        match level {
+            Level::Base => &self.base_order,
+            Level::Detail => &[],
+        }
     }
 
     /// Vertices of `level`'s mesh.
@@ -226,13 +310,21 @@ impl Room {
             field: what.into(),
             message: e.to_string(),
         };
-        let positions = self
+        let predicted = self
             .predictor
             .predict(&mut state.ctx, &state.controls, Some(&state.valid))
-            .map_err(|e| internal("positions", &e))?
-            .to_vec();
-        let qbox = self.qbox;
+            .map_err(|e| internal("positions", &e))?;
+        // In the streamed order; this vector is the frame's (kept for on-demand keyframes).
+        let positions: Vec<Vec3> = if self.base_order.is_empty() {
+            predicted.to_vec()
+        } else {
+            self.base_order
+                .iter()
+                .map(|&m| predicted[m as usize])
+                .collect()
+        };
         let update = |encoder: &mut FrameEncoder, positions: Vec<Vec3>| {
+            let qbox = *encoder.qbox();
             let mut bytes = Vec::new();
             let header = encoder
                 .encode(&positions, None, &mut bytes)
@@ -291,10 +383,10 @@ impl Room {
         self.model.model.detail.is_some()
     }
 
-    /// The triangles of `level`'s mesh.
+    /// The triangles of `level`'s mesh, in the streamed vertex order.
     pub fn triangles(&self, level: Level) -> &[[u32; 3]] {
         match level {
-            Level::Base => &self.model.model.rig.rest.triangles,
+            Level::Base => &self.base_triangles,
             Level::Detail => self.predictor.detail_triangles().unwrap_or_default(),
         }
     }

@@ -35,7 +35,7 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
     let mut indices = Vec::new();
     encode_indices(triangles, n, &mut indices)
         .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
-    let qbox = room.qbox();
+    let qbox = room.qbox(level);
     Ok(v1::MeshFrame {
         body: Some(v1::mesh_frame::Body::Topology(v1::Topology {
             model: room.model.name.clone(),
@@ -44,6 +44,8 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
             triangle_count: triangles.len() as u32,
             indices,
             quantization: Some(box3(qbox.min(), qbox.max())),
+            vertex_order: room.vertex_order(level).to_vec(),
+            bits: u32::from(qbox.bits()),
         })),
     })
 }

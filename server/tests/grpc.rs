@@ -7,7 +7,7 @@
 
 use std::sync::Arc;
 
-use crease_core::codec::{FrameDecoder, decode_indices};
+use crease_core::codec::FrameDecoder;
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
@@ -15,7 +15,7 @@ use crease_core::runtime::predictor::Predictor;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
+use crease_server::{AppState, Config};
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use tonic::Request;
@@ -119,6 +119,42 @@ fn metric(text: &str, name: &str) -> f64 {
         .unwrap()
 }
 
+/// The in-process prediction of `frame` on a fresh context.
+fn predicted(model: &TrainedModel, frame: &v1::ControlFrame) -> Vec<Vec3> {
+    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+    let mut ctx = predictor.new_context();
+    let c: Vec<Vec3> = frame
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    predictor.predict(&mut ctx, &c, None).unwrap().to_vec()
+}
+
+/// Decodes `data` with `decoder` and checks it, put back in model order through `topology`,
+/// against `want` within the frame's quantisation bound. Returns the frame's bits.
+fn check_decoded(
+    decoder: &mut FrameDecoder,
+    topology: &crease_proto::StreamTopology,
+    data: &[u8],
+    want: &[Vec3],
+) -> u8 {
+    let header = decoder.decode(data).unwrap();
+    let (mut streamed, mut got) = (Vec::new(), Vec::new());
+    decoder.positions(&mut streamed);
+    topology.to_model_order(&streamed, &mut got);
+    let bound = header.qbox.error_bound();
+    assert_eq!(got.len(), want.len());
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        let d = (*g - *w).abs();
+        assert!(
+            d.cmple(bound * 1.001 + 1e-6).all(),
+            "vertex {i}: {g} vs {w} (bound {bound})"
+        );
+    }
+    header.qbox.bits()
+}
+
 fn authed<T>(msg: T, token: &str) -> Request<T> {
     let mut r = Request::new(msg);
     r.metadata_mut()
@@ -152,7 +188,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             grpc: "127.0.0.1:0".parse().unwrap(),
             http: "127.0.0.1:0".parse().unwrap(),
             admin_token: Some(ADMIN.into()),
-            limits: Limits::default(),
+            ..Config::default()
         },
     );
     let running = crease_server::serve(state).await.unwrap();
@@ -216,20 +252,19 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         panic!("first message is not the topology: {first:?}");
     };
     assert_eq!(topo.vertex_count as usize, model.rig.rest.vertex_count());
-    let mut tris = Vec::new();
-    decode_indices(
-        &topo.indices,
-        topo.triangle_count as usize,
-        topo.vertex_count as usize,
-        &mut tris,
-    )
-    .unwrap();
+    let topology = crease_proto::read_topology(&topo).unwrap();
+    assert_eq!(topology.bits, 12, "live rooms stream 12-bit base frames");
+    assert_eq!(
+        topology.order.len(),
+        topology.vertex_count,
+        "a spatial vertex order"
+    );
     // meshopt's index codec keeps the triangle order and orientation but may rotate corners.
     let canonical = |t: &[u32; 3]| {
         let k = (0..3).min_by_key(|&k| t[k]).unwrap();
         [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
     };
-    let got: Vec<[u32; 3]> = tris.iter().map(canonical).collect();
+    let got: Vec<[u32; 3]> = topology.model_triangles().iter().map(canonical).collect();
     let want: Vec<[u32; 3]> = model.rig.rest.triangles.iter().map(canonical).collect();
     assert_eq!(got, want);
 
@@ -279,34 +314,17 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     assert_eq!(ack.error.unwrap().code, 7);
 
     // The subscriber sees the latest frame (seq 4) and it decodes to the in-process prediction.
-    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
-    let mut ctx = predictor.new_context();
-    let c: Vec<Vec3> = frames[3]
-        .positions
-        .chunks(3)
-        .map(|p| Vec3::new(p[0], p[1], p[2]))
-        .collect();
-    let want = predictor.predict(&mut ctx, &c, None).unwrap().to_vec();
-    let mut decoder = FrameDecoder::new(topo.vertex_count as usize);
-    let mut got = Vec::new();
-    let bound = loop {
+    let mut decoder = FrameDecoder::new(topology.vertex_count);
+    loop {
         let msg = sub.message().await.unwrap().unwrap();
         let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
             panic!("expected a frame")
         };
-        let header = decoder.decode(&f.data).unwrap();
         if f.seq == 4 {
-            decoder.positions(&mut got);
-            break header.qbox.error_bound();
+            check_decoded(&mut decoder, &topology, &f.data, &predicted(&model, &frames[3]));
+            break;
         }
-    };
-    assert_eq!(got.len(), want.len());
-    for (g, w) in got.iter().zip(&want) {
-        let d = (*g - *w).abs();
-        assert!(
-            d.cmple(bound * 1.001 + 1e-6).all(),
-            "{g} vs {w} (bound {bound})"
-        );
+        decoder.decode(&f.data).unwrap();
     }
 
     // A batch: every frame, in order.
@@ -318,16 +336,29 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             model: "tube".into(),
             level: 0,
             beta: 0.0,
-            frames: batch,
+            frames: batch.clone(),
         })
         .await
         .unwrap()
         .into_inner();
     let mut seqs = Vec::new();
+    let first = s.message().await.unwrap().unwrap();
+    let Some(v1::mesh_frame::Body::Topology(topo)) = first.body else {
+        panic!("a batch starts with the topology: {first:?}");
+    };
+    let batch_topology = crease_proto::read_topology(&topo).unwrap();
+    let mut decoder = FrameDecoder::new(batch_topology.vertex_count);
     while let Some(m) = s.message().await.unwrap() {
-        if let Some(v1::mesh_frame::Body::Frame(f)) = m.body {
-            seqs.push(f.seq);
-        }
+        let Some(v1::mesh_frame::Body::Frame(f)) = m.body else {
+            panic!("a second topology in a batch");
+        };
+        // Each frame on its own context, as the batch's room predicts it: the same controls
+        // and the same state (a batch room starts fresh, like `predicted`'s context, and the
+        // predictor is stateless between frames).
+        let sent = &batch[seqs.len()];
+        let bits = check_decoded(&mut decoder, &batch_topology, &f.data, &predicted(&model, sent));
+        assert_eq!(bits, 16, "batches are full precision");
+        seqs.push(f.seq);
     }
     assert_eq!(seqs, [10, 11, 12, 13, 14]);
 
@@ -347,10 +378,12 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
                 break f;
             }
         };
-        assert!(matches!(
-            first.body,
-            Some(v1::mesh_frame::Body::Topology(_))
-        ));
+        let Some(v1::mesh_frame::Body::Topology(topo)) = first.body else {
+            panic!("the WebSocket stream starts with the topology: {first:?}");
+        };
+        let ws_topology = crease_proto::read_topology(&topo).unwrap();
+        let mut ws_decoder = FrameDecoder::new(ws_topology.vertex_count);
+        let want_501 = predicted(&model, &control_frame(&model, "", 501, 0.6));
         let json = |seq: u64, angle: f32| {
             let f = control_frame(&model, "", seq, angle);
             format!("{{\"seq\": {seq}, \"positions\": {:?}}}", f.positions)
@@ -372,6 +405,11 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
                     if let Some(v1::mesh_frame::Body::Frame(f)) =
                         next_binary(m).and_then(|f| f.body)
                     {
+                        if f.seq == 501 {
+                            check_decoded(&mut ws_decoder, &ws_topology, &f.data, &want_501);
+                        } else {
+                            ws_decoder.decode(&f.data).unwrap();
+                        }
                         seqs.push(f.seq);
                     }
                 }

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use crease_core::codec::{FrameDecoder, decode_indices};
+use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
-use crease_proto::v1;
+use crease_proto::{read_topology, v1};
 use crease_proto::v1::crease_client::CreaseClient;
 
 /// Options of `crease watch`.
@@ -75,15 +75,9 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
         bail!("the first message is not the topology");
     };
-    let n = topology.vertex_count as usize;
-    let mut triangles = Vec::new();
-    decode_indices(
-        &topology.indices,
-        topology.triangle_count as usize,
-        n,
-        &mut triangles,
-    )
-    .context("decoding the topology")?;
+    let stream_topology = read_topology(&topology).context("reading the topology")?;
+    let n = stream_topology.vertex_count;
+    let triangles = stream_topology.model_triangles();
     eprintln!(
         "watching room {:?} (model {:?}, {} vertices, {} triangles)",
         args.room,
@@ -95,7 +89,9 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut decoder = FrameDecoder::new(n);
-    // The dumped mesh: the topology once, each frame's positions decoded into it.
+    // The dumped mesh, in model vertex order: the topology once, each frame's positions
+    // decoded and put back in model order into it.
+    let mut streamed = Vec::new();
     let mut mesh = Mesh {
         positions: Vec::new(),
         triangles,
@@ -116,7 +112,8 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         skipped += u64::from(f.skipped);
         latencies.push(f.server_latency_us);
         if let Some(dir) = &args.dump {
-            decoder.positions(&mut mesh.positions);
+            decoder.positions(&mut streamed);
+            stream_topology.to_model_order(&streamed, &mut mesh.positions);
             let path = dir.join(format!("frame_{:05}.obj", frames - 1));
             mesh.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;

@@ -116,7 +116,7 @@ pub mod quant;
 pub mod stream;
 
 pub use frame::{FrameHeader, FrameKind, HEADER_LEN, MAGIC, VERSION, VERTEX_SIZE, parse_frame};
-pub use index::{decode_indices, encode_indices};
+pub use index::{decode_indices, encode_indices, spatial_order};
 pub use quant::{OCT_MAX_ERROR_DEG, QuantBox, oct_decode, oct_encode};
 pub use stream::{
     DEFAULT_KEYFRAME_INTERVAL, FrameDecoder, FrameEncoder, decode_keyframe, encode_keyframe,
