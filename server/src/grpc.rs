@@ -12,9 +12,9 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::AppState;
 use crate::registry::LoadedModel;
 use crate::room::{Level, Room, RoomError, StreamSettings};
+use crate::{AddRoomError, AppState};
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
 const STREAM_BUFFER: usize = 4;
@@ -126,32 +126,21 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let room = Room::open(&r.room, model, beta, self.state.config.stream).map_err(|e| match e {
-            RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
-            RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
-            RoomError::Codec(e) => Status::internal(format!("model: {e}")),
+        let room =
+            Room::open(&r.room, model, beta, self.state.config.stream).map_err(|e| match e {
+                RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
+                RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
+                RoomError::Codec(e) => Status::internal(format!("model: {e}")),
+            })?;
+        let room = self.state.add_room(room).map_err(|e| match e {
+            AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
+            AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
         })?;
-        let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
-        if rooms.contains_key(&r.room) {
-            return Err(Status::already_exists(format!(
-                "room: {:?} is open",
-                r.room
-            )));
-        }
-        if rooms.len() >= self.state.config.limits.rooms {
-            return Err(Status::resource_exhausted(format!(
-                "rooms: {} open, the limit",
-                rooms.len()
-            )));
-        }
         let response = v1::OpenRoomResponse {
             room: room.id.clone(),
             publish_token: room.token().to_owned(),
             model: Some(room.model.info.clone()),
         };
-        tracing::info!(room = %room.id, model = %room.model.name, beta = room.beta(), "room opened");
-        rooms.insert(r.room, Arc::new(room));
-        self.state.metrics.rooms.set(rooms.len() as i64);
         Ok(Response::new(response))
     }
 

@@ -1,6 +1,6 @@
 //! The HTTP side: `GET /healthz` (the process is up), `GET /readyz` (models loaded and not
-//! shutting down: send traffic), `GET /metrics` (Prometheus). The WebSocket endpoints and the
-//! viewer's static files join this router next (issue 6).
+//! shutting down: send traffic), `GET /metrics` (Prometheus), `/ws/rooms/{id}` (WebSocket,
+//! [`crate::ws`]), and the static files of the browser viewer (`Config::web`) at `/`.
 
 use std::sync::Arc;
 
@@ -14,12 +14,18 @@ use crate::AppState;
 
 /// The HTTP router over shared state.
 pub fn router(state: Arc<AppState>) -> Router {
-    Router::new()
+    let web = state.config.web.clone();
+    let router = Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
         .route("/readyz", get(readyz))
         .route("/metrics", get(metrics))
         .route("/ws/rooms/{id}", get(crate::ws::room_socket))
-        .with_state(state)
+        .with_state(state);
+    match web {
+        // `index.html` for directories; anything else missing is a plain 404.
+        Some(dir) => router.fallback_service(tower_http::services::ServeDir::new(dir)),
+        None => router,
+    }
 }
 
 async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {

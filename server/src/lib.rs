@@ -8,8 +8,12 @@
 //!   [`ws`]: `/ws/rooms/{id}`, subscribe and publish over WebSocket.
 //! - [`serve`]: binds the listeners and runs until shut down.
 //!
-//! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md).
+//! - [`demo`]: the embedded default (a trained demo hand and an animated room).
+//!
+//! Depends on `crease-core` and `crease-proto`, and on `crease-train` for the demo's training
+//! only (ARCHITECTURE.md).
 
+pub mod demo;
 pub mod grpc;
 pub mod http;
 pub mod metrics;
@@ -57,6 +61,8 @@ pub struct Config {
     pub limits: Limits,
     /// How live rooms stream their meshes (bits, vertex order).
     pub stream: room::StreamSettings,
+    /// Static files served at `/` (the browser viewer), if any.
+    pub web: Option<std::path::PathBuf>,
 }
 
 /// The default gRPC address: every interface, port 50051.
@@ -72,6 +78,7 @@ impl Default for Config {
             admin_token: None,
             limits: Limits::default(),
             stream: room::StreamSettings::default(),
+            web: None,
         }
     }
 }
@@ -116,6 +123,25 @@ impl AppState {
         }
     }
 
+    /// Adds an opened room, within the room limit.
+    ///
+    /// # Errors
+    /// [`AddRoomError`] when a room of that id is open or the limit is reached.
+    pub fn add_room(&self, room: Room) -> Result<Arc<Room>, AddRoomError> {
+        let mut rooms = self.rooms.write().unwrap_or_else(|e| e.into_inner());
+        if rooms.contains_key(&room.id) {
+            return Err(AddRoomError::Exists(room.id.clone()));
+        }
+        if rooms.len() >= self.config.limits.rooms {
+            return Err(AddRoomError::Limit(rooms.len()));
+        }
+        let room = Arc::new(room);
+        rooms.insert(room.id.clone(), Arc::clone(&room));
+        self.metrics.rooms.set(rooms.len() as i64);
+        tracing::info!(room = %room.id, model = %room.model.name, beta = room.beta(), "room opened");
+        Ok(room)
+    }
+
     /// The room `id`.
     pub fn room(&self, id: &str) -> Option<Arc<Room>> {
         self.rooms
@@ -124,6 +150,17 @@ impl AppState {
             .get(id)
             .cloned()
     }
+}
+
+/// Why a room could not be added.
+#[derive(Debug, thiserror::Error)]
+pub enum AddRoomError {
+    /// A room of this id is open.
+    #[error("room: {0:?} is open")]
+    Exists(String),
+    /// The room limit is reached.
+    #[error("rooms: {0} open, the limit")]
+    Limit(usize),
 }
 
 /// A running server: its bound addresses and a handle to stop it.

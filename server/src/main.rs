@@ -1,26 +1,48 @@
-//! `crease-server`: serves the models of a model directory over gRPC (issue 6, in progress:
-//! the HTTP/WebSocket side, the embedded demo and the operations endpoints come next).
+//! `crease-server`: hosts live rooms on trained models and streams predicted meshes. With no
+//! arguments it runs the embedded demo (module `demo`): a hand model trained on first start and
+//! cached, and room `demo` animated through the named poses.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use clap::Parser;
+use crease_server::demo::{self, DEMO_MODEL, DEMO_ROOM, DemoAnimation};
 use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
+use crease_server::room::Room;
+use crease_server::{AppState, Config, DEFAULT_GRPC, DEFAULT_HTTP, Limits};
 
-/// Hosts live rooms on trained crease models and streams predicted meshes.
+/// Hosts live rooms on trained crease models and streams predicted meshes over gRPC and
+/// WebSocket. With no --models it serves the embedded demo: a hand trained on first start
+/// (cached; ~15 s) and room "demo" animated through the named poses.
 #[derive(Debug, Parser)]
 #[command(version)]
 struct Args {
-    /// Folder of `*.crease` model files (`crease train --out`).
+    /// Folder of `*.crease` model files (`crease train --out`). Without it the server runs the
+    /// embedded demo.
     #[arg(long, value_name = "DIR")]
-    models: PathBuf,
+    models: Option<PathBuf>,
+    /// Also run the demo (model `demo-hand`, room `demo`) next to --models.
+    #[arg(long)]
+    demo: bool,
+    /// Where the demo model is cached. Default: $CREASE_CACHE_DIR, else $XDG_CACHE_HOME/crease,
+    /// else ~/.cache/crease.
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
+    /// Frames per second of the demo animation.
+    #[arg(long, default_value_t = 60.0)]
+    demo_rate: f64,
     /// gRPC listen address.
-    #[arg(long, default_value = "0.0.0.0:50051")]
+    #[arg(long, default_value = DEFAULT_GRPC)]
     grpc: SocketAddr,
-    /// HTTP listen address (/healthz, /readyz, /metrics).
-    #[arg(long, default_value = "0.0.0.0:8080")]
+    /// HTTP listen address: the viewer (/), WebSocket (/ws/rooms/{id}), /healthz, /readyz,
+    /// /metrics.
+    #[arg(long, default_value = DEFAULT_HTTP)]
     http: SocketAddr,
+    /// Static files served at / (the browser viewer). Default: the web/ folder of the source
+    /// tree this binary was built from, if it exists.
+    #[arg(long, value_name = "DIR")]
+    web: Option<PathBuf>,
     /// Token that opens and closes rooms (`authorization: Bearer <token>`); without it rooms
     /// cannot be opened remotely. Also read from CREASE_ADMIN_TOKEN.
     #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
@@ -39,13 +61,39 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         .with_writer(std::io::stderr)
         .init();
     let args = Args::parse();
-    let models = ModelRegistry::load_dir(&args.models)?;
-    if models.is_empty() {
-        return Err(format!("{}: no *.crease model files", args.models.display()).into());
-    }
+    let mut models = match &args.models {
+        Some(dir) => {
+            let models = ModelRegistry::load_dir(dir)?;
+            if models.is_empty() && !args.demo {
+                return Err(format!(
+                    "{}: no *.crease model files (train one with `crease train`, or add --demo)",
+                    dir.display()
+                )
+                .into());
+            }
+            models
+        }
+        None => ModelRegistry::default(),
+    };
+    let run_demo = args.models.is_none() || args.demo;
+    let demo_model = if run_demo {
+        let cache = args.cache.clone().unwrap_or_else(demo::default_cache_dir);
+        let model = tokio::task::spawn_blocking(move || {
+            demo::demo_model(&cache, &mut |line| eprintln!("demo: {line}"))
+        })
+        .await??;
+        let animation = DemoAnimation::new(&model)?;
+        Some((models.insert(DEMO_MODEL, model), animation))
+    } else {
+        None
+    };
     for m in models.iter() {
         tracing::info!(model = %m.name, vertices = m.info.base_vertices, detail = m.info.detail_vertices, "loaded");
     }
+    let web = args.web.clone().or_else(|| {
+        let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"));
+        dir.is_dir().then_some(dir)
+    });
     let state = AppState::new(
         models,
         Config {
@@ -56,16 +104,53 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
                 rooms: args.max_rooms,
                 ..Limits::default()
             },
+            web,
             ..Config::default()
         },
     );
+    if let Some((model, animation)) = demo_model {
+        let room = state.add_room(Room::open(DEMO_ROOM, model, None, state.config.stream)?)?;
+        tokio::spawn(demo::drive(
+            Arc::clone(&state),
+            room,
+            animation,
+            args.demo_rate,
+        ));
+    }
     let running = crease_server::serve(state).await?;
     eprintln!(
-        "crease-server: gRPC on {}, HTTP on {} (/healthz /readyz /metrics)",
+        "crease-server: gRPC on {}, HTTP on {} (/healthz /readyz /metrics /ws/rooms/ROOM)",
         running.grpc, running.http
     );
-    tokio::signal::ctrl_c().await?;
+    if run_demo {
+        let host = if running.http.ip().is_unspecified() {
+            "localhost".to_owned()
+        } else {
+            running.http.ip().to_string()
+        };
+        eprintln!(
+            "demo: room {DEMO_ROOM:?} is live. Open http://{host}:{}/?room={DEMO_ROOM} or run \
+             `crease watch --server http://{host}:{} --room {DEMO_ROOM}`",
+            running.http.port(),
+            running.grpc.port()
+        );
+    }
+    shutdown_signal().await?;
     eprintln!("shutting down");
     running.shutdown(std::time::Duration::from_secs(5)).await?;
     Ok(())
+}
+
+/// Resolves on Ctrl-C, or on SIGTERM (what container runtimes send) on Unix.
+async fn shutdown_signal() -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+        tokio::select! {
+            r = tokio::signal::ctrl_c() => r,
+            _ = term.recv() => Ok(()),
+        }
+    }
+    #[cfg(not(unix))]
+    tokio::signal::ctrl_c().await
 }

@@ -209,14 +209,10 @@ impl Room {
         let (lo, hi) = model.pose_bounds;
         let base_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.base_bits)?;
         let detail_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.detail_bits)?;
-        let encoder =
-            |vertices, qbox| FrameEncoder::new(vertices, qbox, DEFAULT_KEYFRAME_INTERVAL);
+        let encoder = |vertices, qbox| FrameEncoder::new(vertices, qbox, DEFAULT_KEYFRAME_INTERVAL);
         let rest = &model.model.rig.rest;
         let base_encoder = encoder(rest.vertex_count(), base_qbox)?;
-        let detail_encoder = encoder(
-            model.model.detail_vertex_count().unwrap_or(0),
-            detail_qbox,
-        )?;
+        let detail_encoder = encoder(model.model.detail_vertex_count().unwrap_or(0), detail_qbox)?;
         let (base_order, base_triangles) = if settings.spatial_order {
             let order = spatial_order(&rest.positions);
             let mut inverse = vec![0u32; order.len()];
