@@ -193,10 +193,14 @@ impl Crease for CreaseService {
         let level = level(r.level)?;
         let room = self.room(&r.room)?;
         check_level(&room, level)?;
+        let subscription = room
+            .subscribe(level, self.state.config.limits.subscribers_per_room)
+            .map_err(|e| Status::resource_exhausted(format!("room {:?}: {e}", room.id)))?;
         Ok(Response::new(Box::pin(crate::stream::subscribe(
             Arc::clone(&self.state),
             room,
             level,
+            subscription,
         ))))
     }
 
@@ -237,6 +241,14 @@ pub(crate) async fn publish_one(
             frame.seq,
             7,
             format!("authorization: not the publish token of room {:?}", room.id),
+        ),
+        Some(room) if !room.admit(state.config.limits.publish_hz) => error_ack(
+            frame.seq,
+            8,
+            format!(
+                "rate: room {:?} accepts at most {} frames per second",
+                room.id, state.config.limits.publish_hz
+            ),
         ),
         Some(room) => {
             let seq = frame.seq;

@@ -35,8 +35,13 @@ use room::Room;
 pub struct Limits {
     /// Most rooms open at once.
     pub rooms: usize,
-    /// Largest gRPC message accepted, bytes.
+    /// Largest gRPC or WebSocket message accepted, bytes.
     pub message_bytes: usize,
+    /// Most live subscriptions per room (gRPC and WebSocket together).
+    pub subscribers_per_room: usize,
+    /// Most control frames per second a room accepts (bursts of a quarter second's worth);
+    /// frames over it are refused with RESOURCE_EXHAUSTED and change nothing.
+    pub publish_hz: f64,
 }
 
 impl Default for Limits {
@@ -44,6 +49,9 @@ impl Default for Limits {
         Self {
             rooms: 64,
             message_bytes: 4 << 20,
+            subscribers_per_room: 512,
+            // Twice the fastest mocap rigs we expect (120 Hz).
+            publish_hz: 240.0,
         }
     }
 }

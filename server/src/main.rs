@@ -50,6 +50,15 @@ struct Args {
     /// Most rooms open at once.
     #[arg(long, default_value_t = Limits::default().rooms)]
     max_rooms: usize,
+    /// Most live subscriptions per room.
+    #[arg(long, default_value_t = Limits::default().subscribers_per_room)]
+    max_subscribers: usize,
+    /// Most control frames per second a room accepts.
+    #[arg(long, default_value_t = Limits::default().publish_hz)]
+    max_publish_hz: f64,
+    /// Largest gRPC or WebSocket message accepted, bytes.
+    #[arg(long, default_value_t = Limits::default().message_bytes)]
+    max_message_bytes: usize,
 }
 
 #[tokio::main]
@@ -102,7 +111,9 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             admin_token: args.admin_token,
             limits: Limits {
                 rooms: args.max_rooms,
-                ..Limits::default()
+                subscribers_per_room: args.max_subscribers,
+                publish_hz: args.max_publish_hz,
+                message_bytes: args.max_message_bytes,
             },
             web,
             ..Config::default()

@@ -171,8 +171,25 @@ pub struct Room {
     state: Mutex<RoomState>,
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
     detail: watch::Sender<Option<Arc<MeshUpdate>>>,
+    /// Live subscriptions of both levels (the subscriber limit).
+    subscribers: Arc<AtomicUsize>,
     detail_subscribers: Arc<AtomicUsize>,
+    /// The publish rate limit's token bucket.
+    budget: Mutex<Budget>,
 }
+
+/// A token bucket: `tokens` frames may be published now; it refills at the rate limit, up to a
+/// quarter second's worth.
+#[derive(Debug)]
+struct Budget {
+    tokens: f64,
+    at: Instant,
+}
+
+/// The room is full: its subscriber limit is reached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("room is full: {0} subscribers, the limit")]
+pub struct RoomFull(pub usize);
 
 impl std::fmt::Debug for Room {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -246,7 +263,12 @@ impl Room {
             model,
             base: watch::channel(None).0,
             detail: watch::channel(None).0,
+            subscribers: Arc::new(AtomicUsize::new(0)),
             detail_subscribers: Arc::new(AtomicUsize::new(0)),
+            budget: Mutex::new(Budget {
+                tokens: f64::INFINITY,
+                at: Instant::now(),
+            }),
         })
     }
 
@@ -355,23 +377,61 @@ impl Room {
         })
     }
 
+    /// Whether one more frame may be published now under a limit of `rate_hz` frames per
+    /// second (bursts up to a quarter second's worth, at least one frame). Counts the frame.
+    pub fn admit(&self, rate_hz: f64) -> bool {
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return true;
+        }
+        let burst = (rate_hz / 4.0).max(1.0);
+        let mut b = self.budget.lock().unwrap_or_else(|e| e.into_inner());
+        let now = Instant::now();
+        b.tokens = (b.tokens + now.duration_since(b.at).as_secs_f64() * rate_hz).min(burst);
+        b.at = now;
+        if b.tokens >= 1.0 {
+            b.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Live subscriptions (both levels).
+    pub fn subscriber_count(&self) -> usize {
+        self.subscribers.load(Ordering::Relaxed)
+    }
+
     /// A subscription to `level` (the latest frame, then every frame as it comes, skipping what
-    /// the subscriber was too slow for). Detail subscriptions switch the detail layer on while
-    /// they live.
-    pub fn subscribe(&self, level: Level) -> Subscription {
-        match level {
+    /// the subscriber was too slow for), if fewer than `max` subscriptions are live. Detail
+    /// subscriptions switch the detail layer on while they live.
+    ///
+    /// # Errors
+    /// [`RoomFull`] at `max` live subscriptions.
+    pub fn subscribe(&self, level: Level, max: usize) -> Result<Subscription, RoomFull> {
+        let taken = self
+            .subscribers
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            });
+        if let Err(n) = taken {
+            return Err(RoomFull(n));
+        }
+        let slot = CountGuard(Arc::clone(&self.subscribers));
+        Ok(match level {
             Level::Base => Subscription {
                 rx: self.base.subscribe(),
+                _slot: slot,
                 _detail: None,
             },
             Level::Detail => {
                 self.detail_subscribers.fetch_add(1, Ordering::Relaxed);
                 Subscription {
                     rx: self.detail.subscribe(),
-                    _detail: Some(DetailGuard(Arc::clone(&self.detail_subscribers))),
+                    _slot: slot,
+                    _detail: Some(CountGuard(Arc::clone(&self.detail_subscribers))),
                 }
             }
-        }
+        })
     }
 
     /// Whether the model has a detail layer.
@@ -393,14 +453,15 @@ impl Room {
 pub struct Subscription {
     /// The channel; `borrow_and_update` gives the newest frame.
     pub rx: watch::Receiver<Option<Arc<MeshUpdate>>>,
-    _detail: Option<DetailGuard>,
+    _slot: CountGuard,
+    _detail: Option<CountGuard>,
 }
 
-/// Counts a detail subscriber while it lives.
+/// Holds one unit of a counter while it lives.
 #[derive(Debug)]
-struct DetailGuard(Arc<AtomicUsize>);
+struct CountGuard(Arc<AtomicUsize>);
 
-impl Drop for DetailGuard {
+impl Drop for CountGuard {
     fn drop(&mut self) {
         self.0.fetch_sub(1, Ordering::Relaxed);
     }

@@ -17,7 +17,7 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
 use crate::AppState;
-use crate::room::{Level, MeshUpdate, Room};
+use crate::room::{Level, MeshUpdate, Room, Subscription};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
@@ -78,23 +78,28 @@ fn frame_message(
     }
 }
 
-/// The live stream of a room at `level` (module docs).
+/// The live stream of a room at `level` through `sub`, a subscription taken from the room
+/// (module docs).
 pub fn subscribe(
     state: Arc<AppState>,
     room: Arc<Room>,
     level: Level,
+    sub: Subscription,
 ) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
+    let receiver_gone = tx.clone();
     let closing = state.closing();
     let gauge = state.metrics.subscribers.clone();
     let stream = async move {
+        // The whole subscription moves in (a closure would capture only `sub.rx`, and the
+        // subscriber slot would be given back at once).
+        let mut sub = sub;
         let metrics = &state.metrics;
         let first = topology(&room, level);
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
             return;
         }
-        let mut sub = room.subscribe(level);
         let mut last_seq: Option<u64> = None;
         let mut last_sent: Option<u32> = None;
         // The current frame first (if any), then every change.
@@ -122,12 +127,14 @@ pub fn subscribe(
         }
     };
     // The stream ends (and its sender drops) when the server shuts down, even while it waits
-    // for a frame or for a subscriber who stopped reading.
+    // for a frame or for a subscriber who stopped reading; and when the subscriber goes away,
+    // even while no frames come (its subscriber slot is given back then).
     tokio::spawn(async move {
         gauge.inc();
         tokio::select! {
             () = stream => {}
             () = closing => {}
+            () = receiver_gone.closed() => {}
         }
         gauge.dec();
     });
@@ -150,7 +157,10 @@ pub fn batch(
         if tx.send(first).await.is_err() || failed {
             return;
         }
-        let mut sub = room.subscribe(level);
+        // A private room: nobody else subscribes.
+        let Ok(mut sub) = room.subscribe(level, 1) else {
+            return;
+        };
         let mut last_sent: Option<u32> = None;
         for (k, frame) in frames.into_iter().enumerate() {
             let r = Arc::clone(&room);

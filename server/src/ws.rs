@@ -25,7 +25,7 @@ use tokio::sync::mpsc;
 
 use crate::AppState;
 use crate::grpc::publish_one;
-use crate::room::{Level, Room};
+use crate::room::{Level, Room, Subscription};
 
 /// Query parameters of `/ws/rooms/{id}`.
 #[derive(Debug, serde::Deserialize)]
@@ -93,9 +93,23 @@ pub async fn room_socket(
                 .into_response();
         }
     };
-    let subscribe = params.subscribe != Some(false);
+    // The subscriber slot is taken before the upgrade, so a full room is an HTTP error.
+    let subscription = if params.subscribe == Some(false) {
+        None
+    } else {
+        match room.subscribe(level, state.config.limits.subscribers_per_room) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                return (
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    format!("room {:?}: {e}\n", room.id),
+                )
+                    .into_response();
+            }
+        }
+    };
     ws.max_message_size(state.config.limits.message_bytes)
-        .on_upgrade(move |socket| session(state, room, level, params.token, subscribe, socket))
+        .on_upgrade(move |socket| session(state, room, level, params.token, subscription, socket))
 }
 
 async fn session(
@@ -103,7 +117,7 @@ async fn session(
     room: Arc<Room>,
     level: Level,
     token: Option<String>,
-    subscribe: bool,
+    subscription: Option<Subscription>,
     socket: WebSocket,
 ) {
     let (mut sink, mut source) = socket.split();
@@ -116,9 +130,10 @@ async fn session(
         }
         let _ = sink.close().await;
     });
-    let frames = subscribe.then(|| {
+    let frames = subscription.map(|subscription| {
         let out = out.clone();
-        let frames = crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), level);
+        let frames =
+            crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), level, subscription);
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {

@@ -15,7 +15,7 @@ use crease_core::runtime::predictor::Predictor;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config};
+use crease_server::{AppState, Config, Limits};
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use tonic::Request;
@@ -188,6 +188,11 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             grpc: "127.0.0.1:0".parse().unwrap(),
             http: "127.0.0.1:0".parse().unwrap(),
             admin_token: Some(ADMIN.into()),
+            // The bursts below publish as fast as the room predicts.
+            limits: Limits {
+                publish_hz: f64::INFINITY,
+                ..Limits::default()
+            },
             ..Config::default()
         },
     );
@@ -321,7 +326,12 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             panic!("expected a frame")
         };
         if f.seq == 4 {
-            check_decoded(&mut decoder, &topology, &f.data, &predicted(&model, &frames[3]));
+            check_decoded(
+                &mut decoder,
+                &topology,
+                &f.data,
+                &predicted(&model, &frames[3]),
+            );
             break;
         }
         decoder.decode(&f.data).unwrap();
@@ -356,7 +366,12 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         // and the same state (a batch room starts fresh, like `predicted`'s context, and the
         // predictor is stateless between frames).
         let sent = &batch[seqs.len()];
-        let bits = check_decoded(&mut decoder, &batch_topology, &f.data, &predicted(&model, sent));
+        let bits = check_decoded(
+            &mut decoder,
+            &batch_topology,
+            &f.data,
+            &predicted(&model, sent),
+        );
         assert_eq!(bits, 16, "batches are full precision");
         seqs.push(f.seq);
     }
@@ -543,4 +558,129 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     })
     .await;
     assert!(ended.is_ok(), "the subscription did not end after shutdown");
+}
+
+/// The limits: subscribers per room (gRPC and WebSocket share them), the publish rate (frames
+/// over it are refused with RESOURCE_EXHAUSTED, the room keeps its state and recovers), the
+/// room count.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_refuse_and_the_room_goes_on() {
+    let model = model();
+    let mut registry = ModelRegistry::default();
+    registry.insert("tube", model.clone());
+    let state = AppState::new(
+        registry,
+        Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            admin_token: Some(ADMIN.into()),
+            limits: Limits {
+                rooms: 1,
+                subscribers_per_room: 2,
+                publish_hz: 20.0,
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    );
+    let running = crease_server::serve(state).await.unwrap();
+    let url = format!("http://{}", running.grpc);
+    let mut client = CreaseClient::connect(url.clone()).await.unwrap();
+    let open = |room: &str| {
+        authed(
+            v1::OpenRoomRequest {
+                room: room.into(),
+                model: "tube".into(),
+                beta: 0.0,
+            },
+            ADMIN,
+        )
+    };
+    let token = client
+        .open_room(open("r"))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    let err = client.open_room(open("other")).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::ResourceExhausted, "{err}");
+
+    // Two subscribers fit (one over gRPC, one over WebSocket); the third is refused on both.
+    let req = || v1::SubscribeRequest {
+        room: "r".into(),
+        level: 0,
+    };
+    let _first = client.subscribe(req()).await.unwrap().into_inner();
+    let ws_url = format!("ws://{}/ws/rooms/r", running.http);
+    let (_second, _) = tokio_tungstenite::connect_async(ws_url.clone())
+        .await
+        .unwrap();
+    let err = client.subscribe(req()).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::ResourceExhausted, "{err}");
+    assert!(err.message().contains("2 subscribers"), "{}", err.message());
+    let err = tokio_tungstenite::connect_async(ws_url.clone())
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("503"), "{err}");
+    // A publish-only socket takes no subscriber slot.
+    let publish_only = format!("{ws_url}?subscribe=false&token={token}");
+    assert!(tokio_tungstenite::connect_async(publish_only).await.is_ok());
+    // A slot frees when its subscriber leaves.
+    drop(_first);
+    let mut again = None;
+    for _ in 0..50 {
+        match client.subscribe(req()).await {
+            Ok(s) => {
+                again = Some(s);
+                break;
+            }
+            Err(_) => tokio::time::sleep(std::time::Duration::from_millis(20)).await,
+        }
+    }
+    assert!(
+        again.is_some(),
+        "the slot of a gone subscriber was not freed"
+    );
+
+    // 20 frames/s with a burst of 5: a burst of 30 frames gets about 5 through.
+    let burst: Vec<v1::ControlFrame> = (0..30)
+        .map(|k| control_frame(&model, "r", k, 0.01 * k as f32))
+        .collect();
+    let acks = {
+        let mut s = client
+            .publish(authed(tokio_stream::iter(burst), &token))
+            .await
+            .unwrap()
+            .into_inner();
+        let mut acks = Vec::new();
+        while let Some(a) = s.message().await.unwrap() {
+            acks.push(a);
+        }
+        acks
+    };
+    assert_eq!(acks.len(), 30);
+    let accepted = acks.iter().filter(|a| a.error.is_none()).count();
+    assert!(
+        (5..=8).contains(&accepted),
+        "{accepted} of 30 accepted at 20/s with a burst of 5"
+    );
+    let refused = acks.iter().find_map(|a| a.error.as_ref()).unwrap();
+    assert_eq!(refused.code, 8);
+    assert!(refused.message.starts_with("rate: "), "{}", refused.message);
+    // After a pause the room accepts again: it survived.
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    let mut s = client
+        .publish(authed(
+            tokio_stream::iter(vec![control_frame(&model, "r", 100, 0.2)]),
+            &token,
+        ))
+        .await
+        .unwrap()
+        .into_inner();
+    let ack = s.message().await.unwrap().unwrap();
+    assert!(ack.error.is_none(), "{ack:?}");
+    running
+        .shutdown(std::time::Duration::from_secs(2))
+        .await
+        .unwrap();
 }
