@@ -26,13 +26,23 @@ pub struct CreaseService {
 }
 
 /// The tonic router: the Crease service, health (SERVING for `crease.v1.Crease`) and reflection.
-pub fn router(state: Arc<AppState>) -> std::io::Result<tonic::transport::server::Router> {
+/// With `tls` (PEM certificate chain and key), gRPC is served over TLS (rustls).
+pub fn router(
+    state: Arc<AppState>,
+    tls: Option<&crate::TlsPem>,
+) -> std::io::Result<tonic::transport::server::Router> {
     let max = state.config.limits.message_bytes;
     let (reporter, health) = tonic_health::server::health_reporter();
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(v1::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1()
+    let reflection = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(v1::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    // Both reflection versions: grpcurl and newer tools speak v1, grpcio-reflection's Python
+    // client and older tools v1alpha.
+    let reflection_v1 = reflection().build_v1().map_err(std::io::Error::other)?;
+    let reflection_v1alpha = reflection()
+        .build_v1alpha()
         .map_err(std::io::Error::other)?;
     let service = CreaseServer::new(CreaseService { state })
         .max_decoding_message_size(max)
@@ -40,9 +50,19 @@ pub fn router(state: Arc<AppState>) -> std::io::Result<tonic::transport::server:
     tokio::spawn(async move {
         reporter.set_serving::<CreaseServer<CreaseService>>().await;
     });
-    Ok(tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(tls) = tls {
+        builder = builder
+            .tls_config(
+                tonic::transport::ServerTlsConfig::new()
+                    .identity(tonic::transport::Identity::from_pem(&tls.cert, &tls.key)),
+            )
+            .map_err(std::io::Error::other)?;
+    }
+    Ok(builder
         .add_service(health)
-        .add_service(reflection)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha)
         .add_service(service))
 }
 

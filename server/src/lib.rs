@@ -71,6 +71,50 @@ pub struct Config {
     pub stream: room::StreamSettings,
     /// Static files served at `/` (the browser viewer), if any.
     pub web: Option<std::path::PathBuf>,
+    /// Serve gRPC and HTTP (and so WebSocket) over TLS with this certificate and key.
+    pub tls: Option<TlsFiles>,
+}
+
+/// A TLS certificate chain and its private key, PEM files.
+#[derive(Clone, Debug)]
+pub struct TlsFiles {
+    /// The certificate chain (leaf first).
+    pub cert: std::path::PathBuf,
+    /// The private key (PKCS#8, PKCS#1 or SEC1).
+    pub key: std::path::PathBuf,
+}
+
+/// The contents of [`TlsFiles`].
+#[derive(Clone)]
+pub struct TlsPem {
+    /// The certificate chain, PEM.
+    pub cert: Vec<u8>,
+    /// The private key, PEM.
+    pub key: Vec<u8>,
+}
+
+impl std::fmt::Debug for TlsPem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TlsPem").finish_non_exhaustive()
+    }
+}
+
+impl TlsFiles {
+    /// Reads both files.
+    ///
+    /// # Errors
+    /// The I/O error, naming the file.
+    pub fn load(&self) -> std::io::Result<TlsPem> {
+        let read = |what: &str, path: &std::path::Path| {
+            std::fs::read(path).map_err(|e| {
+                std::io::Error::new(e.kind(), format!("TLS {what} {}: {e}", path.display()))
+            })
+        };
+        Ok(TlsPem {
+            cert: read("certificate", &self.cert)?,
+            key: read("key", &self.key)?,
+        })
+    }
 }
 
 /// The default gRPC address: every interface, port 50051.
@@ -87,6 +131,7 @@ impl Default for Config {
             limits: Limits::default(),
             stream: room::StreamSettings::default(),
             web: None,
+            tls: None,
         }
     }
 }
@@ -211,21 +256,51 @@ impl Running {
     }
 }
 
-/// Binds the gRPC and HTTP listeners and serves `state` until [`Running::shutdown`].
+/// How long the HTTPS server lets open connections finish after shutdown starts.
+const HTTPS_DRAIN: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Binds the gRPC and HTTP listeners and serves `state` until [`Running::shutdown`], over TLS
+/// when `state.config.tls` is set.
+///
+/// # Errors
+/// Binding, reading the TLS files, or a certificate or key rustls refuses.
 pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
+    let tls = state.config.tls.as_ref().map(TlsFiles::load).transpose()?;
     let listener = tokio::net::TcpListener::bind(state.config.grpc).await?;
     let grpc = listener.local_addr()?;
     let http_listener = tokio::net::TcpListener::bind(state.config.http).await?;
     let http = http_listener.local_addr()?;
     let closing = state.closing();
-    let http_task = tokio::spawn(
-        axum::serve(http_listener, http::router(Arc::clone(&state)))
-            .with_graceful_shutdown(closing)
-            .into_future(),
-    );
+    let app = http::router(Arc::clone(&state));
+    let http_task = match &tls {
+        None => tokio::spawn(
+            axum::serve(http_listener, app)
+                .with_graceful_shutdown(closing)
+                .into_future(),
+        ),
+        Some(pem) => {
+            // rustls needs a process-wide crypto provider; ring, as tonic's TLS uses. A second
+            // install (another server in this process) fails harmlessly.
+            let _ = rustls::crypto::ring::default_provider().install_default();
+            let config =
+                axum_server::tls_rustls::RustlsConfig::from_pem(pem.cert.clone(), pem.key.clone())
+                    .await
+                    .map_err(|e| {
+                        std::io::Error::new(e.kind(), format!("TLS certificate or key: {e}"))
+                    })?;
+            let handle = axum_server::Handle::new();
+            let stop = handle.clone();
+            tokio::spawn(async move {
+                closing.await;
+                stop.graceful_shutdown(Some(HTTPS_DRAIN));
+            });
+            let server = axum_server::from_tcp_rustls(http_listener.into_std()?, config)?;
+            tokio::spawn(server.handle(handle).serve(app.into_make_service()))
+        }
+    };
     tracing::info!(%http, "HTTP listening");
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let router = grpc::router(Arc::clone(&state))?;
+    let router = grpc::router(Arc::clone(&state), tls.as_ref())?;
     let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
     let task = tokio::spawn(router.serve_with_incoming_shutdown(incoming, async move {
         let _ = rx.await;

@@ -10,7 +10,7 @@ use clap::Parser;
 use crease_server::demo::{self, DEMO_MODEL, DEMO_ROOM, DemoAnimation};
 use crease_server::registry::ModelRegistry;
 use crease_server::room::Room;
-use crease_server::{AppState, Config, DEFAULT_GRPC, DEFAULT_HTTP, Limits};
+use crease_server::{AppState, Config, DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
 
 /// Hosts live rooms on trained crease models and streams predicted meshes over gRPC and
 /// WebSocket. With no --models it serves the embedded demo: a hand trained on first start
@@ -47,6 +47,12 @@ struct Args {
     /// cannot be opened remotely. Also read from CREASE_ADMIN_TOKEN.
     #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
     admin_token: Option<String>,
+    /// TLS certificate chain (PEM): serve gRPC and HTTP/WebSocket over TLS (rustls).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM) of --tls-cert.
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     /// Most rooms open at once.
     #[arg(long, default_value_t = Limits::default().rooms)]
     max_rooms: usize,
@@ -116,6 +122,11 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
                 message_bytes: args.max_message_bytes,
             },
             web,
+            tls: args
+                .tls_cert
+                .clone()
+                .zip(args.tls_key.clone())
+                .map(|(cert, key)| TlsFiles { cert, key }),
             ..Config::default()
         },
     );
@@ -139,9 +150,14 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             running.http.ip().to_string()
         };
+        let scheme = if args.tls_cert.is_some() {
+            "https"
+        } else {
+            "http"
+        };
         eprintln!(
-            "demo: room {DEMO_ROOM:?} is live. Open http://{host}:{}/?room={DEMO_ROOM} or run \
-             `crease watch --server http://{host}:{} --room {DEMO_ROOM}`",
+            "demo: room {DEMO_ROOM:?} is live. Open {scheme}://{host}:{}/?room={DEMO_ROOM} or run \
+             `crease watch --server {scheme}://{host}:{} --room {DEMO_ROOM}`",
             running.http.port(),
             running.grpc.port()
         );

@@ -1,0 +1,132 @@
+//! TLS: with a certificate and key, gRPC and HTTP are served over rustls. A client that trusts
+//! the certificate lists the models and reads `/healthz` over HTTPS; a plaintext client is
+//! refused; shutdown still drains.
+
+use std::sync::Arc;
+
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use crease_server::registry::ModelRegistry;
+use crease_server::{AppState, Config, TlsFiles};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn grpc_and_https_over_tls() {
+    let dir = tempfile::tempdir().unwrap();
+    let key = rcgen::KeyPair::generate().unwrap();
+    let cert = rcgen::CertificateParams::new(vec!["localhost".to_owned()])
+        .unwrap()
+        .self_signed(&key)
+        .unwrap();
+    let (cert_path, key_path) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
+    std::fs::write(&cert_path, cert.pem()).unwrap();
+    std::fs::write(&key_path, key.serialize_pem()).unwrap();
+
+    // A missing key file is an error naming it.
+    let bad = Config {
+        grpc: "127.0.0.1:0".parse().unwrap(),
+        http: "127.0.0.1:0".parse().unwrap(),
+        tls: Some(TlsFiles {
+            cert: cert_path.clone(),
+            key: dir.path().join("missing.pem"),
+        }),
+        ..Config::default()
+    };
+    let err = crease_server::serve(AppState::new(ModelRegistry::default(), bad))
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("missing.pem"), "{err}");
+
+    let state = AppState::new(
+        ModelRegistry::default(),
+        Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            tls: Some(TlsFiles {
+                cert: cert_path,
+                key: key_path,
+            }),
+            ..Config::default()
+        },
+    );
+    let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
+
+    // gRPC over TLS, trusting the self-signed certificate.
+    let tls = tonic::transport::ClientTlsConfig::new()
+        .ca_certificate(tonic::transport::Certificate::from_pem(cert.pem()))
+        .domain_name("localhost");
+    let channel = tonic::transport::Channel::from_shared(format!(
+        "https://localhost:{}",
+        running.grpc.port()
+    ))
+    .unwrap()
+    .tls_config(tls)
+    .unwrap()
+    .connect()
+    .await
+    .unwrap();
+    let models = CreaseClient::new(channel)
+        .list_models(v1::ListModelsRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(models.models.is_empty());
+
+    // A plaintext gRPC client gets nowhere.
+    let plain = async {
+        let mut c = CreaseClient::connect(format!("http://{}", running.grpc)).await?;
+        c.list_models(v1::ListModelsRequest {})
+            .await
+            .map_err(|e| Box::new(e) as Box<dyn std::error::Error>)?;
+        Ok::<_, Box<dyn std::error::Error>>(())
+    };
+    let plain = tokio::time::timeout(std::time::Duration::from_secs(5), plain).await;
+    assert!(
+        !matches!(plain, Ok(Ok(()))),
+        "a plaintext call succeeded on the TLS port"
+    );
+
+    // HTTPS /healthz with rustls, trusting the certificate.
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    let mut roots = rustls::RootCertStore::empty();
+    roots.add(cert.der().clone()).unwrap();
+    let config = rustls::ClientConfig::builder()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(Arc::new(config));
+    let tcp = tokio::net::TcpStream::connect(running.http).await.unwrap();
+    let name = rustls::pki_types::ServerName::try_from("localhost").unwrap();
+    let mut stream = connector.connect(name, tcp).await.unwrap();
+    stream
+        .write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut text = String::new();
+    let _ = stream.read_to_string(&mut text).await;
+    assert!(text.starts_with("HTTP/1.1 200"), "{text}");
+    assert!(text.ends_with("ok\n"), "{text}");
+
+    // Plain HTTP on the TLS port is not served.
+    let mut tcp = tokio::net::TcpStream::connect(running.http).await.unwrap();
+    tcp.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut buf = Vec::new();
+    let _ =
+        tokio::time::timeout(std::time::Duration::from_secs(5), tcp.read_to_end(&mut buf)).await;
+    assert!(
+        !String::from_utf8_lossy(&buf).starts_with("HTTP/1.1 200"),
+        "plain HTTP answered on the TLS port"
+    );
+
+    let t = std::time::Instant::now();
+    running
+        .shutdown(std::time::Duration::from_secs(5))
+        .await
+        .unwrap();
+    assert!(
+        t.elapsed().as_secs_f32() < 6.0,
+        "drained in {:?}",
+        t.elapsed()
+    );
+}
