@@ -255,13 +255,13 @@ impl Predictor {
                 got: controls.len(),
             });
         }
-        if let Some(mask) = valid {
-            if mask.len() != n {
-                return Err(PredictError::MaskLength {
-                    expected: n,
-                    got: mask.len(),
-                });
-            }
+        if let Some(mask) = valid
+            && mask.len() != n
+        {
+            return Err(PredictError::MaskLength {
+                expected: n,
+                got: mask.len(),
+            });
         }
         ctx.held = 0;
         for (i, (&c, held)) in controls.iter().zip(ctx.controls.iter_mut()).enumerate() {

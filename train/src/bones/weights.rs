@@ -201,10 +201,10 @@ fn solve_vertex(
     s.w[..n].fill(0.0);
     for slot in i * k..(i + 1) * k {
         let w = old.w[slot];
-        if w > 0.0 {
-            if let Some(a) = s.cands.iter().position(|&b| b == old.idx[slot]) {
-                s.w[a] += w as f64;
-            }
+        if w > 0.0
+            && let Some(a) = s.cands.iter().position(|&b| b == old.idx[slot])
+        {
+            s.w[a] += w as f64;
         }
     }
     let sum: f64 = s.w[..n].iter().sum();

@@ -1,0 +1,153 @@
+#!/usr/bin/env bash
+# A gRPC client that is not ours, end to end: builds crease-server and crease, starts the server
+# on its embedded demo (free ports), checks `crease watch` on room demo, then runs
+# tests/python/test_grpc_client.py (grpcio + grpcio-reflection from PyPI, pinned in
+# requirements.txt) against it. Called by .ci/run; runs alone from anywhere:
+#   bash tests/python/run.sh
+# Uses ${CARGO_TARGET_DIR:-target} for the build, the venv (pyenv/), the demo cache
+# (demo-cache/, trained once, ~25 s) and the server log (python-test/server.log).
+# Installs python3 + venv with apt-get when they are missing (fresh Debian, as root or via sudo).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+
+target="${CARGO_TARGET_DIR:-target}"
+bin="$target/release"
+venv="$target/pyenv"
+req="tests/python/requirements.txt"
+work="$target/python-test"
+log="$work/server.log"
+server_pid=""
+ready_timeout=180
+
+# Stops the server with SIGTERM (it drains for up to 5 s); fails unless it exits 0.
+stop_server() {
+    [[ -n "$server_pid" ]] || return 0
+    local pid=$server_pid code=0
+    server_pid=""
+    kill -TERM "$pid" 2>/dev/null || true
+    for _ in $(seq 1 150); do
+        kill -0 "$pid" 2>/dev/null || break
+        sleep 0.1
+    done
+    if kill -0 "$pid" 2>/dev/null; then
+        echo "FAIL: crease-server (pid $pid) still running 15 s after SIGTERM: killing it" >&2
+        kill -KILL "$pid" 2>/dev/null || true
+        wait "$pid" 2>/dev/null || true
+        return 1
+    fi
+    wait "$pid" 2>/dev/null || code=$?
+    if [[ $code -ne 0 ]]; then
+        echo "FAIL: crease-server exited with status $code on SIGTERM (expected 0)" >&2
+        return 1
+    fi
+}
+
+cleanup() {
+    local status=$?
+    set +e
+    stop_server || { [[ $status -eq 0 ]] && status=1; }
+    if [[ $status -ne 0 && -f "$log" ]]; then
+        echo "== crease-server log ($log)" >&2
+        cat "$log" >&2
+    fi
+    exit "$status"
+}
+trap cleanup EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+echo "== python (venv)"
+# Debian splits venv's ensurepip into python3-venv: `python3 -m venv` without it makes no venv.
+if ! command -v python3 >/dev/null 2>&1 || ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then
+    if ! command -v apt-get >/dev/null 2>&1; then
+        echo "FAIL: python3 with the venv module (and ensurepip) is needed; install it (no apt-get here)" >&2
+        exit 1
+    fi
+    sudo=""
+    if [[ $(id -u) -ne 0 ]]; then
+        if ! command -v sudo >/dev/null 2>&1; then
+            echo "FAIL: python3-venv is missing and this user cannot run apt-get (not root, no sudo)" >&2
+            exit 1
+        fi
+        sudo="sudo"
+    fi
+    echo "python3 with venv is missing: apt-get install python3 python3-venv python3-pip"
+    $sudo apt-get update
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y python3 python3-venv python3-pip
+fi
+python3 --version
+
+# Reuse the venv while requirements.txt and the interpreter are unchanged.
+stamp="$( (cat "$req"; python3 --version) | sha256sum | cut -d' ' -f1)"
+if [[ -x "$venv/bin/python" && -f "$venv/.requirements.sha256" ]] \
+    && [[ "$(cat "$venv/.requirements.sha256")" == "$stamp" ]] \
+    && "$venv/bin/python" -c 'import grpc, grpc_reflection, grpc_health' >/dev/null 2>&1; then
+    echo "reusing $venv"
+else
+    echo "creating $venv"
+    rm -rf "$venv"
+    python3 -m venv "$venv"
+    "$venv/bin/python" -m pip install --disable-pip-version-check --no-input -q -r "$req"
+    echo "$stamp" >"$venv/.requirements.sha256"
+fi
+"$venv/bin/python" -m pip freeze --disable-pip-version-check | tr '\n' ' '
+echo
+
+echo "== build (crease-server, crease)"
+cargo build --release --locked -p crease-server -p crease-cli
+
+echo "== start crease-server (demo)"
+mkdir -p "$work"
+: >"$log"
+NO_COLOR=1 "$bin/crease-server" --grpc 127.0.0.1:0 --http 127.0.0.1:0 --cache "$target/demo-cache" >>"$log" 2>&1 &
+server_pid=$!
+start=$SECONDS
+line=""
+while true; do
+    line="$(grep -m1 '^crease-server: gRPC on ' "$log" || true)"
+    [[ -n "$line" ]] && break
+    if ! kill -0 "$server_pid" 2>/dev/null; then
+        wait "$server_pid" && code=0 || code=$?
+        server_pid=""
+        echo "FAIL: crease-server exited (status $code) before it was listening" >&2
+        exit 1
+    fi
+    elapsed=$((SECONDS - start))
+    if ((elapsed >= ready_timeout)); then
+        echo "FAIL: crease-server not listening after $ready_timeout s" >&2
+        exit 1
+    fi
+    if ((elapsed > 0 && elapsed % 10 == 0)); then
+        echo "waiting for crease-server: $elapsed s (the first start trains the demo hand) — $(tail -n1 "$log")"
+        sleep 1
+    else
+        sleep 0.5
+    fi
+done
+grpc_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\1/' <<<"$line")"
+http_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\2/' <<<"$line")"
+if [[ ! "$grpc_addr" =~ ^[0-9.]+:[0-9]+$ || ! "$http_addr" =~ ^[0-9.]+:[0-9]+$ ]]; then
+    echo "FAIL: cannot parse the addresses from: $line" >&2
+    exit 1
+fi
+echo "listening after $((SECONDS - start)) s: gRPC $grpc_addr, HTTP $http_addr (pid $server_pid)"
+
+echo "== crease watch --room demo"
+watch_out="$(timeout 120 "$bin/crease" watch --server "http://$grpc_addr" --room demo --frames 30)" || {
+    code=$?
+    echo "$watch_out"
+    echo "FAIL: crease watch exited with status $code" >&2
+    exit 1
+}
+echo "$watch_out"
+if ! grep -q '^30 frames in ' <<<"$watch_out"; then
+    echo "FAIL: crease watch did not print '30 frames in ...'" >&2
+    exit 1
+fi
+
+echo "== python grpcio client"
+"$venv/bin/python" tests/python/test_grpc_client.py --grpc "$grpc_addr"
+
+echo "== stop crease-server"
+stop_server
+echo "crease-server stopped cleanly on SIGTERM"
