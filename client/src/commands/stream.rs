@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use crease_proto::v1::crease_client::CreaseClient;
 use crease_proto::{encode_valid_mask, v1};
 
 use super::synth::read_control_frames;
@@ -16,6 +15,10 @@ pub struct StreamArgs {
     /// The server's gRPC address.
     #[arg(long, default_value = "http://localhost:50051")]
     pub server: String,
+    /// With an `https://` server: its CA certificate (PEM), e.g. the server's own self-signed
+    /// certificate. Default: the Mozilla root certificates.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
     /// The room to publish into.
     #[arg(long, default_value = "demo")]
     pub room: String,
@@ -49,9 +52,7 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
 }
 
 async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
-    let mut client = CreaseClient::connect(args.server.clone())
-        .await
-        .with_context(|| format!("connecting to {}", args.server))?;
+    let mut client = super::common::connect(&args.server, args.ca.as_deref()).await?;
     let model = client
         .list_models(v1::ListModelsRequest {})
         .await

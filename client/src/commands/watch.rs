@@ -8,7 +8,6 @@ use anyhow::{Context, bail};
 use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
 use crease_proto::{read_topology, v1};
-use crease_proto::v1::crease_client::CreaseClient;
 
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]
@@ -16,6 +15,10 @@ pub struct WatchArgs {
     /// The server's gRPC address, e.g. `http://localhost:50051`.
     #[arg(long, default_value = "http://localhost:50051")]
     pub server: String,
+    /// With an `https://` server: its CA certificate (PEM), e.g. the server's own self-signed
+    /// certificate. Default: the Mozilla root certificates.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
     /// The room to watch.
     #[arg(long, default_value = "demo")]
     pub room: String,
@@ -52,9 +55,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
 }
 
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
-    let mut client = CreaseClient::connect(args.server.clone())
-        .await
-        .with_context(|| format!("connecting to {}", args.server))?;
+    let mut client = super::common::connect(&args.server, args.ca.as_deref()).await?;
     let level = if args.detail {
         v1::Level::Detail
     } else {
