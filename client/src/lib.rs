@@ -46,6 +46,9 @@ pub enum Command {
     Watch(commands::watch::WatchArgs),
     /// Publish a file of control frames into a room at a fixed rate.
     Stream(commands::stream::StreamArgs),
+    /// Network load benchmark (issue 6): rooms, publishers and subscribers on loopback;
+    /// latency, server CPU and bytes per vertex per frame.
+    BenchNet(commands::bench_net::BenchNetArgs),
 }
 
 /// Runs a parsed command line.
@@ -59,6 +62,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pose(args) => commands::handgen::run_pose(&args),
         Command::Watch(args) => commands::watch::run(&args),
         Command::Stream(args) => commands::stream::run(&args),
+        Command::BenchNet(args) => commands::bench_net::run(&args),
     }
 }
 

@@ -107,7 +107,10 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         assert_eq!(got, want, "frame {k}: triangles not in model order");
         for (i, (p, r)) in m.positions.iter().zip(&rest_mesh.positions).enumerate() {
             if r.z < 3.0 {
-                assert!(p.distance(*r) < 0.1, "frame {k} vertex {i}: {p} vs rest {r}");
+                assert!(
+                    p.distance(*r) < 0.1,
+                    "frame {k} vertex {i}: {p} vs rest {r}"
+                );
             }
         }
     }

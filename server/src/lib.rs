@@ -274,9 +274,14 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     let app = http::router(Arc::clone(&state));
     let http_task = match &tls {
         None => tokio::spawn(
-            axum::serve(http_listener, app)
-                .with_graceful_shutdown(closing)
-                .into_future(),
+            axum::serve(
+                axum::serve::ListenerExt::tap_io(http_listener, |tcp| {
+                    let _ = tcp.set_nodelay(true);
+                }),
+                app,
+            )
+            .with_graceful_shutdown(closing)
+            .into_future(),
         ),
         Some(pem) => {
             // rustls needs a process-wide crypto provider; ring, as tonic's TLS uses. A second
@@ -301,7 +306,11 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     tracing::info!(%http, "HTTP listening");
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let router = grpc::router(Arc::clone(&state), tls.as_ref())?;
-    let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
+    // Nagle off on every accepted socket: frames are small and latency-bound (with it on, a
+    // frame could wait for the client's delayed ACK: ~27 ms p99 at the client in
+    // `crease bench-net`, BENCHMARKS.md). tonic's own `tcp_nodelay` does not apply to an
+    // incoming stream we hand it.
+    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
     let task = tokio::spawn(router.serve_with_incoming_shutdown(incoming, async move {
         let _ = rx.await;
         state.closing.send_replace(true);

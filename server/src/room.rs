@@ -15,8 +15,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use crease_core::codec::{
-    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_keyframe,
-    spatial_order,
+    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_indices,
+    encode_keyframe, spatial_order,
 };
 use crease_core::glam::Vec3;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
@@ -184,6 +184,9 @@ pub struct Room {
     detail_subscribers: Arc<AtomicUsize>,
     /// The publish rate limit's token bucket.
     budget: Mutex<Budget>,
+    /// Each level's index buffer, meshopt-encoded once on first need (every subscriber's
+    /// topology message carries it).
+    indices: [OnceLock<Result<Bytes, CodecError>>; 2],
 }
 
 /// A token bucket: `tokens` frames may be published now; it refills at the rate limit, up to a
@@ -234,7 +237,8 @@ impl Room {
         let (lo, hi) = model.pose_bounds;
         let base_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.base_bits)?;
         let detail_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.detail_bits)?;
-        let encoder = |vertices, qbox| FrameEncoder::new(vertices, qbox, settings.keyframe_interval);
+        let encoder =
+            |vertices, qbox| FrameEncoder::new(vertices, qbox, settings.keyframe_interval);
         let rest = &model.model.rig.rest;
         let base_encoder = encoder(rest.vertex_count(), base_qbox)?;
         let detail_encoder = encoder(model.model.detail_vertex_count().unwrap_or(0), detail_qbox)?;
@@ -277,6 +281,7 @@ impl Room {
                 tokens: f64::INFINITY,
                 at: Instant::now(),
             }),
+            indices: [OnceLock::new(), OnceLock::new()],
         })
     }
 
@@ -445,6 +450,23 @@ impl Room {
     /// Whether the model has a detail layer.
     pub fn has_detail(&self) -> bool {
         self.model.model.detail.is_some()
+    }
+
+    /// `level`'s triangles through meshopt's index codec (encoded once, then shared).
+    ///
+    /// # Errors
+    /// The codec's, if a triangle indexes past the vertex count.
+    pub fn encoded_indices(&self, level: Level) -> Result<Bytes, CodecError> {
+        let slot = match level {
+            Level::Base => &self.indices[0],
+            Level::Detail => &self.indices[1],
+        };
+        slot.get_or_init(|| {
+            let mut out = Vec::new();
+            encode_indices(self.triangles(level), self.vertex_count(level), &mut out)
+                .map(|()| Bytes::from(out))
+        })
+        .clone()
     }
 
     /// The triangles of `level`'s mesh, in the streamed vertex order.

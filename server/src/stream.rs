@@ -8,7 +8,6 @@
 
 use std::sync::Arc;
 
-use crease_core::codec::encode_indices;
 use crease_proto::{box3, v1};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
@@ -32,9 +31,10 @@ fn level_wire(level: Level) -> v1::Level {
 fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
     let triangles = room.triangles(level);
     let n = room.vertex_count(level);
-    let mut indices = Vec::new();
-    encode_indices(triangles, n, &mut indices)
-        .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
+    let indices = room
+        .encoded_indices(level)
+        .map_err(|e| Status::internal(format!("index buffer: {e}")))?
+        .to_vec();
     let qbox = room.qbox(level);
     Ok(v1::MeshFrame {
         body: Some(v1::mesh_frame::Body::Topology(v1::Topology {

@@ -1,10 +1,12 @@
 //! One module per subcommand, plus the pieces they share.
 
+pub mod bench_net;
 pub mod common;
 pub mod eval;
 pub mod fit;
 pub mod handgen;
 pub mod layers;
+pub mod remote_synth;
 pub mod stream;
 pub mod synth;
 pub mod train;

@@ -1,4 +1,5 @@
-//! `crease synth`: a batch of control frames in, one mesh per frame out.
+//! `crease synth`: a batch of control frames in, one mesh per frame out: predicted here, or by a
+//! server's `Synthesize` RPC with `--server` ([`super::remote_synth`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -16,9 +17,23 @@ use crease_core::runtime::predictor::Predictor;
     clap::ArgGroup::new("output").required(true).multiple(true).args(["out", "gltf"])
 ))]
 pub struct SynthArgs {
-    /// Trained model (`crease train --out`).
-    #[arg(long, value_name = "FILE")]
+    /// Trained model (`crease train --out`); with `--server`, the NAME of a model the server
+    /// hosts.
+    #[arg(long, value_name = "FILE|NAME")]
     pub model: PathBuf,
+    /// Synthesise on this crease server (gRPC, e.g. `http://127.0.0.1:50051`) instead of here.
+    /// The frames are sent in requests of at most `--chunk-frames` frames (and 3 MiB, under the
+    /// server's 4 MiB message limit) and written with continuous numbering; positions come back
+    /// quantised to 16 bits in the model's pose box (a half-step error, given in the summary).
+    #[arg(long, value_name = "URL")]
+    pub server: Option<String>,
+    /// With an `https://` --server: its CA certificate (PEM), e.g. the server's own self-signed
+    /// certificate. Default: the Mozilla root certificates.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<PathBuf>,
+    /// With `--server`: most control frames per request.
+    #[arg(long, value_name = "N", default_value_t = super::remote_synth::CHUNK_FRAMES)]
+    pub chunk_frames: usize,
     /// Control frames: CSV (one frame per line, x y z of every control point in model order;
     /// an empty or `nan` field marks an occluded point; `#` comments and a header line are
     /// skipped) or JSON (an array of frames, each an array of `[x, y, z]` or `null` per point,
@@ -31,6 +46,7 @@ pub struct SynthArgs {
     pub out: Option<PathBuf>,
     /// Also or instead write every frame into one animated glTF binary (.glb): the rest mesh
     /// with one morph target per frame and an animation showing frame `i` at `i / fps` s.
+    /// With `--server`, the rest mesh is the server's prediction at the rest controls.
     #[arg(long, value_name = "FILE")]
     pub gltf: Option<PathBuf>,
     /// Frames per second of the `--gltf` animation.
@@ -64,6 +80,9 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     }
     if args.gltf.is_some() && !(args.fps.is_finite() && args.fps > 0.0) {
         bail!("--fps must be > 0, got {}", args.fps);
+    }
+    if let Some(server) = &args.server {
+        return super::remote_synth::run(args, server);
     }
     let model = TrainedModel::load(&args.model)
         .with_context(|| format!("loading model {}", args.model.display()))?;
@@ -131,7 +150,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         if let Some(out) = &args.out {
             mesh.positions.clear();
             mesh.positions.extend_from_slice(positions);
-            let path = out.join(format!("frame_{i:05}.{}", args.format));
+            let path = frame_path(out, i, &args.format);
             mesh.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
@@ -159,6 +178,11 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
         1e6 * compute / frames.len().max(1) as f64
     );
     Ok(())
+}
+
+/// The file of frame `i` in `out`: `frame_00000.obj`, ... (local and remote synthesis).
+pub fn frame_path(out: &Path, i: usize, format: &str) -> PathBuf {
+    out.join(format!("frame_{i:05}.{format}"))
 }
 
 /// Reads control frames from CSV or JSON (by extension) for a model with `count` control points.
