@@ -209,16 +209,16 @@ pub fn read_topology(t: &v1::Topology) -> Result<StreamTopology, WireError> {
         if t.vertex_order.len() != n {
             return Err(WireError::new(
                 "vertex_order",
-                format!("{} entries, expected {n} (vertex_count)", t.vertex_order.len()),
+                format!(
+                    "{} entries, expected {n} (vertex_count)",
+                    t.vertex_order.len()
+                ),
             ));
         }
         let mut seen = vec![false; n];
         for (i, &v) in t.vertex_order.iter().enumerate() {
             let slot = seen.get_mut(v as usize).ok_or_else(|| {
-                WireError::new(
-                    format!("vertex_order[{i}]"),
-                    format!("{v}, expected < {n}"),
-                )
+                WireError::new(format!("vertex_order[{i}]"), format!("{v}, expected < {n}"))
             })?;
             if std::mem::replace(slot, true) {
                 return Err(WireError::new(
