@@ -10,12 +10,9 @@
 mod common;
 
 use std::path::Path;
-use std::sync::Arc;
 
-use common::{CONTROLS, bent, crease, train_model, tube};
+use common::{CONTROLS, bent, crease, serve_tube, train_model, tube};
 use crease_core::model::TrainedModel;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config};
 use serde_json::Value;
 
 /// A CSV of control frames: the tube bending forth and back, 12 frames.
@@ -138,21 +135,7 @@ fn bench_net_against_a_server_in_this_process() {
     let controls = write_controls(tmp.path());
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let addr = runtime.block_on(async {
-        let mut registry = ModelRegistry::default();
-        registry.insert("tube", TrainedModel::load(&model_path).unwrap());
-        let state = AppState::new(
-            registry,
-            Config {
-                grpc: "127.0.0.1:0".parse().unwrap(),
-                http: "127.0.0.1:0".parse().unwrap(),
-                admin_token: Some("admin".into()),
-                ..Config::default()
-            },
-        );
-        let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
-        let addr = running.grpc;
-        std::mem::forget(running);
-        addr
+        serve_tube(TrainedModel::load(&model_path).unwrap(), Some("admin")).await
     });
     let out = crease()
         .args(["bench-net", "--model"])

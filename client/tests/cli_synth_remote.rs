@@ -9,16 +9,13 @@ mod common;
 
 use std::path::Path;
 use std::process::Output;
-use std::sync::Arc;
 
-use common::{CONTROLS, bent, crease, train_model, tube};
+use common::{CONTROLS, bent, crease, serve_tube, train_model, tube};
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config};
 
 /// Slack on top of the quantisation bound: the bound is half a grid step exactly, and a decoded
 /// coordinate is rounded once more to f32 (half an ulp of coordinates below 10).
@@ -108,19 +105,7 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let model = TrainedModel::load(&model_path).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let (addr, qbox) = runtime.block_on(async {
-        let mut registry = ModelRegistry::default();
-        registry.insert("tube", model);
-        let state = AppState::new(
-            registry,
-            Config {
-                grpc: "127.0.0.1:0".parse().unwrap(),
-                http: "127.0.0.1:0".parse().unwrap(),
-                ..Config::default()
-            },
-        );
-        let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
-        let addr = running.grpc;
-        std::mem::forget(running);
+        let addr = serve_tube(model, None).await;
         // The quantisation box of the server's batches, as any client sees it.
         let mut client = CreaseClient::connect(format!("http://{addr}"))
             .await

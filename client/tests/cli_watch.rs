@@ -4,16 +4,13 @@
 
 mod common;
 
-use std::sync::Arc;
 use std::time::Duration;
 
-use common::{CONTROLS, bent, crease, train_model, tube};
+use common::{CONTROLS, bent, crease, serve_tube, train_model, tube};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config};
 
 #[test]
 fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
@@ -23,20 +20,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     let rest_mesh = model.rig.rest.clone();
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let (addr, token) = runtime.block_on(async {
-        let mut registry = ModelRegistry::default();
-        registry.insert("tube", model);
-        let state = AppState::new(
-            registry,
-            Config {
-                grpc: "127.0.0.1:0".parse().unwrap(),
-                http: "127.0.0.1:0".parse().unwrap(),
-                admin_token: Some("admin".into()),
-                ..Config::default()
-            },
-        );
-        let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
-        let addr = running.grpc;
-        std::mem::forget(running);
+        let addr = serve_tube(model, Some("admin")).await;
         let mut client = CreaseClient::connect(format!("http://{addr}"))
             .await
             .unwrap();

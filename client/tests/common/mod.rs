@@ -100,3 +100,27 @@ pub fn train_model(dir: &Path) -> std::path::PathBuf {
     );
     model
 }
+
+/// Starts a crease server on free loopback ports hosting `model` as `tube`, with `admin` as
+/// the admin token, and leaves it running for the rest of the test process. Returns its gRPC
+/// address.
+pub async fn serve_tube(
+    model: crease_core::model::TrainedModel,
+    admin: Option<&str>,
+) -> std::net::SocketAddr {
+    let mut registry = crease_server::registry::ModelRegistry::default();
+    registry.insert("tube", model);
+    let state = crease_server::AppState::new(
+        registry,
+        crease_server::Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            admin_token: admin.map(str::to_owned),
+            ..crease_server::Config::default()
+        },
+    );
+    let running = crease_server::serve(state).await.unwrap();
+    let addr = running.grpc;
+    std::mem::forget(running);
+    addr
+}
