@@ -177,9 +177,8 @@ fn control_frame(model: &TrainedModel, room: &str, seq: u64, angle: f32) -> v1::
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn publish_subscribe_batch_and_errors_over_a_socket() {
-    let model = model();
+/// A server on free loopback ports hosting `model` as `tube`, with the admin token and `limits`.
+async fn serve_tube(model: &TrainedModel, limits: Limits) -> crease_server::Running {
     let mut registry = ModelRegistry::default();
     registry.insert("tube", model.clone());
     let state = AppState::new(
@@ -188,15 +187,25 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             grpc: "127.0.0.1:0".parse().unwrap(),
             http: "127.0.0.1:0".parse().unwrap(),
             admin_token: Some(ADMIN.into()),
-            // The bursts below publish as fast as the room predicts.
-            limits: Limits {
-                publish_hz: f64::INFINITY,
-                ..Limits::default()
-            },
+            limits,
             ..Config::default()
         },
     );
-    let running = crease_server::serve(state).await.unwrap();
+    crease_server::serve(state).await.unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn publish_subscribe_batch_and_errors_over_a_socket() {
+    let model = model();
+    // The bursts below publish as fast as the room predicts.
+    let running = serve_tube(
+        &model,
+        Limits {
+            publish_hz: f64::INFINITY,
+            ..Limits::default()
+        },
+    )
+    .await;
     let url = format!("http://{}", running.grpc);
     let mut client = CreaseClient::connect(url.clone()).await.unwrap();
 
@@ -566,24 +575,16 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn limits_refuse_and_the_room_goes_on() {
     let model = model();
-    let mut registry = ModelRegistry::default();
-    registry.insert("tube", model.clone());
-    let state = AppState::new(
-        registry,
-        Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits: Limits {
-                rooms: 1,
-                subscribers_per_room: 2,
-                publish_hz: 20.0,
-                ..Limits::default()
-            },
-            ..Config::default()
+    let running = serve_tube(
+        &model,
+        Limits {
+            rooms: 1,
+            subscribers_per_room: 2,
+            publish_hz: 20.0,
+            ..Limits::default()
         },
-    );
-    let running = crease_server::serve(state).await.unwrap();
+    )
+    .await;
     let url = format!("http://{}", running.grpc);
     let mut client = CreaseClient::connect(url.clone()).await.unwrap();
     let open = |room: &str| {
