@@ -8,7 +8,8 @@
 //! - [`read_control_frame`]: a `ControlFrame` into caller buffers (positions + validity), no
 //!   allocation per frame.
 //! - [`model_info`]: a trained model's public description.
-//! - [`encode_valid_mask`] / [`valid_bit`]: the validity bitmask.
+//! - [`encode_valid_mask`] / [`valid_bit`]: the validity bitmask; [`control_frame`]: points
+//!   and flags into a `ControlFrame`.
 //! - [`read_topology`]: a mesh stream's `Topology` into triangles in model vertex ids and the
 //!   streamed vertex order ([`StreamTopology::to_model_order`] puts decoded frames back).
 
@@ -152,6 +153,38 @@ pub fn read_control_frame(
         };
     }
     Ok(invalid)
+}
+
+/// A control frame for the wire: `positions` flattened to `x, y, z` (a point that is not
+/// finite is sent as zeros; mark it invalid), and the validity mask, left empty when every
+/// point is valid (which the server reads as "all valid").
+pub fn control_frame(
+    room: &str,
+    seq: u64,
+    capture_time_us: i64,
+    positions: &[Vec3],
+    valid: &[bool],
+) -> v1::ControlFrame {
+    let mut mask = Vec::new();
+    if valid.iter().any(|v| !v) {
+        encode_valid_mask(valid, &mut mask);
+    }
+    v1::ControlFrame {
+        room: room.to_owned(),
+        seq,
+        capture_time_us,
+        positions: positions
+            .iter()
+            .flat_map(|p| {
+                if p.is_finite() {
+                    p.to_array()
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect(),
+        valid: mask,
+    }
 }
 
 /// A mesh stream's topology, decoded (see `Topology` in `crease.proto`).
@@ -331,6 +364,28 @@ mod tests {
         let status: tonic::Status = e.into();
         assert_eq!(status.code(), tonic::Code::InvalidArgument);
         assert!(status.message().starts_with("valid: 2 bytes"));
+    }
+
+    #[test]
+    fn control_frames_for_the_wire_read_back() {
+        let points = [
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::NAN,
+            Vec3::new(-1.0, 0.5, 9.0),
+        ];
+        let f = control_frame("r", 7, 11, &points, &[true, false, true]);
+        assert_eq!((f.room.as_str(), f.seq, f.capture_time_us), ("r", 7, 11));
+        assert_eq!(f.positions, [1.0, 2.0, 3.0, 0.0, 0.0, 0.0, -1.0, 0.5, 9.0]);
+        let (mut p, mut v) = ([Vec3::ZERO; 3], [true; 3]);
+        assert_eq!(read_control_frame(&f, &mut p, &mut v), Ok(1));
+        assert_eq!(v, [true, false, true]);
+        assert_eq!((p[0], p[2]), (points[0], points[2]));
+        // All valid: no mask at all.
+        assert!(
+            control_frame("r", 0, 0, &points[..1], &[true])
+                .valid
+                .is_empty()
+        );
     }
 
     #[test]

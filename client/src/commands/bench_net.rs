@@ -26,7 +26,7 @@ use crease_core::codec::{FrameDecoder, FrameKind, parse_frame};
 use crease_core::mesh::ExampleSet;
 use crease_core::model::TrainedModel;
 use crease_proto::v1::crease_client::CreaseClient;
-use crease_proto::{encode_valid_mask, read_topology, v1};
+use crease_proto::{control_frame, read_topology, v1};
 use serde::Serialize;
 use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
@@ -390,25 +390,7 @@ fn control_frames(
         let read = read_control_frames(path, model.controls.len())?;
         let frames = read
             .iter()
-            .map(|f| {
-                // An empty mask says every point is valid.
-                let mut valid = Vec::new();
-                if f.valid.iter().any(|v| !v) {
-                    encode_valid_mask(&f.valid, &mut valid);
-                }
-                let positions = f
-                    .positions
-                    .iter()
-                    .flat_map(|p| {
-                        if p.is_finite() {
-                            p.to_array()
-                        } else {
-                            [0.0; 3]
-                        }
-                    })
-                    .collect();
-                frame(positions, valid)
-            })
+            .map(|f| control_frame("", 0, 0, &f.positions, &f.valid))
             .collect::<Vec<_>>();
         let source = format!("{} ({} frames)", path.display(), frames.len());
         return Ok((frames, source));

@@ -18,7 +18,7 @@ use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::gltf_export;
 use crease_proto::v1::mesh_frame::Body;
-use crease_proto::{StreamTopology, encode_valid_mask, read_topology, v1};
+use crease_proto::{StreamTopology, control_frame, read_topology, v1};
 use tokio_stream::{Stream, StreamExt};
 
 use super::synth::{ControlFrame, SynthArgs, frame_path, read_control_frames};
@@ -223,7 +223,7 @@ fn wire_frames(
         .iter()
         .enumerate()
         .map(|(k, frame)| {
-            let mut positions = Vec::with_capacity(3 * last_valid.len());
+            let mut points = Vec::with_capacity(last_valid.len());
             valid.clear();
             for ((&p, &seen), held) in frame.positions.iter().zip(&frame.valid).zip(&*last_valid) {
                 let (p, seen) = match (seen, held) {
@@ -231,7 +231,7 @@ fn wire_frames(
                     (false, Some(h)) if k == 0 => (*h, true),
                     (false, _) => (Vec3::ZERO, false),
                 };
-                positions.extend_from_slice(&p.to_array());
+                points.push(p);
                 valid.push(seen);
             }
             for (held, (&p, &seen)) in last_valid
@@ -242,17 +242,7 @@ fn wire_frames(
                     *held = Some(p);
                 }
             }
-            let mut mask = Vec::new();
-            if valid.iter().any(|v| !v) {
-                encode_valid_mask(&valid, &mut mask);
-            }
-            v1::ControlFrame {
-                room: String::new(),
-                seq: (first + k) as u64,
-                capture_time_us: 0,
-                positions,
-                valid: mask,
-            }
+            control_frame("", (first + k) as u64, 0, &points, &valid)
         })
         .collect()
 }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use crease_proto::{encode_valid_mask, v1};
+use crease_proto::{control_frame, v1};
 
 use super::synth::read_control_frames;
 
@@ -90,30 +90,10 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         for seq in 0..total {
             ticker.tick().await;
             let f = &frames[(seq % frames.len() as u64) as usize];
-            // An empty mask says every point is valid.
-            let mut valid = Vec::new();
-            if f.valid.iter().any(|v| !v) {
-                encode_valid_mask(&f.valid, &mut valid);
-            }
-            let frame = v1::ControlFrame {
-                room: room.clone(),
-                seq,
-                capture_time_us: std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_micros() as i64),
-                positions: f
-                    .positions
-                    .iter()
-                    .flat_map(|p| {
-                        if p.is_finite() {
-                            p.to_array()
-                        } else {
-                            [0.0; 3]
-                        }
-                    })
-                    .collect(),
-                valid,
-            };
+            let capture_time_us = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_micros() as i64);
+            let frame = control_frame(&room, seq, capture_time_us, &f.positions, &f.valid);
             if tx.send(frame).await.is_err() {
                 break;
             }
