@@ -40,6 +40,9 @@ use crate::room::Room;
 pub const DEMO_MODEL: &str = "demo-hand";
 /// The demo room's id.
 pub const DEMO_ROOM: &str = "demo";
+/// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
+/// control point is followed closely.
+pub const DEMO_BETA: f32 = 3.0;
 /// The cached model's file name. The version changes whenever the recipe below does, so a
 /// stale cache is never served.
 const CACHE_FILE: &str = "demo-hand-v1.crease";
@@ -287,19 +290,27 @@ impl DemoAnimation {
     }
 }
 
+/// How long the animation pauses after someone else published into the demo room (an animator
+/// dragging a control point in the viewer), so the two do not fight over the hand.
+const YIELD_S: f64 = 3.0;
+
 /// Publishes `animation` into `room` at `rate_hz` until the server shuts down: the frames go
 /// through [`crate::grpc::publish_one`] with the room's token, as a remote publisher's would
 /// (metrics, acks, latency), one at a time; a tick missed while a frame was still being
-/// predicted is skipped, not queued.
+/// predicted is skipped, not queued. When another publisher's frames arrive, the animation
+/// pauses until none came for `YIELD_S` seconds, and resumes where it left off.
 pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimation, rate_hz: f64) {
     let period = Duration::from_secs_f64(1.0 / rate_hz.clamp(1.0, 1000.0));
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let closing = state.closing();
     tokio::pin!(closing);
-    let start = Instant::now();
     let token = room.token().to_owned();
     let mut positions = Vec::new();
+    // Animation time (it stands still while others publish), and what the room had counted
+    // after our last frame.
+    let (mut t, mut last_tick) = (0.0f64, Instant::now());
+    let (mut ours, mut others_at) = (room.published(), None::<Instant>);
     for seq in 0u64.. {
         tokio::select! {
             _ = tick.tick() => {}
@@ -309,7 +320,18 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
             tracing::info!(room = %room.id, "demo room closed: the animation stops");
             return;
         }
-        animation.controls_at(start.elapsed().as_secs_f64(), &mut positions);
+        let now = Instant::now();
+        if room.published() > ours {
+            others_at = Some(now);
+            ours = room.published();
+        }
+        if others_at.is_some_and(|at| now.duration_since(at).as_secs_f64() < YIELD_S) {
+            last_tick = now;
+            continue;
+        }
+        t += now.duration_since(last_tick).as_secs_f64();
+        last_tick = now;
+        animation.controls_at(t, &mut positions);
         let frame = v1::ControlFrame {
             room: room.id.clone(),
             seq,
@@ -318,6 +340,7 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
             valid: Vec::new(),
         };
         let ack = crate::grpc::publish_one(&state, Some(&token), frame).await;
+        ours = room.published();
         if let Some(e) = ack.error {
             tracing::warn!(code = e.code, message = %e.message, "demo frame refused");
         }

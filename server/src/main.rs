@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use clap::Parser;
-use crease_server::demo::{self, DEMO_MODEL, DEMO_ROOM, DemoAnimation};
+use crease_server::demo::{self, DEMO_BETA, DEMO_MODEL, DEMO_ROOM, DemoAnimation};
 use crease_server::registry::ModelRegistry;
 use crease_server::room::Room;
 use crease_server::{AppState, Config, DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
@@ -29,6 +29,10 @@ struct Args {
     /// else ~/.cache/crease.
     #[arg(long, value_name = "DIR")]
     cache: Option<PathBuf>,
+    /// The demo room's publish token (default: a random one, printed). With it, the viewer's
+    /// control-point dragging can publish into room `demo`.
+    #[arg(long, env = "CREASE_DEMO_TOKEN", hide_env_values = true)]
+    demo_token: Option<String>,
     /// Frames per second of the demo animation.
     #[arg(long, default_value_t = 60.0)]
     demo_rate: f64,
@@ -109,6 +113,16 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         let dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../web"));
         dir.is_dir().then_some(dir)
     });
+    if let Some(dir) = &web
+        && !dir.join("node_modules/three").is_dir()
+    {
+        eprintln!(
+            "warning: {} has no node_modules: the viewer needs three.js and meshoptimizer \
+             (run `npm ci --prefix {}`)",
+            dir.display(),
+            dir.display()
+        );
+    }
     let state = AppState::new(
         models,
         Config {
@@ -130,8 +144,15 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..Config::default()
         },
     );
+    let mut demo_token = None;
     if let Some((model, animation)) = demo_model {
-        let room = state.add_room(Room::open(DEMO_ROOM, model, None, state.config.stream)?)?;
+        // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
+        let mut room = Room::open(DEMO_ROOM, model, Some(DEMO_BETA), state.config.stream)?;
+        if let Some(token) = &args.demo_token {
+            room = room.with_token(token);
+        }
+        let room = state.add_room(room)?;
+        demo_token = Some(room.token().to_owned());
         tokio::spawn(demo::drive(
             Arc::clone(&state),
             room,
@@ -161,6 +182,11 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             running.http.port(),
             running.grpc.port()
         );
+        if args.demo_token.is_none()
+            && let Some(token) = &demo_token
+        {
+            eprintln!("demo: publish token {token} (enter it in the viewer to drag control points)");
+        }
     }
     shutdown_signal().await?;
     eprintln!("shutting down");

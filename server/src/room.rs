@@ -10,7 +10,7 @@
 //! and a keyframe of the same frame made on demand (once, shared) for subscribers that did not
 //! receive that previous frame (they joined late, or skipped it).
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
@@ -181,6 +181,8 @@ pub struct Room {
     detail: watch::Sender<Option<Arc<MeshUpdate>>>,
     /// Live subscriptions of both levels (the subscriber limit).
     subscribers: Arc<AtomicUsize>,
+    /// Accepted control frames.
+    published: AtomicU64,
     detail_subscribers: Arc<AtomicUsize>,
     /// The publish rate limit's token bucket.
     budget: Mutex<Budget>,
@@ -276,6 +278,7 @@ impl Room {
             base: watch::channel(None).0,
             detail: watch::channel(None).0,
             subscribers: Arc::new(AtomicUsize::new(0)),
+            published: AtomicU64::new(0),
             detail_subscribers: Arc::new(AtomicUsize::new(0)),
             budget: Mutex::new(Budget {
                 tokens: f64::INFINITY,
@@ -283,6 +286,17 @@ impl Room {
             }),
             indices: [OnceLock::new(), OnceLock::new()],
         })
+    }
+
+    /// Replaces the publish token (an operator's fixed token, e.g. `--demo-token`).
+    pub fn with_token(mut self, token: &str) -> Self {
+        token.clone_into(&mut self.token);
+        self
+    }
+
+    /// Frames published into this room so far (accepted ones).
+    pub fn published(&self) -> u64 {
+        self.published.load(Ordering::Relaxed)
     }
 
     /// The publish token.
@@ -384,6 +398,7 @@ impl Room {
             self.detail
                 .send_replace(update(&mut state.detail_encoder, detail)?);
         }
+        self.published.fetch_add(1, Ordering::Relaxed);
         Ok(Published {
             held: held as u32,
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
