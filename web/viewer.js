@@ -252,11 +252,11 @@ function toNdc(e) {
 
 canvas.addEventListener("pointerdown", (e) => {
   if (!geometry || handleMeshes.length === 0) return;
-  // The nearest handle within 14 px.
+  // The nearest handle within 20 px.
   let best = null;
   for (const h of state.handles) {
     const d = Math.hypot(h.x - e.clientX, h.y - e.clientY);
-    if (d < 14 && (!best || d < best.d)) best = { ...h, d };
+    if (d < 20 && (!best || d < best.d)) best = { ...h, d };
   }
   if (!best) return;
   const handle = handleMeshes.find((m) => m.userData.id === best.id);

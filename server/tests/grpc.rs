@@ -532,6 +532,28 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
 
     // HTTP: liveness, readiness, and metrics that counted what happened above.
     assert_eq!(http_get(running.http, "/healthz").await.0, 200);
+    // What the viewer reads besides the stream: the room list and the room's control points.
+    let (status, body) = http_get(running.http, "/api/rooms").await;
+    assert_eq!(status, 200);
+    assert_eq!(
+        serde_json::from_str::<serde_json::Value>(&body).unwrap()["rooms"],
+        serde_json::json!(["r1"])
+    );
+    let (status, body) = http_get(running.http, "/api/rooms/r1").await;
+    assert_eq!(status, 200, "{body}");
+    let info: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(info["model"], "tube");
+    let points = info["control_points"].as_array().unwrap();
+    assert_eq!(points.len(), model.controls.len());
+    for (p, c) in points.iter().zip(&model.controls) {
+        assert_eq!(p["vertex"], c.vertex);
+        let rest = model.rig.rest.positions[c.vertex as usize];
+        for k in 0..3 {
+            assert_eq!(p["rest"][k].as_f64().unwrap() as f32, rest[k]);
+        }
+    }
+    assert_eq!(info["beta"].as_f64().unwrap() as f32, model.beta);
+    assert_eq!(http_get(running.http, "/api/rooms/nowhere").await.0, 404);
     assert_eq!(
         http_get(running.http, "/readyz").await,
         (200, "ready\n".into())
