@@ -185,7 +185,9 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
         if args.demo_token.is_none()
             && let Some(token) = &demo_token
         {
-            eprintln!("demo: publish token {token} (enter it in the viewer to drag control points)");
+            eprintln!(
+                "demo: publish token {token} (enter it in the viewer to drag control points)"
+            );
         }
     }
     shutdown_signal().await?;
