@@ -1,0 +1,144 @@
+#!/usr/bin/env bash
+# The browser viewer (web/) in a real headless Chromium, end to end: builds crease-server, starts
+# it on its embedded demo (free ports, a random publish token for room demo), then runs
+# tests/browser/viewer.test.mjs (playwright-core driving Debian's /usr/bin/chromium) against it.
+# Called by .ci/run; runs alone from anywhere:
+#   bash tests/browser/run.sh
+# Uses ${CARGO_TARGET_DIR:-target} for the build, the demo cache (demo-cache/, trained once,
+# ~25 s), the server log (browser-test/server.log) and the screenshots (browser-test/*.png).
+# Installs chromium, and nodejs + npm, with apt-get when they are missing (as root or via sudo).
+# Never downloads a browser of its own (no `npx playwright install`).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+
+target="${CARGO_TARGET_DIR:-target}"
+bin="$target/release"
+work="$target/browser-test"
+log="$work/server.log"
+chromium_bin="/usr/bin/chromium"
+server_pid=""
+ready_timeout=180
+
+# Stops the server with SIGTERM (it drains for up to 5 s); fails unless it exits 0.
+stop_server() {
+    [[ -n "$server_pid" ]] || return 0
+    local pid=$server_pid code=0
+    server_pid=""
+    kill -TERM "$pid" 2>/dev/null || true
+    for _ in $(seq 1 150); do
+        kill -0 "$pid" 2>/dev/null || break
+        sleep 0.1
+    done
+    if kill -0 "$pid" 2>/dev/null; then
+        echo "FAIL: crease-server (pid $pid) still running 15 s after SIGTERM: killing it" >&2
+        kill -KILL "$pid" 2>/dev/null || true
+        wait "$pid" 2>/dev/null || true
+        return 1
+    fi
+    wait "$pid" 2>/dev/null || code=$?
+    if [[ $code -ne 0 ]]; then
+        echo "FAIL: crease-server exited with status $code on SIGTERM (expected 0)" >&2
+        return 1
+    fi
+}
+
+cleanup() {
+    local status=$?
+    set +e
+    stop_server || { [[ $status -eq 0 ]] && status=1; }
+    if [[ $status -ne 0 && -f "$log" ]]; then
+        echo "== crease-server log ($log)" >&2
+        cat "$log" >&2
+    fi
+    exit "$status"
+}
+trap cleanup EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+
+# apt-get install "$@" as root or through sudo; fails with a reason when neither is possible.
+apt_install() {
+    if ! command -v apt-get >/dev/null 2>&1; then
+        echo "FAIL: $* needed and there is no apt-get here: install it by hand" >&2
+        exit 1
+    fi
+    local sudo=""
+    if [[ $(id -u) -ne 0 ]]; then
+        if ! command -v sudo >/dev/null 2>&1; then
+            echo "FAIL: $* needed and this user cannot run apt-get (not root, no sudo)" >&2
+            exit 1
+        fi
+        sudo="sudo"
+    fi
+    echo "apt-get install $*"
+    $sudo apt-get update
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y "$@"
+}
+
+echo "== chromium, node"
+if [[ ! -x "$chromium_bin" ]]; then
+    echo "$chromium_bin is missing"
+    apt_install chromium
+fi
+# The Debian wrapper script prints a harmless shell warning on some machines: keep the version.
+"$chromium_bin" --version 2>/dev/null | head -n1
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    echo "node or npm is missing"
+    apt_install nodejs npm
+fi
+echo "node $(node --version), npm $(npm --version 2>/dev/null)"
+if (($(node -p 'process.versions.node.split(".")[0]') < 20)); then
+    echo "warning: playwright-core 1.65 wants Node.js 20 or newer" >&2
+fi
+
+echo "== npm ci (web/, tests/browser/)"
+(cd web && npm ci --no-audit --no-fund)
+(cd tests/browser && npm ci --no-audit --no-fund)
+
+echo "== build (crease-server)"
+cargo build --release --locked -p crease-server
+
+echo "== start crease-server (demo)"
+mkdir -p "$work"
+: >"$log"
+token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
+NO_COLOR=1 "$bin/crease-server" --grpc 127.0.0.1:0 --http 127.0.0.1:0 --cache "$target/demo-cache" \
+    --demo-token "$token" >>"$log" 2>&1 &
+server_pid=$!
+start=$SECONDS
+line=""
+while true; do
+    line="$(grep -m1 '^crease-server: gRPC on ' "$log" || true)"
+    [[ -n "$line" ]] && break
+    if ! kill -0 "$server_pid" 2>/dev/null; then
+        wait "$server_pid" && code=0 || code=$?
+        server_pid=""
+        echo "FAIL: crease-server exited (status $code) before it was listening" >&2
+        exit 1
+    fi
+    elapsed=$((SECONDS - start))
+    if ((elapsed >= ready_timeout)); then
+        echo "FAIL: crease-server not listening after $ready_timeout s" >&2
+        exit 1
+    fi
+    if ((elapsed > 0 && elapsed % 10 == 0)); then
+        echo "waiting for crease-server: $elapsed s (the first start trains the demo hand) — $(tail -n1 "$log")"
+        sleep 1
+    else
+        sleep 0.5
+    fi
+done
+http_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\2/' <<<"$line")"
+if [[ ! "$http_addr" =~ ^[0-9.]+:[0-9]+$ ]]; then
+    echo "FAIL: cannot parse the HTTP address from: $line" >&2
+    exit 1
+fi
+echo "listening after $((SECONDS - start)) s: HTTP $http_addr (pid $server_pid)"
+
+echo "== viewer in headless chromium"
+CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+    node tests/browser/viewer.test.mjs
+
+echo "== stop crease-server"
+stop_server
+echo "crease-server stopped cleanly on SIGTERM"
