@@ -204,12 +204,24 @@ function onAck(ack) {
 }
 
 function frameCamera() {
-  const s = geometry.boundingSphere;
-  if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
-  controls.target.copy(s.center);
-  camera.position.copy(s.center).add(new THREE.Vector3(0.2, 0.15, 1).normalize().multiplyScalar(s.radius * 3.2));
-  camera.near = s.radius / 100;
-  camera.far = s.radius * 100;
+  // The model's rest box (every pose stays near it) rather than the first frame's pose, so the
+  // framing does not depend on when the page joined; the first frame's sphere as a fallback.
+  let center;
+  let radius;
+  if (roomInfo && roomInfo.bounds && level === "base") {
+    const [lo, hi] = roomInfo.bounds.map((v) => new THREE.Vector3(...v));
+    center = lo.clone().add(hi).multiplyScalar(0.5);
+    radius = hi.distanceTo(lo) / 2;
+  } else {
+    const s = geometry.boundingSphere;
+    if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
+    center = s.center;
+    radius = s.radius;
+  }
+  controls.target.copy(center);
+  camera.position.copy(center).add(new THREE.Vector3(0.2, 0.15, 1).normalize().multiplyScalar(radius * 3.6));
+  camera.near = radius / 100;
+  camera.far = radius * 100;
   camera.updateProjectionMatrix();
   framed = true;
 }
