@@ -3,8 +3,9 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
+use crease_core::codec::spatial_order;
 use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{BonePalette, skin_lbs};
@@ -22,6 +23,38 @@ pub struct LoadedModel {
     /// The box around the rest pose and every training pose (skinned by the rig): where the
     /// model's meshes live, the basis of the streams' quantisation box.
     pub pose_bounds: (Vec3, Vec3),
+    /// The base mesh's spatial streaming order, computed on first use and shared by every room
+    /// (and batch) on this model.
+    spatial: OnceLock<SpatialStream>,
+}
+
+/// The base mesh in a spatial streaming order (`core::codec::spatial_order`).
+#[derive(Debug)]
+pub struct SpatialStream {
+    /// Streamed vertex `i` is model vertex `order[i]`.
+    pub order: Vec<u32>,
+    /// The base triangles in the streamed order.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl LoadedModel {
+    /// The base mesh's spatial streaming order (computed once).
+    pub fn spatial(&self) -> &SpatialStream {
+        self.spatial.get_or_init(|| {
+            let rest = &self.model.rig.rest;
+            let order = spatial_order(&rest.positions);
+            let mut inverse = vec![0u32; order.len()];
+            for (i, &m) in order.iter().enumerate() {
+                inverse[m as usize] = i as u32;
+            }
+            let triangles = rest
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| inverse[v as usize]))
+                .collect();
+            SpatialStream { order, triangles }
+        })
+    }
 }
 
 /// The box around the rest mesh and the rig's training poses.
@@ -102,6 +135,7 @@ impl ModelRegistry {
             name: name.to_owned(),
             info: model_info(name, &model),
             pose_bounds: pose_bounds(&model),
+            spatial: OnceLock::new(),
             model: Arc::new(model),
         });
         self.models.insert(name.to_owned(), Arc::clone(&loaded));

@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use crease_core::codec::{
     CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_indices,
-    encode_keyframe, spatial_order,
+    encode_keyframe,
 };
 use crease_core::glam::Vec3;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
@@ -171,10 +171,8 @@ pub struct Room {
     token: String,
     base_qbox: QuantBox,
     detail_qbox: QuantBox,
-    /// Streamed base vertex `i` is model vertex `base_order[i]` (empty: model order).
-    base_order: Vec<u32>,
-    /// The base triangles in the streamed order.
-    base_triangles: Vec<[u32; 3]>,
+    /// Whether base vertices stream in the model's spatial order ([`LoadedModel::spatial`]).
+    spatial: bool,
     predictor: Predictor,
     state: Mutex<RoomState>,
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
@@ -244,28 +242,12 @@ impl Room {
         let rest = &model.model.rig.rest;
         let base_encoder = encoder(rest.vertex_count(), base_qbox)?;
         let detail_encoder = encoder(model.model.detail_vertex_count().unwrap_or(0), detail_qbox)?;
-        let (base_order, base_triangles) = if settings.spatial_order {
-            let order = spatial_order(&rest.positions);
-            let mut inverse = vec![0u32; order.len()];
-            for (i, &m) in order.iter().enumerate() {
-                inverse[m as usize] = i as u32;
-            }
-            let triangles = rest
-                .triangles
-                .iter()
-                .map(|t| t.map(|v| inverse[v as usize]))
-                .collect();
-            (order, triangles)
-        } else {
-            (Vec::new(), rest.triangles.clone())
-        };
         Ok(Room {
             id: id.to_owned(),
             token: new_token(),
             base_qbox,
             detail_qbox,
-            base_order,
-            base_triangles,
+            spatial: settings.spatial_order,
             state: Mutex::new(RoomState {
                 ctx,
                 controls: vec![Vec3::ZERO; n],
@@ -325,7 +307,8 @@ impl Room {
     /// Streamed vertex `i` of `level` is model vertex `order[i]`; empty: the model's order.
     pub fn vertex_order(&self, level: Level) -> &[u32] {
         match level {
-            Level::Base => &self.base_order,
+            Level::Base if self.spatial => &self.model.spatial().order,
+            Level::Base => &[],
             Level::Detail => &[],
         }
     }
@@ -360,13 +343,11 @@ impl Room {
             .predict(&mut state.ctx, &state.controls, Some(&state.valid))
             .map_err(|e| internal("positions", &e))?;
         // In the streamed order; this vector is the frame's (kept for on-demand keyframes).
-        let positions: Vec<Vec3> = if self.base_order.is_empty() {
+        let order = self.vertex_order(Level::Base);
+        let positions: Vec<Vec3> = if order.is_empty() {
             predicted.to_vec()
         } else {
-            self.base_order
-                .iter()
-                .map(|&m| predicted[m as usize])
-                .collect()
+            order.iter().map(|&m| predicted[m as usize]).collect()
         };
         let update = |encoder: &mut FrameEncoder, positions: Vec<Vec3>| {
             let qbox = *encoder.qbox();
@@ -487,7 +468,8 @@ impl Room {
     /// The triangles of `level`'s mesh, in the streamed vertex order.
     pub fn triangles(&self, level: Level) -> &[[u32; 3]] {
         match level {
-            Level::Base => &self.base_triangles,
+            Level::Base if self.spatial => &self.model.spatial().triangles,
+            Level::Base => &self.model.model.rig.rest.triangles,
             Level::Detail => self.predictor.detail_triangles().unwrap_or_default(),
         }
     }
