@@ -19,7 +19,7 @@ chromium_bin="/usr/bin/chromium"
 
 ready_timeout=180
 
-# stop_server, server_pid, the EXIT trap (stops the server, prints its log on failure).
+# start_demo_server, stop_server, the EXIT trap (stops the server, prints its log on failure).
 source tests/lib/server.sh
 
 # apt-get install "$@" as root or through sudo; fails with a reason when neither is possible.
@@ -64,42 +64,8 @@ echo "== npm ci (web/, tests/browser/)"
 echo "== build (crease-server)"
 cargo build --release --locked -p crease-server
 
-echo "== start crease-server (demo)"
-mkdir -p "$work"
-: >"$log"
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
-NO_COLOR=1 "$bin/crease-server" --grpc 127.0.0.1:0 --http 127.0.0.1:0 --cache "$target/demo-cache" \
-    --demo-token "$token" >>"$log" 2>&1 &
-server_pid=$!
-start=$SECONDS
-line=""
-while true; do
-    line="$(grep -m1 '^crease-server: gRPC on ' "$log" || true)"
-    [[ -n "$line" ]] && break
-    if ! kill -0 "$server_pid" 2>/dev/null; then
-        wait "$server_pid" && code=0 || code=$?
-        server_pid=""
-        echo "FAIL: crease-server exited (status $code) before it was listening" >&2
-        exit 1
-    fi
-    elapsed=$((SECONDS - start))
-    if ((elapsed >= ready_timeout)); then
-        echo "FAIL: crease-server not listening after $ready_timeout s" >&2
-        exit 1
-    fi
-    if ((elapsed > 0 && elapsed % 10 == 0)); then
-        echo "waiting for crease-server: $elapsed s (the first start trains the demo hand) — $(tail -n1 "$log")"
-        sleep 1
-    else
-        sleep 0.5
-    fi
-done
-http_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\2/' <<<"$line")"
-if [[ ! "$http_addr" =~ ^[0-9.]+:[0-9]+$ ]]; then
-    echo "FAIL: cannot parse the HTTP address from: $line" >&2
-    exit 1
-fi
-echo "listening after $((SECONDS - start)) s: HTTP $http_addr (pid $server_pid)"
+start_demo_server --demo-token "$token"
 
 echo "== viewer in headless chromium"
 CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \

@@ -1,4 +1,4 @@
-# Shared by tests/python/run.sh and tests/browser/run.sh (sourced, not run): stopping the demo
+# Shared by tests/python/run.sh and tests/browser/run.sh (sourced, not run): starting and stopping the demo
 # server they start, and the EXIT trap that stops it and prints its log on failure. The caller
 # sets `log` (the server's log file) and `server_pid` (once started).
 
@@ -40,3 +40,44 @@ cleanup() {
 trap cleanup EXIT
 trap 'exit 130' INT
 trap 'exit 143' TERM
+
+# Starts "$bin/crease-server" on its embedded demo on free loopback ports (extra arguments are
+# passed on), logging to "$log", and waits up to $ready_timeout s (the first start trains the
+# demo hand) for its address line. Sets server_pid, grpc_addr and http_addr; exits on failure.
+start_demo_server() {
+    echo "== start crease-server (demo)"
+    mkdir -p "$(dirname "$log")"
+    : >"$log"
+    NO_COLOR=1 "$bin/crease-server" --grpc 127.0.0.1:0 --http 127.0.0.1:0 \
+        --cache "$target/demo-cache" "$@" >>"$log" 2>&1 &
+    server_pid=$!
+    local start=$SECONDS line="" code elapsed
+    while true; do
+        line="$(grep -m1 '^crease-server: gRPC on ' "$log" || true)"
+        [[ -n "$line" ]] && break
+        if ! kill -0 "$server_pid" 2>/dev/null; then
+            wait "$server_pid" && code=0 || code=$?
+            server_pid=""
+            echo "FAIL: crease-server exited (status $code) before it was listening" >&2
+            exit 1
+        fi
+        elapsed=$((SECONDS - start))
+        if ((elapsed >= ready_timeout)); then
+            echo "FAIL: crease-server not listening after $ready_timeout s" >&2
+            exit 1
+        fi
+        if ((elapsed > 0 && elapsed % 10 == 0)); then
+            echo "waiting for crease-server: $elapsed s (the first start trains the demo hand) — $(tail -n1 "$log")"
+            sleep 1
+        else
+            sleep 0.5
+        fi
+    done
+    grpc_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\1/' <<<"$line")"
+    http_addr="$(sed -E 's/^crease-server: gRPC on ([^ ,]+), HTTP on ([^ ,]+).*/\2/' <<<"$line")"
+    if [[ ! "$grpc_addr" =~ ^[0-9.]+:[0-9]+$ || ! "$http_addr" =~ ^[0-9.]+:[0-9]+$ ]]; then
+        echo "FAIL: cannot parse the addresses from: $line" >&2
+        exit 1
+    fi
+    echo "listening after $((SECONDS - start)) s: gRPC $grpc_addr, HTTP $http_addr (pid $server_pid)"
+}
