@@ -737,21 +737,7 @@ struct Subscribed {
 /// Connects on its own connection and subscribes to `room`'s base mesh.
 async fn subscribe(url: String, room: String, check: bool) -> anyhow::Result<Subscribed> {
     let mut client = connect(&url).await?;
-    let mut stream = client
-        .subscribe(v1::SubscribeRequest {
-            room: room.clone(),
-            level: v1::Level::Base as i32,
-        })
-        .await
-        .with_context(|| format!("subscribing to room {room:?}"))?
-        .into_inner();
-    let first = stream
-        .message()
-        .await?
-        .context("the server closed the stream before the topology")?;
-    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
-        bail!("room {room:?}: the first message is not the topology");
-    };
+    let (stream, topology) = super::common::subscribe(&mut client, &room, v1::Level::Base).await?;
     if check {
         read_topology(&topology).with_context(|| format!("room {room:?}: Topology"))?;
     }

@@ -175,3 +175,56 @@ pub async fn connect(
     Ok(crease_proto::v1::crease_client::CreaseClient::new(channel)
         .max_decoding_message_size(MAX_RESPONSE_BYTES))
 }
+
+/// Where the network commands find the server.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ServerArgs {
+    /// The server's gRPC address, e.g. `http://localhost:50051` (`https://` for TLS).
+    #[arg(long, default_value = "http://localhost:50051")]
+    pub server: String,
+    /// With an `https://` server: its CA certificate (PEM), e.g. the server's own self-signed
+    /// certificate. Default: the Mozilla root certificates.
+    #[arg(long, value_name = "FILE")]
+    pub ca: Option<std::path::PathBuf>,
+}
+
+impl ServerArgs {
+    /// A client of the server ([`connect`]).
+    pub async fn connect(
+        &self,
+    ) -> anyhow::Result<crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>>
+    {
+        connect(&self.server, self.ca.as_deref()).await
+    }
+}
+
+/// Subscribes to `room` at `level` and reads the stream's first message, the topology.
+///
+/// # Errors
+/// The server's refusal, or a stream that ends or starts with something else.
+pub async fn subscribe(
+    client: &mut crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>,
+    room: &str,
+    level: crease_proto::v1::Level,
+) -> anyhow::Result<(
+    tonic::Streaming<crease_proto::v1::MeshFrame>,
+    crease_proto::v1::Topology,
+)> {
+    use crease_proto::v1;
+    let mut stream = client
+        .subscribe(v1::SubscribeRequest {
+            room: room.to_owned(),
+            level: level as i32,
+        })
+        .await
+        .with_context(|| format!("subscribing to room {room:?}"))?
+        .into_inner();
+    let first = stream
+        .message()
+        .await?
+        .context("the server closed the stream before the topology")?;
+    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
+        bail!("room {room:?}: the first message is not the topology");
+    };
+    Ok((stream, topology))
+}

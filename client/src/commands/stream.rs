@@ -12,13 +12,8 @@ use super::synth::read_control_frames;
 /// Options of `crease stream`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct StreamArgs {
-    /// The server's gRPC address.
-    #[arg(long, default_value = "http://localhost:50051")]
-    pub server: String,
-    /// With an `https://` server: its CA certificate (PEM), e.g. the server's own self-signed
-    /// certificate. Default: the Mozilla root certificates.
-    #[arg(long, value_name = "FILE")]
-    pub ca: Option<PathBuf>,
+    #[command(flatten)]
+    pub server: super::common::ServerArgs,
     /// The room to publish into.
     #[arg(long, default_value = "demo")]
     pub room: String,
@@ -52,7 +47,7 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
 }
 
 async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
-    let mut client = super::common::connect(&args.server, args.ca.as_deref()).await?;
+    let mut client = args.server.connect().await?;
     let model = client
         .list_models(v1::ListModelsRequest {})
         .await

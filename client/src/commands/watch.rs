@@ -12,13 +12,8 @@ use crease_proto::{read_topology, v1};
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct WatchArgs {
-    /// The server's gRPC address, e.g. `http://localhost:50051`.
-    #[arg(long, default_value = "http://localhost:50051")]
-    pub server: String,
-    /// With an `https://` server: its CA certificate (PEM), e.g. the server's own self-signed
-    /// certificate. Default: the Mozilla root certificates.
-    #[arg(long, value_name = "FILE")]
-    pub ca: Option<PathBuf>,
+    #[command(flatten)]
+    pub server: super::common::ServerArgs,
     /// The room to watch.
     #[arg(long, default_value = "demo")]
     pub room: String,
@@ -55,27 +50,13 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
 }
 
 async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
-    let mut client = super::common::connect(&args.server, args.ca.as_deref()).await?;
+    let mut client = args.server.connect().await?;
     let level = if args.detail {
         v1::Level::Detail
     } else {
         v1::Level::Base
     };
-    let mut stream = client
-        .subscribe(v1::SubscribeRequest {
-            room: args.room.clone(),
-            level: level as i32,
-        })
-        .await
-        .with_context(|| format!("subscribing to room {:?}", args.room))?
-        .into_inner();
-    let first = stream
-        .message()
-        .await?
-        .context("the server closed the stream before the topology")?;
-    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
-        bail!("the first message is not the topology");
-    };
+    let (mut stream, topology) = super::common::subscribe(&mut client, &args.room, level).await?;
     let stream_topology = read_topology(&topology).context("reading the topology")?;
     let n = stream_topology.vertex_count;
     let triangles = stream_topology.model_triangles();
