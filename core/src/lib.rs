@@ -11,10 +11,13 @@
 //! - [`sweep`]: the LYK06 sweep hand; today its skeleton, poses and forward kinematics.
 //! - [`codec`]: compact per-frame vertex buffers for streaming (16-bit quantisation, octahedral
 //!   normals, keyframes and deltas, meshopt's vertex and index codecs, a self-describing header).
+//! - [`mocap`]: marker recordings (Qualisys TSV, C3D) to control frames: marker maps,
+//!   registration into the model's hand frame, gap filling, the One Euro filter.
 
 mod atomic;
 pub mod codec;
 pub mod mesh;
+pub mod mocap;
 pub mod model;
 pub mod render;
 pub mod runtime;
