@@ -44,8 +44,14 @@ pub enum Command {
     Pose(commands::handgen::PoseArgs),
     /// Watch a room on a server: decode its frames, report frames/s, bytes and latency.
     Watch(commands::watch::WatchArgs),
-    /// Publish a file of control frames into a room at a fixed rate.
+    /// Publish control frames into a room in real time: a CSV/JSON file of frames, or a
+    /// Qualisys TSV / C3D marker recording retargeted through a marker map.
     Stream(commands::stream::StreamArgs),
+    /// Turn a marker recording (Qualisys TSV, C3D) into control frames for a model, through a
+    /// marker map (registration, gap filling); writes the CSV `synth` and `stream` read.
+    Retarget(commands::retarget::RetargetArgs),
+    /// Open, inspect or close rooms on a server.
+    Room(commands::room::RoomArgs),
     /// Network load benchmark (issue 6): rooms, publishers and subscribers on loopback;
     /// latency, server CPU and bytes per vertex per frame.
     BenchNet(commands::bench_net::BenchNetArgs),
@@ -62,6 +68,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Pose(args) => commands::handgen::run_pose(&args),
         Command::Watch(args) => commands::watch::run(&args),
         Command::Stream(args) => commands::stream::run(&args),
+        Command::Room(args) => commands::room::run(&args),
+        Command::Retarget(args) => commands::retarget::run(&args),
         Command::BenchNet(args) => commands::bench_net::run(&args),
     }
 }

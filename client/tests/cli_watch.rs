@@ -28,6 +28,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
             room: "r1".into(),
             model: "tube".into(),
             beta: 0.0,
+            filter: None,
         });
         open.metadata_mut()
             .insert("authorization", "Bearer admin".parse().unwrap());

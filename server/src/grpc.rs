@@ -5,6 +5,7 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::time::Instant;
 
+use crease_core::mocap::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
 use crease_proto::v1::{self, FrameError};
 use tokio::sync::mpsc;
@@ -146,12 +147,26 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let room =
-            Room::open(&r.room, model, beta, self.state.config.stream).map_err(|e| match e {
+        let filter = r.filter.map(|f| OneEuroParams {
+            min_cutoff_hz: f.min_cutoff_hz,
+            beta: f.beta,
+            d_cutoff_hz: f.d_cutoff_hz,
+        });
+        if let Some(f) = filter
+            && !f.is_valid()
+        {
+            return Err(Status::invalid_argument(format!(
+                "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
+                f.min_cutoff_hz, f.beta, f.d_cutoff_hz
+            )));
+        }
+        let room = Room::open(&r.room, model, beta, self.state.config.stream)
+            .map_err(|e| match e {
                 RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
                 RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
                 RoomError::Codec(e) => Status::internal(format!("model: {e}")),
-            })?;
+            })?
+            .with_filter(filter);
         let room = self.state.add_room(room).map_err(|e| match e {
             AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
             AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
@@ -162,6 +177,25 @@ impl Crease for CreaseService {
             model: Some(room.model.info.clone()),
         };
         Ok(Response::new(response))
+    }
+
+    async fn get_room(
+        &self,
+        req: Request<v1::GetRoomRequest>,
+    ) -> Result<Response<v1::RoomInfo>, Status> {
+        let room = self.room(&req.get_ref().room)?;
+        Ok(Response::new(v1::RoomInfo {
+            room: room.id.clone(),
+            model: Some(room.model.info.clone()),
+            beta: room.beta(),
+            filter: room.filter().map(|f| v1::MarkerFilter {
+                min_cutoff_hz: f.min_cutoff_hz,
+                beta: f.beta,
+                d_cutoff_hz: f.d_cutoff_hz,
+            }),
+            subscribers: room.subscriber_count() as u32,
+            published: room.published(),
+        }))
     }
 
     async fn close_room(
@@ -279,6 +313,7 @@ pub(crate) async fn publish_one(
                     server_latency_us: p.latency_us,
                     held_controls: p.held,
                     error: None,
+                    control_residual: p.control_rms,
                 },
                 Ok(Err(e)) => error_ack(seq, 3, e.to_string()),
                 Err(e) => error_ack(seq, 13, format!("internal: {e}")),
@@ -313,5 +348,6 @@ fn error_ack(seq: u64, code: i32, message: String) -> v1::PublishAck {
         server_latency_us: 0,
         held_controls: 0,
         error: Some(FrameError { code, message }),
+        control_residual: 0.0,
     }
 }

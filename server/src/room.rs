@@ -19,6 +19,8 @@ use crease_core::codec::{
     encode_keyframe,
 };
 use crease_core::glam::Vec3;
+use crease_core::mocap::filter::{OneEuro, OneEuroParams};
+use crease_core::model::ControlPoint;
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
 use crease_proto::{WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
@@ -123,12 +125,15 @@ impl MeshUpdate {
 }
 
 /// What publishing one frame did.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Published {
     /// Control points held (invalid or occluded).
     pub held: u32,
     /// Microseconds from arrival to the meshes being handed to the subscribers.
     pub latency_us: u32,
+    /// RMS distance between the frame's valid control points (as received, before any
+    /// filter) and the predicted mesh's control vertices, model units; 0 with none valid.
+    pub control_rms: f32,
 }
 
 /// Errors of opening a room.
@@ -160,6 +165,12 @@ struct RoomState {
     valid: Vec<bool>,
     base_encoder: FrameEncoder,
     detail_encoder: FrameEncoder,
+    /// The control points as received (the residual is measured against these).
+    received: Vec<Vec3>,
+    /// One filter per control point (empty when the room does not filter).
+    filters: Vec<OneEuro>,
+    /// The previous frame's capture time and arrival, for the filter's time step.
+    last_time: Option<(i64, Instant)>,
 }
 
 /// A live session on one model (module docs).
@@ -173,6 +184,8 @@ pub struct Room {
     detail_qbox: QuantBox,
     /// Whether base vertices stream in the model's spatial order ([`LoadedModel::spatial`]).
     spatial: bool,
+    /// The One Euro filter on control points, if the room smooths them.
+    filter: Option<OneEuroParams>,
     predictor: Predictor,
     state: Mutex<RoomState>,
     base: watch::Sender<Option<Arc<MeshUpdate>>>,
@@ -208,6 +221,29 @@ impl std::fmt::Debug for Room {
             .field("id", &self.id)
             .field("model", &self.model.name)
             .finish_non_exhaustive()
+    }
+}
+
+/// RMS over the valid control points of the distance between `targets[i]` and the predicted
+/// position of control vertex `i`; 0 when none is valid.
+fn control_residual(
+    controls: &[ControlPoint],
+    predicted: &[Vec3],
+    targets: &[Vec3],
+    valid: &[bool],
+) -> f32 {
+    let (sum, n) = controls
+        .iter()
+        .zip(targets.iter().zip(valid))
+        .filter(|(_, (_, ok))| **ok)
+        .fold((0.0f64, 0usize), |(s, n), (c, (t, _))| {
+            let d = predicted[c.vertex as usize].distance_squared(*t);
+            (s + f64::from(d), n + 1)
+        });
+    if n == 0 {
+        0.0
+    } else {
+        (sum / n as f64).sqrt() as f32
     }
 }
 
@@ -248,12 +284,16 @@ impl Room {
             base_qbox,
             detail_qbox,
             spatial: settings.spatial_order,
+            filter: None,
             state: Mutex::new(RoomState {
                 ctx,
                 controls: vec![Vec3::ZERO; n],
                 valid: vec![true; n],
                 base_encoder,
                 detail_encoder,
+                received: vec![Vec3::ZERO; n],
+                filters: Vec::new(),
+                last_time: None,
             }),
             predictor,
             model,
@@ -274,6 +314,28 @@ impl Room {
     pub fn with_token(mut self, token: &str) -> Self {
         token.clone_into(&mut self.token);
         self
+    }
+
+    /// Smooths every frame's control points with a One Euro filter (mocap rooms; `None`, the
+    /// default, passes them through as UI rooms need).
+    ///
+    /// # Panics
+    /// If `params` is not [valid](OneEuroParams::is_valid) (callers check what users send).
+    pub fn with_filter(mut self, params: Option<OneEuroParams>) -> Self {
+        assert!(
+            params.is_none_or(|p| p.is_valid()),
+            "invalid filter {params:?}"
+        );
+        self.filter = params;
+        let n = self.model.model.controls.len();
+        let state = self.state.get_mut().unwrap_or_else(|e| e.into_inner());
+        state.filters = params.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]);
+        self
+    }
+
+    /// The room's control-point filter.
+    pub fn filter(&self) -> Option<OneEuroParams> {
+        self.filter
     }
 
     /// Frames published into this room so far (accepted ones).
@@ -334,6 +396,31 @@ impl Room {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let state = &mut *guard;
         let held = read_control_frame(frame, &mut state.controls, &mut state.valid)?;
+        state.received.copy_from_slice(&state.controls);
+        if !state.filters.is_empty() {
+            // The time step: capture times when the publisher sends increasing ones, else
+            // arrival times.
+            let dt = match state.last_time {
+                Some((t, _)) if frame.capture_time_us > t => {
+                    (frame.capture_time_us - t) as f32 * 1e-6
+                }
+                Some((_, at)) => received.duration_since(at).as_secs_f32(),
+                None => 0.0,
+            };
+            state.last_time = Some((frame.capture_time_us, received));
+            for ((f, p), ok) in state
+                .filters
+                .iter_mut()
+                .zip(state.controls.iter_mut())
+                .zip(&state.valid)
+            {
+                if *ok {
+                    *p = f.filter(*p, dt);
+                } else {
+                    f.reset();
+                }
+            }
+        }
         let internal = |what: &str, e: &dyn std::fmt::Display| WireError {
             field: what.into(),
             message: e.to_string(),
@@ -342,6 +429,12 @@ impl Room {
             .predictor
             .predict(&mut state.ctx, &state.controls, Some(&state.valid))
             .map_err(|e| internal("positions", &e))?;
+        let control_rms = control_residual(
+            &self.model.model.controls,
+            predicted,
+            &state.received,
+            &state.valid,
+        );
         // In the streamed order; this vector is the frame's (kept for on-demand keyframes).
         let order = self.vertex_order(Level::Base);
         let positions: Vec<Vec3> = if order.is_empty() {
@@ -383,6 +476,7 @@ impl Room {
         Ok(Published {
             held: held as u32,
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
+            control_rms,
         })
     }
 

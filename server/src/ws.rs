@@ -7,7 +7,8 @@
 //!   (`{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...], "valid": [true, ...]}`,
 //!   `valid` optional); the room is the path's. Publishing needs the room's token in
 //!   `?token=`. Each frame is answered by a text message, the ack as JSON
-//!   (`{"seq": 1, "server_latency_us": 120, "held_controls": 0, "error": null}` or with
+//!   (`{"seq": 1, "server_latency_us": 120, "held_controls": 0, "control_residual": 0.002,
+//!   "error": null}` or with
 //!   `"error": {"code": 3, "message": "positions: ..."}`).
 //!
 //! A bad message is answered by an error ack and the socket stays open.
@@ -56,6 +57,7 @@ struct JsonAck {
     seq: u64,
     server_latency_us: u32,
     held_controls: u32,
+    control_residual: f32,
     error: Option<JsonError>,
 }
 
@@ -176,6 +178,7 @@ async fn session(
             seq: ack.seq,
             server_latency_us: ack.server_latency_us,
             held_controls: ack.held_controls,
+            control_residual: ack.control_residual,
             error: ack.error.map(|e| JsonError {
                 code: e.code,
                 message: e.message,

@@ -242,6 +242,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         room: "r1".into(),
         model: "tube".into(),
         beta: 0.0,
+        filter: None,
     };
     let err = client.open_room(open.clone()).await.unwrap_err();
     assert_eq!(err.code(), tonic::Code::Unauthenticated);
@@ -615,6 +616,7 @@ async fn limits_refuse_and_the_room_goes_on() {
                 room: room.into(),
                 model: "tube".into(),
                 beta: 0.0,
+                filter: None,
             },
             ADMIN,
         )

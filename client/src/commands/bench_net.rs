@@ -32,6 +32,7 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::{Channel, Endpoint};
 
+use super::common::authorized;
 use super::synth::read_control_frames;
 
 /// The horse gallop beside the checkout (`../shared/data`), as the core benches find it.
@@ -580,18 +581,6 @@ async fn connect(url: &str) -> anyhow::Result<CreaseClient<Channel>> {
     Ok(CreaseClient::new(channel))
 }
 
-/// `msg` with `authorization: Bearer <token>`.
-fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
-    let mut req = tonic::Request::new(msg);
-    req.metadata_mut().insert(
-        "authorization",
-        format!("Bearer {token}")
-            .parse()
-            .context("the token is not a valid header value")?,
-    );
-    Ok(req)
-}
-
 /// Microseconds since the Unix epoch (the wire's capture clock).
 fn unix_us() -> i64 {
     SystemTime::now()
@@ -814,6 +803,7 @@ async fn run_scenario(
             room: id.clone(),
             model: target.model.clone(),
             beta: 0.0,
+            filter: None,
         };
         let opened = admin
             .open_room(authorized(open, &target.admin_token)?)

@@ -228,3 +228,18 @@ pub async fn subscribe(
     };
     Ok((stream, topology))
 }
+
+/// `msg` with `authorization: Bearer <token>` metadata (admin and publish tokens).
+///
+/// # Errors
+/// A token that is not a valid header value.
+pub fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
+    let mut req = tonic::Request::new(msg);
+    req.metadata_mut().insert(
+        "authorization",
+        format!("Bearer {token}")
+            .parse()
+            .context("the token is not a valid header value")?,
+    );
+    Ok(req)
+}

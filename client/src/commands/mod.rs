@@ -7,6 +7,8 @@ pub mod fit;
 pub mod handgen;
 pub mod layers;
 pub mod remote_synth;
+pub mod retarget;
+pub mod room;
 pub mod stream;
 pub mod synth;
 pub mod train;

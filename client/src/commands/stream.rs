@@ -1,43 +1,82 @@
-//! `crease stream`: publish a file of control frames into a room at a fixed rate over gRPC,
-//! printing refused frames as they come and a summary of acks and latency at the end.
+//! `crease stream`: publish control frames into a room in real time over gRPC: a file of
+//! control frames (CSV/JSON), or a marker recording (Qualisys TSV, C3D) retargeted onto the
+//! room's model through a marker map (`crease_core::mocap`). Prints refused frames as they come
+//! and at the end acks, latency, invalid markers and how closely the mesh followed them.
+//!
+//! With `--check` (or `--strip`) it also subscribes to the room and decodes every mesh the
+//! frames produce, checking each is finite; `--strip` renders the hand every `--strip-every`
+//! seconds of the recording into one PNG.
 
+use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
-use crease_proto::{control_frame, v1};
+use crease_core::codec::FrameDecoder;
+use crease_core::mesh::Mesh;
+use crease_core::mocap::RetargetStats;
+use crease_core::render::{View, contact_sheet};
+use crease_proto::{control_frame, read_topology, v1};
+use serde::Serialize;
 
+use super::common::authorized;
+use super::retarget::{ModelControls, RecordingArgs, Retargeted};
 use super::synth::read_control_frames;
 
 /// Options of `crease stream`.
 #[derive(Clone, Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["frames", "tsv", "c3d"])))]
 pub struct StreamArgs {
     #[command(flatten)]
     pub server: super::common::ServerArgs,
     /// The room to publish into.
     #[arg(long, default_value = "demo")]
     pub room: String,
-    /// The room's publish token (from OpenRoom). Also read from CREASE_TOKEN.
+    /// The room's publish token (from `crease room open`). Also read from CREASE_TOKEN.
     #[arg(long, env = "CREASE_TOKEN", hide_env_values = true)]
     pub token: String,
     /// Control frames: CSV or JSON, as `crease synth --controls` reads them.
     #[arg(long, value_name = "FILE")]
-    pub frames: PathBuf,
-    /// Frames per second (30, 60, 100, ...).
-    #[arg(long, default_value_t = 60.0)]
-    pub rate: f64,
-    /// Play the file again and again until interrupted.
+    pub frames: Option<PathBuf>,
+    #[command(flatten)]
+    pub recording: RecordingArgs,
+    /// Frames per second. A recording plays at its own rate unless this is given, and is then
+    /// resampled to it (e.g. 100 Hz to a 60 Hz room). Control-frame files default to 60.
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Play again and again until interrupted.
     #[arg(long = "loop")]
     pub repeat: bool,
+    /// Subscribe too, decode every mesh the frames produce, and check that each is finite.
+    #[arg(long)]
+    pub check: bool,
+    /// Render the mesh every --strip-every seconds into this PNG (implies --check).
+    #[arg(long, value_name = "PNG")]
+    pub strip: Option<PathBuf>,
+    /// Seconds between the strip's pictures.
+    #[arg(long, default_value_t = 10.0)]
+    pub strip_every: f64,
+    /// Write the summary as JSON.
+    #[arg(long, value_name = "FILE")]
+    pub report: Option<PathBuf>,
 }
 
 /// Runs `crease stream`.
 pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
-    if !(args.rate.is_finite() && args.rate > 0.0 && args.rate <= 10_000.0) {
+    if let Some(rate) = args.rate
+        && !(rate.is_finite() && rate > 0.0 && rate <= 10_000.0)
+    {
+        bail!("--rate must be in (0, 10000] frames per second, got {rate}");
+    }
+    if !(args.strip_every.is_finite() && args.strip_every > 0.0) {
         bail!(
-            "--rate must be in (0, 10000] frames per second, got {}",
-            args.rate
+            "--strip-every must be a positive number of seconds, got {}",
+            args.strip_every
         );
+    }
+    if args.recording.map.is_some() && args.frames.is_some() {
+        bail!("--map applies to --tsv and --c3d recordings, not to --frames");
     }
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -46,101 +85,331 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
     runtime.block_on(stream(args))
 }
 
+/// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
+fn unix_us() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
+
+/// Percentile `p` (0..=1) of sorted values.
+fn pct<T: Copy + Default>(sorted: &[T], p: f64) -> T {
+    if sorted.is_empty() {
+        return T::default();
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+/// Summary of a run (`--report`).
+#[derive(Debug, Default, Serialize)]
+struct Report {
+    frames_sent: u64,
+    acknowledged: u64,
+    refused: u64,
+    rate_hz: f64,
+    seconds: f64,
+    server_latency_us_p50: u32,
+    server_latency_us_p99: u32,
+    round_trip_us_p50: u64,
+    round_trip_us_p99: u64,
+    held_controls: u64,
+    invalid_in_frames: u64,
+    frames_with_invalid: u64,
+    control_residual_rms_model: f64,
+    control_residual_rms_recording_units: Option<f64>,
+    scale: Option<f32>,
+    retarget: Option<RetargetStats>,
+    meshes: Option<MeshCheck>,
+    strip: Option<String>,
+}
+
+/// What `--check` saw on the subscription.
+#[derive(Clone, Debug, Default, Serialize)]
+struct MeshCheck {
+    received: u64,
+    skipped: u64,
+    non_finite: u64,
+    latency_us_p50: i64,
+    latency_us_p99: i64,
+    #[serde(skip)]
+    strip: Vec<(String, Mesh)>,
+}
+
 async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let mut client = args.server.connect().await?;
-    let model = client
-        .list_models(v1::ListModelsRequest {})
+    let room = client
+        .get_room(v1::GetRoomRequest {
+            room: args.room.clone(),
+        })
         .await
-        .context("listing models")?
+        .map_err(|s| anyhow::anyhow!("room {:?}: {}", args.room, s.message()))?
         .into_inner();
-    // Rooms are not listed, so the file must fit one of the server's models: the first
-    // control-point count that parses it wins, and the server checks it against the room.
-    let mut counts: Vec<usize> = model
-        .models
-        .iter()
-        .map(|m| m.control_points.len())
-        .collect();
-    counts.sort_unstable();
-    counts.dedup();
-    let frames = counts
-        .iter()
-        .find_map(|&n| read_control_frames(&args.frames, n).ok())
-        .with_context(|| {
-            format!(
-                "{}: no frame layout of the server's models fits ({counts:?} control points)",
-                args.frames.display()
-            )
-        })?;
+    let model = room
+        .model
+        .clone()
+        .context("the server sent a room without a model")?;
+    let n = model.control_points.len();
+    let prepared = match &args.frames {
+        Some(path) => Retargeted {
+            frames: read_control_frames(path, n).with_context(|| {
+                format!(
+                    "{}: frames for model {:?} ({n} control points)",
+                    path.display(),
+                    model.name
+                )
+            })?,
+            rate: args.rate.unwrap_or(60.0),
+            scale: None,
+            units: "model units".into(),
+            stats: None,
+        },
+        None => {
+            let controls = ModelControls::from_info(&model);
+            args.recording.retarget(&controls, args.rate)?
+        }
+    };
+    if prepared.frames.is_empty() {
+        bail!("nothing to send: no frames");
+    }
+    let frames = Arc::new(prepared.frames);
     let total = if args.repeat {
         u64::MAX
     } else {
         frames.len() as u64
     };
-    let period = Duration::from_secs_f64(1.0 / args.rate);
-    let room = args.room.clone();
-    let (tx, rx) = tokio::sync::mpsc::channel(8);
-    let start = Instant::now();
-    tokio::spawn(async move {
-        let mut ticker = tokio::time::interval(period);
-        for seq in 0..total {
-            ticker.tick().await;
-            let f = &frames[(seq % frames.len() as u64) as usize];
-            let capture_time_us = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_micros() as i64);
-            let frame = control_frame(&room, seq, capture_time_us, &f.positions, &f.valid);
-            if tx.send(frame).await.is_err() {
-                break;
+    let rate = prepared.rate;
+    let start_us = unix_us();
+
+    // The checker subscribes before the first frame goes out.
+    let want_check = args.check || args.strip.is_some();
+    let checker = if want_check {
+        let (mut mesh_stream, topology) =
+            super::common::subscribe(&mut client, &args.room, v1::Level::Base).await?;
+        let topo = read_topology(&topology).context("reading the topology")?;
+        let triangles = topo.model_triangles();
+        let last_seq = total.saturating_sub(1);
+        let strip_every = args.strip.is_some().then_some(args.strip_every);
+        Some(tokio::spawn(async move {
+            let mut check = MeshCheck::default();
+            let mut decoder = FrameDecoder::new(topo.vertex_count);
+            let (mut streamed, mut model_order) = (Vec::new(), Vec::new());
+            let mut latencies = Vec::new();
+            let mut next_strip = 0.0f64;
+            loop {
+                let msg = match tokio::time::timeout(Duration::from_secs(5), mesh_stream.message())
+                    .await
+                {
+                    Ok(Ok(Some(m))) => m,
+                    _ => break,
+                };
+                let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+                    continue;
+                };
+                // Keep the codec state, count only this run's frames.
+                let decoded = decoder.decode(&f.data);
+                if f.capture_time_us < start_us {
+                    continue;
+                }
+                check.received += 1;
+                check.skipped += u64::from(f.skipped);
+                latencies.push(unix_us() - f.capture_time_us);
+                if decoded.is_err() {
+                    check.non_finite += 1;
+                    continue;
+                }
+                decoder.positions(&mut streamed);
+                if !streamed.iter().all(|p| p.is_finite()) {
+                    check.non_finite += 1;
+                }
+                if let Some(every) = strip_every {
+                    let t = f.seq as f64 / rate;
+                    if t + 0.5 / rate >= next_strip && f.seq <= last_seq {
+                        topo.to_model_order(&streamed, &mut model_order);
+                        check.strip.push((
+                            format!("t = {t:.1} s"),
+                            Mesh {
+                                positions: model_order.clone(),
+                                triangles: triangles.clone(),
+                            },
+                        ));
+                        next_strip = (t / every + 1e-9).floor() * every + every;
+                    }
+                }
+                if f.seq >= last_seq {
+                    break;
+                }
             }
-        }
-    });
-    let mut req = tonic::Request::new(tokio_stream::wrappers::ReceiverStream::new(rx));
-    req.metadata_mut().insert(
-        "authorization",
-        format!("Bearer {}", args.token)
-            .parse()
-            .context("--token: not a valid header value")?,
-    );
+            latencies.sort_unstable();
+            check.latency_us_p50 = pct(&latencies, 0.5);
+            check.latency_us_p99 = pct(&latencies, 0.99);
+            check
+        }))
+    } else {
+        None
+    };
+
+    let period = Duration::from_secs_f64(1.0 / rate);
+    let (tx, rx) = tokio::sync::mpsc::channel(8);
+    let sent_at = Arc::new(std::sync::Mutex::new(VecDeque::<(u64, Instant)>::new()));
+    let room_id = args.room.clone();
+    let start = Instant::now();
+    // The sender counts invalid points as it goes (`--loop` never ends, so not up front).
+    let sender = {
+        let frames = Arc::clone(&frames);
+        let sent_at = Arc::clone(&sent_at);
+        tokio::spawn(async move {
+            let (mut invalid_points, mut invalid_frames) = (0u64, 0u64);
+            let mut ticker = tokio::time::interval(period);
+            ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
+            for seq in 0..total {
+                ticker.tick().await;
+                let f = &frames[(seq % frames.len() as u64) as usize];
+                let frame = control_frame(&room_id, seq, unix_us(), &f.positions, &f.valid);
+                let invalid = f.valid.iter().filter(|v| !**v).count() as u64;
+                invalid_points += invalid;
+                invalid_frames += u64::from(invalid > 0);
+                sent_at
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .push_back((seq, Instant::now()));
+                if tx.send(frame).await.is_err() {
+                    break;
+                }
+            }
+            (invalid_points, invalid_frames)
+        })
+    };
+    let req = authorized(tokio_stream::wrappers::ReceiverStream::new(rx), &args.token)
+        .context("--token")?;
     let mut acks = client
         .publish(req)
         .await
         .context("publishing")?
         .into_inner();
-    let (mut ok, mut refused, mut held) = (0u64, 0u64, 0u64);
+    let mut report = Report {
+        rate_hz: rate,
+        scale: prepared.scale,
+        retarget: prepared.stats,
+        ..Report::default()
+    };
     let mut latencies = Vec::new();
+    let mut round_trips = Vec::new();
+    let mut residual_sq = 0.0f64;
     while let Some(ack) = acks.message().await? {
+        let sent = {
+            let mut q = sent_at.lock().unwrap_or_else(|e| e.into_inner());
+            let mut found = None;
+            while let Some((seq, at)) = q.pop_front() {
+                if seq == ack.seq {
+                    found = Some(at);
+                    break;
+                }
+            }
+            found
+        };
+        if let Some(at) = sent {
+            round_trips.push(at.elapsed().as_micros() as u64);
+        }
         match ack.error {
             Some(e) => {
-                refused += 1;
+                report.refused += 1;
                 eprintln!(
                     "frame {}: refused (code {}): {}",
                     ack.seq, e.code, e.message
                 );
             }
             None => {
-                ok += 1;
-                held += u64::from(ack.held_controls);
+                report.acknowledged += 1;
+                report.held_controls += u64::from(ack.held_controls);
                 latencies.push(ack.server_latency_us);
+                residual_sq += f64::from(ack.control_residual).powi(2);
             }
         }
     }
+    report.seconds = start.elapsed().as_secs_f64();
+    report.frames_sent = report.acknowledged + report.refused;
+    (report.invalid_in_frames, report.frames_with_invalid) =
+        sender.await.context("the sender stopped")?;
     latencies.sort_unstable();
-    let pct = |p: f64| {
-        latencies
-            .get(((latencies.len().max(1) - 1) as f64 * p).round() as usize)
-            .copied()
-            .unwrap_or(0)
-    };
-    let secs = start.elapsed().as_secs_f64();
+    round_trips.sort_unstable();
+    report.server_latency_us_p50 = pct(&latencies, 0.5);
+    report.server_latency_us_p99 = pct(&latencies, 0.99);
+    report.round_trip_us_p50 = pct(&round_trips, 0.5);
+    report.round_trip_us_p99 = pct(&round_trips, 0.99);
+    report.control_residual_rms_model = (residual_sq / report.acknowledged.max(1) as f64).sqrt();
+    report.control_residual_rms_recording_units = prepared
+        .scale
+        .map(|s| report.control_residual_rms_model / f64::from(s));
     println!(
-        "{} frames in {secs:.2} s ({:.1} frames/s): {ok} acknowledged, {refused} refused, {held} occluded control points held, server latency p50 {} µs p99 {} µs",
-        ok + refused,
-        (ok + refused) as f64 / secs.max(1e-9),
-        pct(0.5),
-        pct(0.99)
+        "{} frames in {:.2} s ({:.1} frames/s): {} acknowledged, {} refused; server latency p50 {} µs p99 {} µs, round trip p50 {} µs p99 {} µs",
+        report.frames_sent,
+        report.seconds,
+        report.frames_sent as f64 / report.seconds.max(1e-9),
+        report.acknowledged,
+        report.refused,
+        report.server_latency_us_p50,
+        report.server_latency_us_p99,
+        report.round_trip_us_p50,
+        report.round_trip_us_p99
     );
-    if ok == 0 {
+    println!(
+        "invalid control points: {} in {} frames (server held {}); control residual RMS {:.3e} model units{}",
+        report.invalid_in_frames,
+        report.frames_with_invalid,
+        report.held_controls,
+        report.control_residual_rms_model,
+        report
+            .control_residual_rms_recording_units
+            .map_or(String::new(), |r| format!(" = {r:.2} {}", prepared.units))
+    );
+    if let Some(checker) = checker {
+        let mut check = checker.await.context("the mesh checker stopped")?;
+        println!(
+            "meshes: {} received for {} frames sent ({} skipped by the room's latest-wins fan-out), {} not finite; capture -> mesh received p50 {} µs p99 {} µs",
+            check.received,
+            report.frames_sent,
+            check.skipped,
+            check.non_finite,
+            check.latency_us_p50,
+            check.latency_us_p99
+        );
+        if let Some(path) = &args.strip {
+            if check.strip.is_empty() {
+                bail!("--strip: no mesh was received to render");
+            }
+            let tiles: Vec<(&str, &Mesh)> =
+                check.strip.iter().map(|(l, m)| (l.as_str(), m)).collect();
+            let sheet = contact_sheet(
+                &tiles,
+                &[View::ThumbSide, View::Palm],
+                220,
+                tiles.len() as u32,
+            );
+            sheet
+                .write_png(path)
+                .with_context(|| format!("writing {}", path.display()))?;
+            println!("wrote {} ({} pictures)", path.display(), tiles.len());
+            report.strip = Some(path.display().to_string());
+        }
+        check.strip.clear();
+        let bad = check.non_finite;
+        report.meshes = Some(check);
+        if bad > 0 {
+            write_report(args, &report)?;
+            bail!("{bad} meshes were not finite");
+        }
+    }
+    write_report(args, &report)?;
+    if report.acknowledged == 0 {
         bail!("no frame was accepted");
+    }
+    Ok(())
+}
+
+fn write_report(args: &StreamArgs, report: &Report) -> anyhow::Result<()> {
+    if let Some(path) = &args.report {
+        let text = serde_json::to_string_pretty(report).context("report")?;
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }

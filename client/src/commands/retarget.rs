@@ -1,0 +1,238 @@
+//! `crease retarget`: a marker recording (Qualisys TSV, C3D) through a marker map onto a model's
+//! control points, written as a control-frame CSV that `crease synth --controls` and
+//! `crease stream --frames` read. The same steps feed `crease stream --tsv/--c3d` live.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use crease_core::glam::Vec3;
+use crease_core::mocap::map::MarkerMap;
+use crease_core::mocap::{Recording, Retarget, RetargetStats};
+use crease_core::model::TrainedModel;
+use crease_proto::v1;
+
+use super::synth::ControlFrame;
+
+/// A recording and its marker map (shared by `stream` and `retarget`).
+#[derive(Clone, Debug, clap::Args)]
+pub struct RecordingArgs {
+    /// A Qualisys TSV marker recording (needs --map).
+    #[arg(long, value_name = "FILE", requires = "map", conflicts_with = "c3d")]
+    pub tsv: Option<PathBuf>,
+    /// A C3D marker recording (needs --map).
+    #[arg(long, value_name = "FILE", requires = "map")]
+    pub c3d: Option<PathBuf>,
+    /// Marker map (TOML): recording markers -> the model's control points, registration, gap
+    /// filling. Examples: bench/mocap/*.toml.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
+}
+
+/// A model's control points: names and rest positions, model order.
+#[derive(Clone, Debug)]
+pub struct ModelControls {
+    /// The model's name.
+    pub model: String,
+    /// Control point names.
+    pub names: Vec<String>,
+    /// Rest positions.
+    pub rest: Vec<Vec3>,
+}
+
+impl ModelControls {
+    /// From a server's model description.
+    pub fn from_info(info: &v1::ModelInfo) -> ModelControls {
+        ModelControls {
+            model: info.name.clone(),
+            names: info.control_points.iter().map(|c| c.name.clone()).collect(),
+            rest: info
+                .control_points
+                .iter()
+                .map(|c| c.rest.map_or(Vec3::ZERO, |r| Vec3::new(r.x, r.y, r.z)))
+                .collect(),
+        }
+    }
+
+    /// From a trained model.
+    pub fn from_model(name: &str, model: &TrainedModel) -> ModelControls {
+        ModelControls {
+            model: name.to_owned(),
+            names: model.controls.iter().map(|c| c.name.clone()).collect(),
+            rest: model
+                .controls
+                .iter()
+                .map(|c| model.rig.rest.positions[c.vertex as usize])
+                .collect(),
+        }
+    }
+}
+
+/// Control frames made from a recording.
+#[derive(Clone, Debug)]
+pub struct Retargeted {
+    /// One frame per (resampled) recording frame, model order.
+    pub frames: Vec<ControlFrame>,
+    /// Their rate, Hz.
+    pub rate: f64,
+    /// Model units per recording unit.
+    pub scale: Option<f32>,
+    /// The recording's length unit.
+    pub units: String,
+    /// Occlusion and registration counts.
+    pub stats: Option<RetargetStats>,
+}
+
+impl RecordingArgs {
+    /// The recording file given (`--tsv` or `--c3d`).
+    pub fn path(&self) -> Option<&Path> {
+        self.tsv.as_deref().or(self.c3d.as_deref())
+    }
+
+    /// Reads the recording, resamples it to `rate` when given, and retargets every frame onto
+    /// `controls`, reporting on stderr.
+    pub fn retarget(
+        &self,
+        controls: &ModelControls,
+        rate: Option<f64>,
+    ) -> anyhow::Result<Retargeted> {
+        let path = self.path().context("--tsv or --c3d is needed")?;
+        let map_path = self
+            .map
+            .as_deref()
+            .context("--map is required with a recording")?;
+        let start = Instant::now();
+        let mut recording = Recording::read(path)?;
+        eprintln!(
+            "read {}: {} frames at {} Hz, {} markers ({}) in {:.2} s",
+            path.display(),
+            recording.frame_count(),
+            recording.rate_hz,
+            recording.marker_count(),
+            recording.units,
+            start.elapsed().as_secs_f64()
+        );
+        if recording.frame_count() == 0 {
+            bail!("{}: no frames", path.display());
+        }
+        let rate = rate.unwrap_or(recording.rate_hz);
+        if (rate - recording.rate_hz).abs() > 1e-9 {
+            recording = recording.resampled(rate);
+            eprintln!("resampled to {rate} Hz: {} frames", recording.frame_count());
+        }
+        let map = MarkerMap::read(map_path)?;
+        let bound = map.bind(&recording, &controls.names).with_context(|| {
+            format!(
+                "binding {} to model {:?}",
+                map_path.display(),
+                controls.model
+            )
+        })?;
+        let mut retarget = Retarget::new(bound, &controls.rest);
+        let used = retarget.calibrate(&recording);
+        match retarget.registration().scale() {
+            Some(s) => eprintln!(
+                "registration: scale {s:.6} model units per {} (fitted on {used} frames)",
+                recording.units
+            ),
+            None => eprintln!(
+                "registration: only {used} calibration frames; the scale adapts while playing"
+            ),
+        }
+        let n = retarget.control_count();
+        let mut frames = Vec::with_capacity(recording.frame_count());
+        for frame in recording.frames() {
+            let mut positions = vec![Vec3::ZERO; n];
+            let mut valid = vec![false; n];
+            retarget.frame(&frame, &mut positions, &mut valid);
+            frames.push(ControlFrame { positions, valid });
+        }
+        let stats = retarget.stats();
+        eprintln!(
+            "retargeted {} frames: {} with missing markers ({} points: {} estimated from neighbours, {} sent invalid); registration held in {} frames",
+            stats.frames,
+            stats.occluded_frames,
+            stats.missing_points,
+            stats.estimated_points,
+            stats.held_points,
+            stats.registration_held
+        );
+        Ok(Retargeted {
+            frames,
+            rate,
+            scale: retarget.registration().scale(),
+            units: recording.units,
+            stats: Some(stats),
+        })
+    }
+}
+
+/// Options of `crease retarget`.
+#[derive(Clone, Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["tsv", "c3d"])))]
+pub struct RetargetArgs {
+    #[command(flatten)]
+    pub recording: RecordingArgs,
+    /// The trained model whose control points the map names.
+    #[arg(long, value_name = "FILE")]
+    pub model: PathBuf,
+    /// Resample the recording to this rate first (Hz).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Control-frame CSV to write (one frame per line; an invalid point is `nan,nan,nan`).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+}
+
+/// Writes frames as the CSV `crease synth --controls` reads: a header of point names, then
+/// `x,y,z` per point per line (`nan` for invalid points).
+pub fn write_csv(path: &Path, names: &[String], frames: &[ControlFrame]) -> anyhow::Result<()> {
+    let mut text = String::with_capacity(frames.len() * names.len() * 30 + 256);
+    let header: Vec<String> = names
+        .iter()
+        .flat_map(|n| ["x", "y", "z"].map(|a| format!("{n}_{a}")))
+        .collect();
+    text.push_str(&header.join(","));
+    text.push('\n');
+    for f in frames {
+        for (i, (p, ok)) in f.positions.iter().zip(&f.valid).enumerate() {
+            if i > 0 {
+                text.push(',');
+            }
+            if *ok {
+                let _ = write!(text, "{},{},{}", p.x, p.y, p.z);
+            } else {
+                text.push_str("nan,nan,nan");
+            }
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Runs `crease retarget`.
+pub fn run(args: &RetargetArgs) -> anyhow::Result<()> {
+    if let Some(rate) = args.rate
+        && !(rate.is_finite() && rate > 0.0 && rate <= 10_000.0)
+    {
+        bail!("--rate must be in (0, 10000] frames per second, got {rate}");
+    }
+    let model = TrainedModel::load(&args.model)
+        .with_context(|| format!("reading model {}", args.model.display()))?;
+    let name = args
+        .model
+        .file_stem()
+        .map_or("model".into(), |s| s.to_string_lossy().into_owned());
+    let controls = ModelControls::from_model(&name, &model);
+    let out = args.recording.retarget(&controls, args.rate)?;
+    write_csv(&args.out, &controls.names, &out.frames)?;
+    println!(
+        "wrote {}: {} frames at {} Hz for {} control points",
+        args.out.display(),
+        out.frames.len(),
+        out.rate,
+        controls.names.len()
+    );
+    Ok(())
+}

@@ -1,0 +1,250 @@
+//! `crease room open|info|close`: manage rooms on a server (opening and closing need the
+//! server's admin token). `open` prints the publish token `crease stream --token` takes.
+
+use anyhow::{Context, bail};
+use crease_core::mocap::filter::OneEuroParams;
+use crease_proto::v1;
+
+use super::common::{ServerArgs, authorized};
+
+/// Options of `crease room`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct RoomArgs {
+    #[command(subcommand)]
+    pub action: RoomAction,
+}
+
+/// What to do with a room.
+#[derive(Clone, Debug, clap::Subcommand)]
+pub enum RoomAction {
+    /// Open a room on a model; prints the publish token.
+    Open(OpenArgs),
+    /// Show a room's model, settings and counters.
+    Info(InfoArgs),
+    /// Close a room (its subscribers' streams end).
+    Close(CloseArgs),
+}
+
+/// The server's admin token.
+#[derive(Clone, Debug, clap::Args)]
+pub struct AdminArgs {
+    /// The server's admin token (`crease-server --admin-token`). Also read from
+    /// CREASE_ADMIN_TOKEN.
+    #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
+    pub admin_token: String,
+}
+
+/// Options of `crease room open`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct OpenArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    #[command(flatten)]
+    pub admin: AdminArgs,
+    /// Room id: 1-64 characters of A-Z, a-z, 0-9, _ and -.
+    #[arg(long)]
+    pub room: String,
+    /// The model the room runs (`crease-server --models` names models by file stem).
+    #[arg(long)]
+    pub model: String,
+    /// Translation-solve beta (FKY08 eq. 11): about 3 for keyframing UIs, 0.3 for noisy mocap
+    /// (HZY11 Fig. 11). Default: the model's.
+    #[arg(long)]
+    pub beta: Option<f32>,
+    /// Smooth control points with a One Euro filter (for mocap; off for UI rooms). Optional
+    /// value: `MIN_CUTOFF_HZ,BETA,D_CUTOFF_HZ` (default 1.5,10,1 for models in metres).
+    #[arg(long, value_name = "PARAMS", num_args = 0..=1, default_missing_value = "default")]
+    pub filter: Option<String>,
+}
+
+/// Options of `crease room info`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct InfoArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The room.
+    #[arg(long, default_value = "demo")]
+    pub room: String,
+}
+
+/// Options of `crease room close`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CloseArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    #[command(flatten)]
+    pub admin: AdminArgs,
+    /// The room.
+    #[arg(long)]
+    pub room: String,
+}
+
+/// Parses `--filter`: `default` or three comma-separated numbers.
+pub fn parse_filter(spec: &str) -> anyhow::Result<OneEuroParams> {
+    if spec == "default" {
+        return Ok(OneEuroParams::default());
+    }
+    let v: Vec<f32> = spec
+        .split(',')
+        .map(|x| x.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .with_context(|| {
+            format!("--filter {spec}: expected MIN_CUTOFF_HZ,BETA,D_CUTOFF_HZ, e.g. 1.5,10,1")
+        })?;
+    let [min_cutoff_hz, beta, d_cutoff_hz] = v[..] else {
+        bail!(
+            "--filter {spec}: expected 3 numbers (MIN_CUTOFF_HZ,BETA,D_CUTOFF_HZ), got {}",
+            v.len()
+        );
+    };
+    let p = OneEuroParams {
+        min_cutoff_hz,
+        beta,
+        d_cutoff_hz,
+    };
+    if !p.is_valid() {
+        bail!("--filter {spec}: cutoffs must be positive and beta non-negative");
+    }
+    Ok(p)
+}
+
+/// Runs `crease room`.
+pub fn run(args: &RoomArgs) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the network runtime")?;
+    runtime.block_on(async {
+        match &args.action {
+            RoomAction::Open(a) => open(a).await,
+            RoomAction::Info(a) => info(a).await,
+            RoomAction::Close(a) => close(a).await,
+        }
+    })
+}
+
+fn print_filter(filter: Option<&v1::MarkerFilter>) -> String {
+    filter.map_or_else(
+        || "off".to_owned(),
+        |f| {
+            format!(
+                "One Euro (min cutoff {} Hz, beta {}, speed cutoff {} Hz)",
+                f.min_cutoff_hz, f.beta, f.d_cutoff_hz
+            )
+        },
+    )
+}
+
+async fn open(args: &OpenArgs) -> anyhow::Result<()> {
+    let filter = args.filter.as_deref().map(parse_filter).transpose()?;
+    if let Some(b) = args.beta
+        && !(b.is_finite() && b > 0.0)
+    {
+        bail!("--beta must be a positive number, got {b}");
+    }
+    let mut client = args.server.connect().await?;
+    let request = v1::OpenRoomRequest {
+        room: args.room.clone(),
+        model: args.model.clone(),
+        beta: args.beta.unwrap_or(0.0),
+        filter: filter.map(|f| v1::MarkerFilter {
+            min_cutoff_hz: f.min_cutoff_hz,
+            beta: f.beta,
+            d_cutoff_hz: f.d_cutoff_hz,
+        }),
+    };
+    let opened = client
+        .open_room(authorized(request, &args.admin.admin_token)?)
+        .await
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))
+        .with_context(|| format!("opening room {:?} on model {:?}", args.room, args.model))?
+        .into_inner();
+    let room = client
+        .get_room(v1::GetRoomRequest {
+            room: opened.room.clone(),
+        })
+        .await
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))?
+        .into_inner();
+    eprintln!(
+        "opened room {:?} on model {:?}: beta {}, filter {}",
+        room.room,
+        args.model,
+        room.beta,
+        print_filter(room.filter.as_ref())
+    );
+    // The token alone on stdout, for scripts: TOKEN=$(crease room open ...).
+    println!("{}", opened.publish_token);
+    Ok(())
+}
+
+async fn info(args: &InfoArgs) -> anyhow::Result<()> {
+    let mut client = args.server.connect().await?;
+    let room = client
+        .get_room(v1::GetRoomRequest {
+            room: args.room.clone(),
+        })
+        .await
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))?
+        .into_inner();
+    let model = room.model.unwrap_or_default();
+    println!(
+        "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, {} subscribers, {} frames published",
+        room.room,
+        model.name,
+        model.base_vertices,
+        model.control_points.len(),
+        model
+            .control_points
+            .iter()
+            .map(|c| c.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        room.beta,
+        print_filter(room.filter.as_ref()),
+        room.subscribers,
+        room.published
+    );
+    Ok(())
+}
+
+async fn close(args: &CloseArgs) -> anyhow::Result<()> {
+    let mut client = args.server.connect().await?;
+    client
+        .close_room(authorized(
+            v1::CloseRoomRequest {
+                room: args.room.clone(),
+            },
+            &args.admin.admin_token,
+        )?)
+        .await
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))
+        .with_context(|| format!("closing room {:?}", args.room))?;
+    eprintln!("closed room {:?}", args.room);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn filter_specs() {
+        assert_eq!(parse_filter("default").unwrap(), OneEuroParams::default());
+        let p = parse_filter("2, 0.5, 1").unwrap();
+        assert_eq!((p.min_cutoff_hz, p.beta, p.d_cutoff_hz), (2.0, 0.5, 1.0));
+        assert!(
+            parse_filter("1,2")
+                .unwrap_err()
+                .to_string()
+                .contains("got 2")
+        );
+        assert!(
+            parse_filter("0,1,1")
+                .unwrap_err()
+                .to_string()
+                .contains("positive")
+        );
+        assert!(parse_filter("a,b,c").is_err());
+    }
+}
