@@ -709,3 +709,135 @@ async fn limits_refuse_and_the_room_goes_on() {
         .await
         .unwrap();
 }
+
+/// RMS over control points of |predicted control vertex - target|.
+fn residual(model: &TrainedModel, mesh: &[Vec3], targets: &[Vec3]) -> f32 {
+    let sum: f32 = model
+        .controls
+        .iter()
+        .zip(targets)
+        .map(|(c, t)| mesh[c.vertex as usize].distance_squared(*t))
+        .sum();
+    (sum / targets.len() as f32).sqrt()
+}
+
+/// A mocap room: OpenRoom with a One Euro filter, GetRoom reporting it, and the ack's control
+/// residual checked against an independent prediction, unfiltered and filtered (beta 0: a
+/// plain first-order low-pass, so the filtered controls after a step are known exactly).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn filtered_rooms_lag_a_step_and_acks_report_the_control_residual() {
+    let model = model();
+    let running = serve_tube(&model, Limits::default()).await;
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let filter = v1::MarkerFilter {
+        min_cutoff_hz: 1.0,
+        beta: 0.0,
+        d_cutoff_hz: 1.0,
+    };
+    let open = |room: &str, filter: Option<v1::MarkerFilter>| {
+        authed(
+            v1::OpenRoomRequest {
+                room: room.into(),
+                model: "tube".into(),
+                beta: 0.0,
+                filter,
+            },
+            ADMIN,
+        )
+    };
+    let bad = v1::MarkerFilter {
+        min_cutoff_hz: 0.0,
+        ..filter
+    };
+    let err = client.open_room(open("bad", Some(bad))).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::InvalidArgument);
+    assert!(err.message().starts_with("filter:"), "{}", err.message());
+    let raw = client
+        .open_room(open("raw", None))
+        .await
+        .unwrap()
+        .into_inner();
+    let smooth = client
+        .open_room(open("smooth", Some(filter)))
+        .await
+        .unwrap()
+        .into_inner();
+    let info = |room: &str| v1::GetRoomRequest { room: room.into() };
+    let got = client.get_room(info("smooth")).await.unwrap().into_inner();
+    assert_eq!(got.filter, Some(filter));
+    assert_eq!(got.model.unwrap().name, "tube");
+    assert_eq!(got.published, 0);
+    assert_eq!(
+        client
+            .get_room(info("raw"))
+            .await
+            .unwrap()
+            .into_inner()
+            .filter,
+        None
+    );
+    let err = client.get_room(info("nope")).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound);
+
+    // Rest at t = 0, then a 0.6 rad bend 10 ms later, into both rooms.
+    let frames = |room: &str| {
+        let mut a = control_frame(&model, room, 0, 0.0);
+        let mut b = control_frame(&model, room, 1, 0.6);
+        a.capture_time_us = 1_000_000;
+        b.capture_time_us = 1_010_000;
+        vec![a, b]
+    };
+    let mut acks = Vec::new();
+    for (room, token) in [
+        ("raw", &raw.publish_token),
+        ("smooth", &smooth.publish_token),
+    ] {
+        let req = authed(tokio_stream::iter(frames(room)), token);
+        let mut stream = client.publish(req).await.unwrap().into_inner();
+        let mut got = Vec::new();
+        while let Some(ack) = stream.message().await.unwrap() {
+            assert!(ack.error.is_none(), "{ack:?}");
+            got.push(ack);
+        }
+        acks.push(got);
+    }
+    let step = frames("raw").remove(1);
+    let targets: Vec<Vec3> = step
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    // Unfiltered: the mesh of the step itself.
+    let want = residual(&model, &predicted(&model, &step), &targets);
+    assert!(want > 0.0);
+    let raw_residual = acks[0][1].control_residual;
+    assert!(
+        (raw_residual - want).abs() <= 1e-4 * want.max(1e-3),
+        "{raw_residual} vs {want}"
+    );
+    // Filtered: the mesh of rest + alpha (step - rest), alpha = dt / (dt + 1 / (2 pi fc)).
+    let alpha = 0.01 / (0.01 + 1.0 / (2.0 * std::f32::consts::PI));
+    let rest = frames("raw").remove(0);
+    let mut lagged = step.clone();
+    for (l, (r, s)) in lagged
+        .positions
+        .iter_mut()
+        .zip(rest.positions.iter().zip(&step.positions))
+    {
+        *l = r + alpha * (s - r);
+    }
+    let want = residual(&model, &predicted(&model, &lagged), &targets);
+    let smooth_residual = acks[1][1].control_residual;
+    assert!(
+        (smooth_residual - want).abs() <= 1e-3 * want,
+        "{smooth_residual} vs {want}"
+    );
+    assert!(
+        smooth_residual > 2.0 * raw_residual,
+        "the filtered mesh lags the step"
+    );
+    let got = client.get_room(info("smooth")).await.unwrap().into_inner();
+    assert_eq!(got.published, 2);
+}

@@ -48,6 +48,10 @@ pub struct StreamArgs {
     /// Play again and again until interrupted.
     #[arg(long = "loop")]
     pub repeat: bool,
+    /// Play this many times faster than real time (the frames stay the same; capture times
+    /// are wall-clock send times, so a room's filter sees the faster clock too).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
     /// Subscribe too, decode every mesh the frames produce, and check that each is finite.
     #[arg(long)]
     pub check: bool,
@@ -68,6 +72,9 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
         && !(rate.is_finite() && rate > 0.0 && rate <= 10_000.0)
     {
         bail!("--rate must be in (0, 10000] frames per second, got {rate}");
+    }
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        bail!("--speed must be a positive factor, got {}", args.speed);
     }
     if !(args.strip_every.is_finite() && args.strip_every > 0.0) {
         bail!(
@@ -248,7 +255,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         None
     };
 
-    let period = Duration::from_secs_f64(1.0 / rate);
+    let period = Duration::from_secs_f64(1.0 / (rate * args.speed));
     let (tx, rx) = tokio::sync::mpsc::channel(8);
     let sent_at = Arc::new(std::sync::Mutex::new(VecDeque::<(u64, Instant)>::new()));
     let room_id = args.room.clone();

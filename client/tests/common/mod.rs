@@ -108,14 +108,26 @@ pub async fn serve_tube(
     model: crease_core::model::TrainedModel,
     admin: Option<&str>,
 ) -> std::net::SocketAddr {
+    serve_model("tube", model, admin, crease_server::Limits::default()).await
+}
+
+/// Starts a crease server on free loopback ports hosting `model` as `name`, with `admin` as
+/// its admin token and `limits`; returns the gRPC address.
+pub async fn serve_model(
+    name: &str,
+    model: crease_core::model::TrainedModel,
+    admin: Option<&str>,
+    limits: crease_server::Limits,
+) -> std::net::SocketAddr {
     let mut registry = crease_server::registry::ModelRegistry::default();
-    registry.insert("tube", model);
+    registry.insert(name, model);
     let state = crease_server::AppState::new(
         registry,
         crease_server::Config {
             grpc: "127.0.0.1:0".parse().unwrap(),
             http: "127.0.0.1:0".parse().unwrap(),
             admin_token: admin.map(str::to_owned),
+            limits,
             ..crease_server::Config::default()
         },
     );

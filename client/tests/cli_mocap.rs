@@ -1,0 +1,406 @@
+//! Mocap end to end on the real recordings in ../shared/data/mocap: a glove13 hand trained from
+//! `crease handgen`, `crease retarget` + `crease synth` offline, and `crease stream --tsv/--c3d`
+//! into a room of a server running in this process, with every mesh decoded and checked.
+//! Every test skips with a note when the shared data is absent.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{crease, serve_model};
+use crease_core::mesh::Mesh;
+use crease_core::model::TrainedModel;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+
+const TSV: &str = "qualisys-hand-glove-recording.tsv";
+const C3D: &str = "ART-Human_hands_real_no6dof.c3d";
+
+fn data(file: &str) -> Option<PathBuf> {
+    let path = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/data/mocap"
+    ))
+    .join(file);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!(
+            "skipping: {} not found (shared data sets absent)",
+            path.display()
+        );
+        None
+    }
+}
+
+fn map(name: &str) -> PathBuf {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../bench/mocap")).join(name)
+}
+
+fn run_ok(cmd: &mut std::process::Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A glove13 hand: `crease handgen` (base only) and `crease train` on its glove13 manifest.
+fn glove_model(dir: &Path) -> PathBuf {
+    let hg = dir.join("hg");
+    run_ok(
+        crease()
+            .args([
+                "handgen",
+                "--train",
+                "14",
+                "--test",
+                "1",
+                "--base-only",
+                "--out",
+            ])
+            .arg(&hg),
+    );
+    let model = dir.join("glove-hand.crease");
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(hg.join("train-glove13.toml"))
+            .args(["--bones", "30", "--method", "local", "--no-detail", "--out"])
+            .arg(&model),
+    );
+    model
+}
+
+/// The first `frames` frames of the Qualisys recording, with every finger marker (the ten
+/// after hand_top, hand_left, hand_right) written as `nan` in frames `blank`.
+fn short_tsv(src: &Path, dst: &Path, frames: usize, blank: std::ops::Range<usize>) {
+    let text = std::fs::read_to_string(src).unwrap();
+    let mut out = String::new();
+    let mut row = 0;
+    for line in text.lines() {
+        if line.starts_with("NO_OF_FRAMES") {
+            out.push_str(&format!("NO_OF_FRAMES\t{frames}\n"));
+            continue;
+        }
+        let is_data = line
+            .split('\t')
+            .next()
+            .is_some_and(|f| f.parse::<u64>().is_ok());
+        if !is_data {
+            out.push_str(line);
+            out.push('\n');
+            continue;
+        }
+        if row == frames {
+            break;
+        }
+        let mut cols: Vec<&str> = line.split('\t').collect();
+        if blank.contains(&row) {
+            // Frame, Time, then x y z per marker: markers 3..13 are the fingers.
+            for c in cols.iter_mut().take(2 + 3 * 13).skip(2 + 3 * 3) {
+                *c = "nan";
+            }
+        }
+        out.push_str(&cols.join("\t"));
+        out.push('\n');
+        row += 1;
+    }
+    std::fs::write(dst, out).unwrap();
+}
+
+fn read_csv(path: &Path) -> Vec<Vec<f32>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse::<f32>().unwrap()).collect())
+        .collect()
+}
+
+/// All ten finger markers gone for 50 frames: the retargeted frames carry them as invalid (no
+/// neighbour of a fingertip is seen) and every synthesised mesh is finite, the hand holding
+/// the pose it had (its fingers relative to the back of the hand).
+#[test]
+fn all_finger_markers_missing_still_yields_finite_meshes() {
+    let Some(src) = data(TSV) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = glove_model(tmp.path());
+    let tsv = tmp.path().join("short.tsv");
+    short_tsv(&src, &tsv, 200, 100..150);
+    let csv = tmp.path().join("controls.csv");
+    let stdout = run_ok(
+        crease()
+            .args(["retarget", "--tsv"])
+            .arg(&tsv)
+            .arg("--map")
+            .arg(map("qualisys-glove13.toml"))
+            .arg("--model")
+            .arg(&model_path)
+            .arg("--out")
+            .arg(&csv),
+    );
+    assert!(
+        stdout.contains("200 frames at 100 Hz for 13 control points"),
+        "{stdout}"
+    );
+    let rows = read_csv(&csv);
+    assert_eq!(rows.len(), 200);
+    let model = TrainedModel::load(&model_path).unwrap();
+    let names: Vec<&str> = model.controls.iter().map(|c| c.name.as_str()).collect();
+    let tip = names.iter().position(|n| *n == "index_tip").unwrap();
+    assert!(rows[99].iter().all(|v| v.is_finite()));
+    assert!(
+        rows[120][3 * tip].is_nan(),
+        "a fingertip with no seen neighbour is invalid"
+    );
+    assert!(
+        rows[120][..9].iter().all(|v| v.is_finite()),
+        "back markers still seen"
+    );
+
+    let out = tmp.path().join("meshes");
+    run_ok(
+        crease()
+            .args(["synth", "--model"])
+            .arg(&model_path)
+            .arg("--controls")
+            .arg(&csv)
+            .arg("--out")
+            .arg(&out)
+            .args(["--beta", "0.3"]),
+    );
+    let mesh = |k: usize| Mesh::read(out.join(format!("frame_{k:05}.obj"))).unwrap();
+    for k in [0, 99, 100, 125, 149, 150, 199] {
+        let m = mesh(k);
+        assert!(m.positions.iter().all(|p| p.is_finite()), "frame {k}");
+    }
+    // Held: the hand at frame 125 is the hand at frame 99 up to the back markers' jitter
+    // (registered to the model's rest back), far from snapping to the rest pose.
+    let (a, b) = (mesh(99), mesh(125));
+    let moved = a
+        .positions
+        .iter()
+        .zip(&b.positions)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0f32, f32::max);
+    let rest_gap = a
+        .positions
+        .iter()
+        .zip(&model.rig.rest.positions)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved < 0.5 * rest_gap,
+        "held pose moved {moved} m; the pose is {rest_gap} m from rest"
+    );
+}
+
+struct Room {
+    runtime: tokio::runtime::Runtime,
+    server: String,
+    token: String,
+}
+
+/// A server in this process hosting `model` as glove-hand, a room `mocap` on it with beta 0.3
+/// and the default filter.
+fn mocap_room(model: &Path) -> Room {
+    let model = TrainedModel::load(model).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let (addr, token) = runtime.block_on(async {
+        let limits = crease_server::Limits {
+            publish_hz: 2000.0,
+            ..crease_server::Limits::default()
+        };
+        let addr = serve_model("glove-hand", model, Some("admin"), limits).await;
+        let mut client = CreaseClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+        let mut open = tonic::Request::new(v1::OpenRoomRequest {
+            room: "mocap".into(),
+            model: "glove-hand".into(),
+            beta: 0.3,
+            filter: Some(v1::MarkerFilter {
+                min_cutoff_hz: 1.5,
+                beta: 10.0,
+                d_cutoff_hz: 1.0,
+            }),
+        });
+        open.metadata_mut()
+            .insert("authorization", "Bearer admin".parse().unwrap());
+        let token = client
+            .open_room(open)
+            .await
+            .unwrap()
+            .into_inner()
+            .publish_token;
+        (addr, token)
+    });
+    Room {
+        runtime,
+        server: format!("http://{addr}"),
+        token,
+    }
+}
+
+fn stream(room: &Room) -> std::process::Command {
+    let mut c = crease();
+    c.args([
+        "stream",
+        "--server",
+        &room.server,
+        "--room",
+        "mocap",
+        "--token",
+        &room.token,
+    ]);
+    c
+}
+
+fn report(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// 2 s of the Qualisys recording (with 50 frames of missing fingers) into a filtered mocap
+/// room: every frame acknowledged, every mesh decoded finite, the missing markers counted and
+/// held, the strip written; then the same clip resampled to 50 Hz.
+#[test]
+fn stream_tsv_into_a_mocap_room() {
+    let Some(src) = data(TSV) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = glove_model(tmp.path());
+    let tsv = tmp.path().join("short.tsv");
+    short_tsv(&src, &tsv, 200, 100..150);
+    let room = mocap_room(&model);
+    let (json, strip) = (tmp.path().join("r.json"), tmp.path().join("strip.png"));
+    let stdout = run_ok(
+        stream(&room)
+            .arg("--tsv")
+            .arg(&tsv)
+            .arg("--map")
+            .arg(map("qualisys-glove13.toml"))
+            .args(["--strip-every", "0.5", "--speed", "2", "--strip"])
+            .arg(&strip)
+            .arg("--report")
+            .arg(&json),
+    );
+    assert!(stdout.contains("200 acknowledged, 0 refused"), "{stdout}");
+    let r = report(&json);
+    assert_eq!(r["acknowledged"], 200);
+    // Points whose nearest neighbours are all fingers (the index tip, ...) have nothing to be
+    // estimated from and go invalid in each of the 50 frames; the server holds exactly those.
+    assert_eq!(r["frames_with_invalid"], 50, "{r}");
+    assert!(r["invalid_in_frames"].as_u64().unwrap() >= 50, "{r}");
+    assert_eq!(r["held_controls"], r["invalid_in_frames"], "{r}");
+    assert_eq!(r["retarget"]["occluded_frames"], 50);
+    assert_eq!(r["retarget"]["missing_points"], 500);
+    let meshes = &r["meshes"];
+    assert_eq!(meshes["non_finite"], 0, "{r}");
+    assert_eq!(
+        meshes["received"].as_u64().unwrap() + meshes["skipped"].as_u64().unwrap(),
+        200,
+        "{r}"
+    );
+    let residual = r["control_residual_rms_recording_units"].as_f64().unwrap();
+    assert!(residual > 0.0 && residual < 100.0, "{residual} mm");
+    // t = 0, 0.5, 1, 1.5 s.
+    assert!(stdout.contains("(4 pictures)"), "{stdout}");
+    let png = std::fs::read(&strip).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+
+    let stdout = run_ok(
+        stream(&room)
+            .arg("--tsv")
+            .arg(&tsv)
+            .arg("--map")
+            .arg(map("qualisys-glove13.toml"))
+            .args(["--rate", "50", "--speed", "2", "--check", "--report"])
+            .arg(&json),
+    );
+    // 1.99 s at 50 Hz: 100 frames.
+    assert!(stdout.contains("100 acknowledged"), "{stdout}");
+    assert_eq!(report(&json)["meshes"]["non_finite"], 0);
+    drop(room.runtime);
+}
+
+/// The ART C3D sample (61 points, 969 frames at 60 Hz) through the right-hand map, with 101
+/// samples of the right thumb tip marked invalid the C3D way (residual -1): all frames go
+/// through, the gap is estimated from the thumb's other joints, every mesh is finite.
+#[test]
+fn stream_c3d_with_invalid_samples() {
+    let Some(src) = data(C3D) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = glove_model(tmp.path());
+    let mut bytes = std::fs::read(&src).unwrap();
+    // Data from block 9, 61 points x 16 bytes per frame; RTTI is point 42.
+    for f in 100..=200 {
+        let at = 8 * 512 + f * 61 * 16 + 42 * 16 + 12;
+        bytes[at..at + 4].copy_from_slice(&(-1.0f32).to_le_bytes());
+    }
+    let c3d = tmp.path().join("edited.c3d");
+    std::fs::write(&c3d, bytes).unwrap();
+    let room = mocap_room(&model);
+    let json = tmp.path().join("r.json");
+    let stdout = run_ok(
+        stream(&room)
+            .arg("--c3d")
+            .arg(&c3d)
+            .arg("--map")
+            .arg(map("art-right-hand-glove13.toml"))
+            .args(["--speed", "8", "--check", "--report"])
+            .arg(&json),
+    );
+    assert!(stdout.contains("969 acknowledged, 0 refused"), "{stdout}");
+    let r = report(&json);
+    assert_eq!(r["retarget"]["frames"], 969);
+    assert_eq!(r["retarget"]["occluded_frames"], 101);
+    assert_eq!(r["retarget"]["estimated_points"], 101, "{r}");
+    assert_eq!(r["meshes"]["non_finite"], 0);
+    assert_eq!(r["scale"].as_f64().unwrap(), 0.001, "the map's fixed scale");
+    drop(room.runtime);
+}
+
+#[test]
+fn stream_and_retarget_errors_name_the_problem() {
+    let err = |cmd: &mut std::process::Command| {
+        let out = cmd.output().unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = err(crease().args(["stream", "--token", "t", "--tsv", "x.tsv"]));
+    assert!(e.contains("--map"), "{e}");
+    let e = err(crease().args([
+        "stream", "--token", "t", "--frames", "f.csv", "--tsv", "x.tsv", "--map", "m.toml",
+    ]));
+    assert!(e.contains("cannot be used with"), "{e}");
+    let e = err(crease().args([
+        "stream", "--token", "t", "--frames", "f.csv", "--speed", "0",
+    ]));
+    assert!(e.contains("--speed must be a positive factor"), "{e}");
+    let Some(src) = data(TSV) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = glove_model(tmp.path());
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(map("qualisys-glove13.toml"))
+            .unwrap()
+            .replace("thumb_tip = \"thumb_tip\"", "thumb_tip = \"thumb_nail\""),
+    )
+    .unwrap();
+    let e = err(crease()
+        .args(["retarget", "--tsv"])
+        .arg(&src)
+        .arg("--map")
+        .arg(&bad)
+        .arg("--model")
+        .arg(&model)
+        .args(["--out", "/dev/null"]));
+    assert!(
+        e.contains("[markers] thumb_tip: the recording has no marker \"thumb_nail\""),
+        "{e}"
+    );
+}
