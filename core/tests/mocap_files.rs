@@ -122,7 +122,7 @@ fn art_c3d_reads_labels_rate_and_frame_one() {
     assert_eq!(f.positions[0], Vec3::new(93.646_94, 158.843_72, 861.751_65));
     assert_eq!(
         f.positions[42],
-        Vec3::new(-344.316_68, -343.261_6, 1358.369_8)
+        Vec3::new(-344.316_68, -343.261_6, 1_358.369_8)
     );
     // And every point of frame 1 against a direct read: Intel floats, data from block 9,
     // 16 bytes (x, y, z, residual word) per point.

@@ -132,6 +132,10 @@ impl RecordingArgs {
         let mut retarget = Retarget::new(bound, &controls.rest);
         let used = retarget.calibrate(&recording);
         match retarget.registration().scale() {
+            Some(s) if used == 0 => eprintln!(
+                "registration: scale {s:.6} model units per {} (fixed by the map)",
+                recording.units
+            ),
             Some(s) => eprintln!(
                 "registration: scale {s:.6} model units per {} (fitted on {used} frames)",
                 recording.units

@@ -100,7 +100,7 @@ pub fn parse(path: &Path, bytes: &[u8]) -> Result<Recording, MocapError> {
     check_header(path, bytes)?;
     // c3dio indexes slices it has not always bounds-checked; a panic there is a bad file.
     let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        c3dio::C3d::from_bytes(bytes)
+        c3dio::C3d::from_bytes(bytes).map_err(|e| e.to_string())
     }))
     .map_err(|_| MocapError::format(path, "malformed C3D (the c3dio parser gave up)"))?
     .map_err(|e| MocapError::format(path, format!("C3D: {e}")))?;

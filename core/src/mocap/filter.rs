@@ -104,7 +104,7 @@ impl OneEuro {
             self.state = Some((x, Vec3::ZERO));
             return x;
         };
-        if !(dt.is_finite() && dt > 0.0) || !x.is_finite() {
+        if !(dt.is_finite() && dt > 0.0 && x.is_finite()) {
             return prev;
         }
         // Paper §4: speed, low-passed at d_cutoff; cutoff from it; then the position.
