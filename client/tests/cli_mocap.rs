@@ -7,30 +7,16 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{crease, serve_model};
+use common::{crease, open_room, serve_model, shared_data};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
-use crease_proto::v1::crease_client::CreaseClient;
 
 const TSV: &str = "qualisys-hand-glove-recording.tsv";
 const C3D: &str = "ART-Human_hands_real_no6dof.c3d";
 
 fn data(file: &str) -> Option<PathBuf> {
-    let path = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/mocap"
-    ))
-    .join(file);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipping: {} not found (shared data sets absent)",
-            path.display()
-        );
-        None
-    }
+    shared_data(&format!("mocap/{file}"))
 }
 
 fn map(name: &str) -> PathBuf {
@@ -216,10 +202,7 @@ fn mocap_room(model: &Path) -> Room {
             ..crease_server::Limits::default()
         };
         let addr = serve_model("glove-hand", model, Some("admin"), limits).await;
-        let mut client = CreaseClient::connect(format!("http://{addr}"))
-            .await
-            .unwrap();
-        let mut open = tonic::Request::new(v1::OpenRoomRequest {
+        let open = v1::OpenRoomRequest {
             room: "mocap".into(),
             model: "glove-hand".into(),
             beta: 0.3,
@@ -228,15 +211,8 @@ fn mocap_room(model: &Path) -> Room {
                 beta: 10.0,
                 d_cutoff_hz: 1.0,
             }),
-        });
-        open.metadata_mut()
-            .insert("authorization", "Bearer admin".parse().unwrap());
-        let token = client
-            .open_room(open)
-            .await
-            .unwrap()
-            .into_inner()
-            .publish_token;
+        };
+        let token = open_room(addr, "admin", open).await;
         (addr, token)
     });
     Room {

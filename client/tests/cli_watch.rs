@@ -6,7 +6,7 @@ mod common;
 
 use std::time::Duration;
 
-use common::{CONTROLS, bent, crease, serve_tube, train_model, tube};
+use common::{CONTROLS, bent, crease, open_room, serve_tube, train_model, tube};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
@@ -21,24 +21,13 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let (addr, token) = runtime.block_on(async {
         let addr = serve_tube(model, Some("admin")).await;
-        let mut client = CreaseClient::connect(format!("http://{addr}"))
-            .await
-            .unwrap();
-        let mut open = tonic::Request::new(v1::OpenRoomRequest {
+        let open = v1::OpenRoomRequest {
             room: "r1".into(),
             model: "tube".into(),
             beta: 0.0,
             filter: None,
-        });
-        open.metadata_mut()
-            .insert("authorization", "Bearer admin".parse().unwrap());
-        let token = client
-            .open_room(open)
-            .await
-            .unwrap()
-            .into_inner()
-            .publish_token;
-        (addr, token)
+        };
+        (addr, open_room(addr, "admin", open).await)
     });
     // A publisher: a frame every 20 ms until the test ends.
     let rest = tube();
@@ -130,7 +119,8 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     );
     assert!(
         stdout.starts_with("10 frames in ")
-            && stdout.contains("10 acknowledged, 0 refused, 1 occluded"),
+            && stdout.contains("10 acknowledged, 0 refused")
+            && stdout.contains("invalid control points: 1 in 1 frames (server held 1)"),
         "{stdout}"
     );
     // A wrong token: every frame refused, and the command says so.

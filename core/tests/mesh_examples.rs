@@ -5,18 +5,8 @@ use std::path::{Path, PathBuf};
 use crease_core::glam::Vec3;
 use crease_core::mesh::{ExampleSet, Mesh, MeshError, PlyFormat, ply};
 
-fn data(sub: &str) -> Option<PathBuf> {
-    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(sub);
-    if dir.exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipping: {} not found (shared data sets absent)",
-            dir.display()
-        );
-        None
-    }
-}
+mod common;
+use common::shared_data as data;
 
 /// A small strip of two triangles, moved by `t`.
 fn strip(t: f32) -> Mesh {

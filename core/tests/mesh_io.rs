@@ -1,26 +1,14 @@
 //! Mesh file formats end to end: round trips through real files, the shared data sets, and the
 //! error messages a user sees.
 
-use std::path::{Path, PathBuf};
-
 use crease_core::glam::Vec3;
 use crease_core::mesh::{Mesh, MeshError, PlyFormat, gltf, obj, ply};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-/// The shared data folder, or `None` (with a note) when it is not there.
-fn data(sub: &str) -> Option<PathBuf> {
-    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(sub);
-    if dir.exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "skipping: {} not found (shared data sets absent)",
-            dir.display()
-        );
-        None
-    }
-}
+mod common;
+/// A path below the shared data folder, or `None` (with a note) when it is not there.
+use common::shared_data as data;
 
 /// A random mesh whose coordinates span many magnitudes, subnormals and signed zeros included,
 /// with random (possibly degenerate) triangles.

@@ -7,21 +7,10 @@ use std::path::{Path, PathBuf};
 use crease_core::glam::Vec3;
 use crease_core::mocap::{MocapError, Recording, c3d};
 
+mod common;
+
 fn data(file: &str) -> Option<PathBuf> {
-    let path = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/mocap"
-    ))
-    .join(file);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipping: {} not found (shared data sets absent)",
-            path.display()
-        );
-        None
-    }
+    common::shared_data(&format!("mocap/{file}"))
 }
 
 const QUALISYS: &str = "qualisys-hand-glove-recording.tsv";

@@ -5,7 +5,9 @@
 //!
 //! Needs `../shared/data/hand`; every test skips with a note when it is absent.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use crease_core::glam::{Affine3A, Mat4, Quat, Vec3};
@@ -17,20 +19,7 @@ use crease_core::sweep::webxr::{
 
 /// A file of the shared hand data, or `None` (with a note) when it is not there.
 fn data(file: &str) -> Option<PathBuf> {
-    let path = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/hand"
-    ))
-    .join(file);
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!(
-            "skipping: {} not found (shared data sets absent)",
-            path.display()
-        );
-        None
-    }
+    common::shared_data(&format!("hand/{file}"))
 }
 
 /// The right hand, loaded and bound once.

@@ -136,3 +136,40 @@ pub async fn serve_model(
     std::mem::forget(running);
     addr
 }
+
+/// `rel` below the shared data folder (`../shared/data` beside the checkout), or `None` with a
+/// note on stderr when it is not there (the test then skips).
+pub fn shared_data(rel: &str) -> Option<std::path::PathBuf> {
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!(
+            "skipping: {} not found (shared data sets absent)",
+            path.display()
+        );
+        None
+    }
+}
+
+/// Opens `room` on `model` at the server `addr` with the admin token `admin`; returns the
+/// room's publish token.
+pub async fn open_room(
+    addr: std::net::SocketAddr,
+    admin: &str,
+    request: crease_proto::v1::OpenRoomRequest,
+) -> String {
+    let mut client =
+        crease_proto::v1::crease_client::CreaseClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+    let mut open = tonic::Request::new(request);
+    open.metadata_mut()
+        .insert("authorization", format!("Bearer {admin}").parse().unwrap());
+    client
+        .open_room(open)
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token
+}
