@@ -172,3 +172,60 @@ fn unknown_extensions_and_missing_files_are_named() {
         .to_string();
     assert!(e.contains("/nonexistent/take.tsv"), "{e}");
 }
+
+/// Corrupted copies of the real files (random bytes overwritten, truncated, a huge count in
+/// the header) read as an error or as a recording, never a panic or an abort.
+#[test]
+fn corrupted_recordings_are_errors_not_crashes() {
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+    let mut rng = StdRng::seed_from_u64(8);
+    if let Some(path) = data(QUALISYS) {
+        let text = std::fs::read_to_string(&path).unwrap();
+        // Only the header and the first rows, to keep the test quick.
+        let head: String = text.lines().take(60).map(|l| format!("{l}\n")).collect();
+        let e = crease_core::mocap::tsv::parse(
+            Path::new("h.tsv"),
+            &head.replace("NO_OF_FRAMES\t6000", "NO_OF_FRAMES\t999999999999999999"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("the file has 48 data rows"), "{e}");
+        for _ in 0..300 {
+            let mut bytes = head.clone().into_bytes();
+            for _ in 0..rng.random_range(1..8) {
+                let at = rng.random_range(0..bytes.len());
+                bytes[at] = *b"\t\n0.9-xnaNE ".get(rng.random_range(0..12)).unwrap();
+            }
+            let cut = rng.random_range(0..=bytes.len());
+            let t = String::from_utf8_lossy(&bytes[..cut]).into_owned();
+            if let Ok(r) = crease_core::mocap::tsv::parse(Path::new("m.tsv"), &t) {
+                assert!(
+                    r.frames()
+                        .all(|f| f.positions.iter().all(|p| p.is_finite()))
+                );
+            }
+        }
+    }
+    if let Some(path) = data(ART) {
+        let bytes = std::fs::read(&path).unwrap();
+        for _ in 0..100 {
+            let mut b = bytes.clone();
+            // Mostly the header and parameter blocks, where the structure is.
+            for _ in 0..rng.random_range(1..6) {
+                let at = rng.random_range(0..4096);
+                b[at] = rng.random();
+            }
+            let cut = if rng.random_bool(0.3) {
+                rng.random_range(0..b.len())
+            } else {
+                b.len()
+            };
+            if let Ok(r) = c3d::parse(Path::new("m.c3d"), &b[..cut]) {
+                assert!(
+                    r.frames()
+                        .all(|f| f.positions.iter().all(|p| p.is_finite()))
+                );
+            }
+        }
+    }
+}

@@ -123,8 +123,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Recording, MocapError> {
         lead = Some(at);
         lines.next();
     }
-    let mut positions = Vec::with_capacity(frames * markers);
-    let mut valid = Vec::with_capacity(frames * markers);
+    // The header's counts size nothing until the rows confirm them: a corrupted NO_OF_FRAMES
+    // must not become an allocation. A sample takes at least 6 bytes of text (`0\t0\t0\t`).
+    let capacity = frames.saturating_mul(markers).min(text.len() / 6);
+    let mut positions = Vec::with_capacity(capacity);
+    let mut valid = Vec::with_capacity(capacity);
     let mut rows = 0usize;
     for (i, line) in lines {
         let line = line.trim_end_matches('\r');
