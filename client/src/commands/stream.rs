@@ -92,6 +92,9 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
     runtime.block_on(stream(args))
 }
 
+/// Refused frames reported one by one before the rest are only counted.
+const SHOWN_REFUSALS: u64 = 10;
+
 /// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
 fn unix_us() -> i64 {
     SystemTime::now()
@@ -195,6 +198,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         let topo = read_topology(&topology).context("reading the topology")?;
         let triangles = topo.model_triangles();
         let last_seq = total.saturating_sub(1);
+        // The strip covers the first pass (with --loop the stream never ends).
+        let pass = frames.len() as u64;
         let strip_every = args.strip.is_some().then_some(args.strip_every);
         Some(tokio::spawn(async move {
             let mut check = MeshCheck::default();
@@ -230,7 +235,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 }
                 if let Some(every) = strip_every {
                     let t = f.seq as f64 / rate;
-                    if t + 0.5 / rate >= next_strip && f.seq <= last_seq {
+                    if t + 0.5 / rate >= next_strip && f.seq < pass {
                         topo.to_model_order(&streamed, &mut model_order);
                         check.strip.push((
                             format!("t = {t:.1} s"),
@@ -320,10 +325,15 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         match ack.error {
             Some(e) => {
                 report.refused += 1;
-                eprintln!(
-                    "frame {}: refused (code {}): {}",
-                    ack.seq, e.code, e.message
-                );
+                // The first refusals say why; a flood of the same (a rate limit) is counted.
+                if report.refused <= SHOWN_REFUSALS {
+                    eprintln!(
+                        "frame {}: refused (code {}): {}",
+                        ack.seq, e.code, e.message
+                    );
+                } else if report.refused == SHOWN_REFUSALS + 1 {
+                    eprintln!("further refusals are counted in the summary");
+                }
             }
             None => {
                 report.acknowledged += 1;
