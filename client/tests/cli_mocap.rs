@@ -380,3 +380,90 @@ fn stream_and_retarget_errors_name_the_problem() {
         "{e}"
     );
 }
+
+/// `crease room open --mocap | info | close` against a server in this process.
+#[test]
+fn room_commands_open_inspect_and_close() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = TrainedModel::load(common::train_model(tmp.path())).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let addr = runtime.block_on(serve_model(
+        "tube",
+        model,
+        Some("adm"),
+        crease_server::Limits::default(),
+    ));
+    let server = format!("http://{addr}");
+    let room = |args: &[&str]| {
+        let mut c = crease();
+        c.arg("room").args(args).args(["--server", &server]);
+        c
+    };
+    let token = run_ok(&mut room(&[
+        "open",
+        "--admin-token",
+        "adm",
+        "--room",
+        "m",
+        "--model",
+        "tube",
+        "--mocap",
+    ]));
+    assert_eq!(token.trim().len(), 32, "{token}");
+    let info = run_ok(&mut room(&["info", "--room", "m"]));
+    assert!(
+        info.contains("model \"tube\"")
+            && info.contains("beta 0.3")
+            && info.contains("filter One Euro (min cutoff 1.5 Hz, beta 10, speed cutoff 1 Hz)"),
+        "{info}"
+    );
+    // --beta and --filter override the preset.
+    run_ok(&mut room(&[
+        "open",
+        "--admin-token",
+        "adm",
+        "--room",
+        "k",
+        "--model",
+        "tube",
+        "--mocap",
+        "--beta",
+        "2",
+        "--filter",
+        "3,0,1",
+    ]));
+    let info = run_ok(&mut room(&["info", "--room", "k"]));
+    assert!(
+        info.contains("beta 2") && info.contains("min cutoff 3 Hz, beta 0,"),
+        "{info}"
+    );
+    let failed = |mut c: std::process::Command| {
+        let out = c.output().unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = failed(room(&[
+        "open",
+        "--admin-token",
+        "wrong",
+        "--room",
+        "x",
+        "--model",
+        "tube",
+    ]));
+    assert!(e.contains("opening room \"x\""), "{e}");
+    let e = failed(room(&[
+        "open",
+        "--admin-token",
+        "adm",
+        "--room",
+        "m",
+        "--model",
+        "tube",
+    ]));
+    assert!(e.contains("\"m\" is open"), "{e}");
+    run_ok(&mut room(&["close", "--admin-token", "adm", "--room", "m"]));
+    let e = failed(room(&["info", "--room", "m"]));
+    assert!(e.contains("no room \"m\""), "{e}");
+    drop(runtime);
+}

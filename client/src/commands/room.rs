@@ -55,7 +55,14 @@ pub struct OpenArgs {
     /// value: `MIN_CUTOFF_HZ,BETA,D_CUTOFF_HZ` (default 1.5,10,1 for models in metres).
     #[arg(long, value_name = "PARAMS", num_args = 0..=1, default_missing_value = "default")]
     pub filter: Option<String>,
+    /// A motion-capture room: beta 0.3 (HZY11 Fig. 11) and the default filter, unless --beta
+    /// or --filter say otherwise.
+    #[arg(long)]
+    pub mocap: bool,
 }
+
+/// Beta of `--mocap` rooms (HZY11 Fig. 11: noisy markers, a loose fit).
+pub const MOCAP_BETA: f32 = 0.3;
 
 /// Options of `crease room info`.
 #[derive(Clone, Debug, clap::Args)]
@@ -136,8 +143,13 @@ fn print_filter(filter: Option<&v1::MarkerFilter>) -> String {
 }
 
 async fn open(args: &OpenArgs) -> anyhow::Result<()> {
-    let filter = args.filter.as_deref().map(parse_filter).transpose()?;
-    if let Some(b) = args.beta
+    let filter = match args.filter.as_deref() {
+        Some(spec) => Some(parse_filter(spec)?),
+        None if args.mocap => Some(OneEuroParams::default()),
+        None => None,
+    };
+    let beta = args.beta.or_else(|| args.mocap.then_some(MOCAP_BETA));
+    if let Some(b) = beta
         && !(b.is_finite() && b > 0.0)
     {
         bail!("--beta must be a positive number, got {b}");
@@ -146,7 +158,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
     let request = v1::OpenRoomRequest {
         room: args.room.clone(),
         model: args.model.clone(),
-        beta: args.beta.unwrap_or(0.0),
+        beta: beta.unwrap_or(0.0),
         filter: filter.map(|f| v1::MarkerFilter {
             min_cutoff_hz: f.min_cutoff_hz,
             beta: f.beta,
