@@ -7,6 +7,7 @@ use std::sync::{Arc, OnceLock};
 
 use crease_core::codec::spatial_order;
 use crease_core::glam::Vec3;
+use crease_core::mesh::subdivision::LoopSubdivision;
 use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{BonePalette, skin_lbs};
 use crease_proto::{model_info, v1};
@@ -26,6 +27,9 @@ pub struct LoadedModel {
     /// The base mesh's spatial streaming order, computed on first use and shared by every room
     /// (and batch) on this model.
     spatial: OnceLock<SpatialStream>,
+    /// The same for the detail layer's mesh (`None`: no detail layer, or its subdivision
+    /// cannot be built, which the predictor then reports).
+    detail_spatial: OnceLock<Option<SpatialStream>>,
 }
 
 /// The base mesh in a spatial streaming order (`core::codec::spatial_order`).
@@ -37,23 +41,47 @@ pub struct SpatialStream {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl SpatialStream {
+    /// The spatial order of a mesh's vertices and its triangles renumbered into it.
+    fn of(positions: &[Vec3], triangles: &[[u32; 3]]) -> SpatialStream {
+        let order = spatial_order(positions);
+        let mut inverse = vec![0u32; order.len()];
+        for (i, &m) in order.iter().enumerate() {
+            inverse[m as usize] = i as u32;
+        }
+        let triangles = triangles
+            .iter()
+            .map(|t| t.map(|v| inverse[v as usize]))
+            .collect();
+        SpatialStream { order, triangles }
+    }
+}
+
 impl LoadedModel {
     /// The base mesh's spatial streaming order (computed once).
     pub fn spatial(&self) -> &SpatialStream {
         self.spatial.get_or_init(|| {
             let rest = &self.model.rig.rest;
-            let order = spatial_order(&rest.positions);
-            let mut inverse = vec![0u32; order.len()];
-            for (i, &m) in order.iter().enumerate() {
-                inverse[m as usize] = i as u32;
-            }
-            let triangles = rest
-                .triangles
-                .iter()
-                .map(|t| t.map(|v| inverse[v as usize]))
-                .collect();
-            SpatialStream { order, triangles }
+            SpatialStream::of(&rest.positions, &rest.triangles)
         })
+    }
+
+    /// The detail mesh's spatial streaming order (computed once, from the subdivided rest
+    /// mesh; detail frames keep the subdivision's triangles, renumbered).
+    pub fn detail_spatial(&self) -> Option<&SpatialStream> {
+        self.detail_spatial
+            .get_or_init(|| {
+                let layer = self.model.detail.as_ref()?;
+                let rest = &self.model.rig.rest;
+                let subdivided = LoopSubdivision::new(rest, layer.levels)
+                    .and_then(|s| s.mesh(&rest.positions))
+                    .ok()?;
+                Some(SpatialStream::of(
+                    &subdivided.positions,
+                    &subdivided.triangles,
+                ))
+            })
+            .as_ref()
     }
 }
 
@@ -136,6 +164,7 @@ impl ModelRegistry {
             info: model_info(name, &model),
             pose_bounds: pose_bounds(&model),
             spatial: OnceLock::new(),
+            detail_spatial: OnceLock::new(),
             model: Arc::new(model),
         });
         self.models.insert(name.to_owned(), Arc::clone(&loaded));

@@ -841,3 +841,102 @@ async fn filtered_rooms_lag_a_step_and_acks_report_the_control_residual() {
     let got = client.get_room(info("smooth")).await.unwrap().into_inner();
     assert_eq!(got.published, 2);
 }
+
+/// The detail level over the wire: a tube with a one-level detail layer (a static
+/// displacement that varies per vertex) streams detail frames in a spatial vertex order whose
+/// topology maps back to the subdivision's triangles, and whose frames, put back in model
+/// order, decode to the in-process `predict_detail` within the quantisation bound.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() {
+    use crease_core::mesh::subdivision::subdivided_vertex_count;
+    use crease_core::model::DetailLayer;
+    use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
+    let mut model = model();
+    let rest = model.rig.rest.clone();
+    let n = subdivided_vertex_count(&rest, 1);
+    let h: Vec<f32> = (0..n)
+        .map(|i| 0.02 * ((i * 7919) % 13) as f32 / 13.0)
+        .collect();
+    model.detail = Some(DetailLayer {
+        levels: 1,
+        regressor: DetailRegressor::fixed(DetailInput::Controls, 3 * model.controls.len(), h),
+    });
+    let running = serve_tube(&model, Limits::default()).await;
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let open = v1::OpenRoomRequest {
+        room: "d".into(),
+        model: "tube".into(),
+        beta: 0.0,
+        filter: None,
+    };
+    let token = client
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    let mut sub = client
+        .subscribe(v1::SubscribeRequest {
+            room: "d".into(),
+            level: v1::Level::Detail as i32,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let Some(v1::mesh_frame::Body::Topology(topology)) = sub.message().await.unwrap().unwrap().body
+    else {
+        panic!("topology first");
+    };
+    let topology = crease_proto::read_topology(&topology).unwrap();
+    assert_eq!(topology.vertex_count, n);
+    assert_eq!(topology.order.len(), n, "detail streams in a spatial order");
+    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+    // meshopt's index codec may rotate a triangle's corners (keeping its winding).
+    let canonical = |t: &[[u32; 3]]| -> Vec<[u32; 3]> {
+        t.iter()
+            .map(|&[a, b, c]| {
+                let min = a.min(b).min(c);
+                if min == a {
+                    [a, b, c]
+                } else if min == b {
+                    [b, c, a]
+                } else {
+                    [c, a, b]
+                }
+            })
+            .collect()
+    };
+    assert_eq!(
+        canonical(&topology.model_triangles()),
+        canonical(predictor.detail_triangles().unwrap()),
+        "the streamed triangles are the subdivision's, renumbered"
+    );
+    let frame = control_frame(&model, "d", 7, 0.5);
+    let req = authed(tokio_stream::iter(vec![frame.clone()]), &token);
+    let mut acks = client.publish(req).await.unwrap().into_inner();
+    while let Some(ack) = acks.message().await.unwrap() {
+        assert!(ack.error.is_none(), "{ack:?}");
+    }
+    let data = loop {
+        let Some(v1::mesh_frame::Body::Frame(f)) = sub.message().await.unwrap().unwrap().body
+        else {
+            continue;
+        };
+        if f.seq == 7 {
+            break f.data;
+        }
+    };
+    let mut ctx = predictor.new_context();
+    let c: Vec<Vec3> = frame
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    predictor.predict(&mut ctx, &c, None).unwrap();
+    let want = predictor.predict_detail(&mut ctx).unwrap().to_vec();
+    let mut decoder = FrameDecoder::new(n);
+    let bits = check_decoded(&mut decoder, &topology, &data, &want);
+    assert_eq!(bits, 14);
+}
