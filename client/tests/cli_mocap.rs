@@ -275,6 +275,7 @@ fn stream_tsv_into_a_mocap_room() {
     assert_eq!(r["retarget"]["missing_points"], 500);
     let meshes = &r["meshes"];
     assert_eq!(meshes["non_finite"], 0, "{r}");
+    assert_eq!(meshes["decode_errors"], 0, "{r}");
     assert_eq!(
         meshes["received"].as_u64().unwrap() + meshes["skipped"].as_u64().unwrap(),
         200,

@@ -139,6 +139,7 @@ struct MeshCheck {
     received: u64,
     skipped: u64,
     non_finite: u64,
+    decode_errors: u64,
     latency_us_p50: i64,
     latency_us_p99: i64,
     #[serde(skip)]
@@ -201,6 +202,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         // The strip covers the first pass (with --loop the stream never ends).
         let pass = frames.len() as u64;
         let strip_every = args.strip.is_some().then_some(args.strip_every);
+        // Give up on a silent stream after three frame periods, at least 5 s.
+        let patience = Duration::from_secs_f64((3.0 / (rate * args.speed)).max(5.0));
         Some(tokio::spawn(async move {
             let mut check = MeshCheck::default();
             let mut decoder = FrameDecoder::new(topo.vertex_count);
@@ -208,9 +211,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             let mut latencies = Vec::new();
             let mut next_strip = 0.0f64;
             loop {
-                let msg = match tokio::time::timeout(Duration::from_secs(5), mesh_stream.message())
-                    .await
-                {
+                let msg = match tokio::time::timeout(patience, mesh_stream.message()).await {
                     Ok(Ok(Some(m))) => m,
                     _ => break,
                 };
@@ -226,7 +227,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 check.skipped += u64::from(f.skipped);
                 latencies.push(unix_us() - f.capture_time_us);
                 if decoded.is_err() {
-                    check.non_finite += 1;
+                    check.decode_errors += 1;
                     continue;
                 }
                 decoder.positions(&mut streamed);
@@ -382,11 +383,12 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     if let Some(checker) = checker {
         let mut check = checker.await.context("the mesh checker stopped")?;
         println!(
-            "meshes: {} received for {} frames sent ({} skipped by the room's latest-wins fan-out), {} not finite; capture -> mesh received p50 {} µs p99 {} µs",
+            "meshes: {} received for {} frames sent ({} skipped by the room's latest-wins fan-out), {} not finite, {} undecodable; capture -> mesh received p50 {} µs p99 {} µs",
             check.received,
             report.frames_sent,
             check.skipped,
             check.non_finite,
+            check.decode_errors,
             check.latency_us_p50,
             check.latency_us_p99
         );
@@ -409,11 +411,11 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             report.strip = Some(path.display().to_string());
         }
         check.strip.clear();
-        let bad = check.non_finite;
+        let bad = check.non_finite + check.decode_errors;
         report.meshes = Some(check);
         if bad > 0 {
             write_report(args, &report)?;
-            bail!("{bad} meshes were not finite");
+            bail!("{bad} meshes were not finite or could not be decoded");
         }
     }
     write_report(args, &report)?;
