@@ -14,6 +14,7 @@
 //!   streamed vertex order ([`StreamTopology::to_model_order`] puts decoded frames back).
 
 use crease_core::glam::Vec3;
+use crease_core::mocap::filter::OneEuroParams;
 use crease_core::model::TrainedModel;
 
 /// The generated `crease.v1` package.
@@ -65,6 +66,28 @@ impl From<Vec3> for v1::Vec3 {
 impl From<v1::Vec3> for Vec3 {
     fn from(p: v1::Vec3) -> Self {
         Vec3::new(p.x, p.y, p.z)
+    }
+}
+
+/// The wire form of a room's control-point filter.
+impl From<OneEuroParams> for v1::MarkerFilter {
+    fn from(p: OneEuroParams) -> Self {
+        Self {
+            min_cutoff_hz: p.min_cutoff_hz,
+            beta: p.beta,
+            d_cutoff_hz: p.d_cutoff_hz,
+        }
+    }
+}
+
+/// A wire filter as core parameters (check [`OneEuroParams::is_valid`] before use).
+impl From<v1::MarkerFilter> for OneEuroParams {
+    fn from(f: v1::MarkerFilter) -> Self {
+        Self {
+            min_cutoff_hz: f.min_cutoff_hz,
+            beta: f.beta,
+            d_cutoff_hz: f.d_cutoff_hz,
+        }
     }
 }
 

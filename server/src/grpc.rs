@@ -147,11 +147,7 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let filter = r.filter.map(|f| OneEuroParams {
-            min_cutoff_hz: f.min_cutoff_hz,
-            beta: f.beta,
-            d_cutoff_hz: f.d_cutoff_hz,
-        });
+        let filter = r.filter.map(OneEuroParams::from);
         if let Some(f) = filter
             && !f.is_valid()
         {
@@ -188,11 +184,7 @@ impl Crease for CreaseService {
             room: room.id.clone(),
             model: Some(room.model.info.clone()),
             beta: room.beta(),
-            filter: room.filter().map(|f| v1::MarkerFilter {
-                min_cutoff_hz: f.min_cutoff_hz,
-                beta: f.beta,
-                d_cutoff_hz: f.d_cutoff_hz,
-            }),
+            filter: room.filter().map(v1::MarkerFilter::from),
             subscribers: room.subscriber_count() as u32,
             published: room.published(),
         }))

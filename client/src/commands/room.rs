@@ -159,11 +159,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         room: args.room.clone(),
         model: args.model.clone(),
         beta: beta.unwrap_or(0.0),
-        filter: filter.map(|f| v1::MarkerFilter {
-            min_cutoff_hz: f.min_cutoff_hz,
-            beta: f.beta,
-            d_cutoff_hz: f.d_cutoff_hz,
-        }),
+        filter: filter.map(v1::MarkerFilter::from),
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
