@@ -19,7 +19,7 @@ use std::hash::BuildHasher;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use anyhow::{Context, bail};
 use crease_core::codec::{FrameDecoder, FrameKind, parse_frame};
@@ -32,7 +32,7 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::{Channel, Endpoint};
 
-use super::common::authorized;
+use super::common::{authorized, unix_us};
 use super::synth::read_control_frames;
 
 /// The horse gallop beside the checkout (`../shared/data`), as the core benches find it.
@@ -579,13 +579,6 @@ async fn connect(url: &str) -> anyhow::Result<CreaseClient<Channel>> {
         .await
         .with_context(|| format!("connecting to {url}"))?;
     Ok(CreaseClient::new(channel))
-}
-
-/// Microseconds since the Unix epoch (the wire's capture clock).
-fn unix_us() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as i64)
 }
 
 /// `USER_HZ`, the unit of `/proc/PID/stat`'s times: `getconf CLK_TCK`, else Linux's 100.

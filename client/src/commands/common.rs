@@ -243,3 +243,19 @@ pub fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
     );
     Ok(req)
 }
+
+/// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
+pub fn unix_us() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
+
+/// Percentile `p` (0..=100) of sorted values, nearest rank; the default value when empty.
+pub fn percentile<T: Copy + Default>(sorted: &[T], p: f64) -> T {
+    if sorted.is_empty() {
+        return T::default();
+    }
+    let i = ((sorted.len() - 1) as f64 * p / 100.0).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}

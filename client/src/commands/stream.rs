@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use crease_core::codec::FrameDecoder;
@@ -20,7 +20,7 @@ use crease_core::render::{View, contact_sheet};
 use crease_proto::{control_frame, read_topology, v1};
 use serde::Serialize;
 
-use super::common::authorized;
+use super::common::{authorized, percentile, unix_us};
 use super::retarget::{ModelControls, RecordingArgs, Retargeted};
 use super::synth::read_control_frames;
 
@@ -94,21 +94,6 @@ pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
 
 /// Refused frames reported one by one before the rest are only counted.
 const SHOWN_REFUSALS: u64 = 10;
-
-/// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
-fn unix_us() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as i64)
-}
-
-/// Percentile `p` (0..=1) of sorted values.
-fn pct<T: Copy + Default>(sorted: &[T], p: f64) -> T {
-    if sorted.is_empty() {
-        return T::default();
-    }
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
 
 /// Summary of a run (`--report`).
 #[derive(Debug, Default, Serialize)]
@@ -253,8 +238,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 }
             }
             latencies.sort_unstable();
-            check.latency_us_p50 = pct(&latencies, 0.5);
-            check.latency_us_p99 = pct(&latencies, 0.99);
+            check.latency_us_p50 = percentile(&latencies, 50.0);
+            check.latency_us_p99 = percentile(&latencies, 99.0);
             check
         }))
     } else {
@@ -350,10 +335,10 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         sender.await.context("the sender stopped")?;
     latencies.sort_unstable();
     round_trips.sort_unstable();
-    report.server_latency_us_p50 = pct(&latencies, 0.5);
-    report.server_latency_us_p99 = pct(&latencies, 0.99);
-    report.round_trip_us_p50 = pct(&round_trips, 0.5);
-    report.round_trip_us_p99 = pct(&round_trips, 0.99);
+    report.server_latency_us_p50 = percentile(&latencies, 50.0);
+    report.server_latency_us_p99 = percentile(&latencies, 99.0);
+    report.round_trip_us_p50 = percentile(&round_trips, 50.0);
+    report.round_trip_us_p99 = percentile(&round_trips, 99.0);
     report.control_residual_rms_model = (residual_sq / report.acknowledged.max(1) as f64).sqrt();
     report.control_residual_rms_recording_units = prepared
         .scale

@@ -9,6 +9,8 @@ use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
 use crease_proto::{read_topology, v1};
 
+use super::common::percentile;
+
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct WatchArgs {
@@ -26,15 +28,6 @@ pub struct WatchArgs {
     /// Write every received frame as `DIR/frame_00000.obj`, ...
     #[arg(long, value_name = "DIR")]
     pub dump: Option<PathBuf>,
-}
-
-/// Percentile `p` (0..=100) of sorted values.
-fn percentile(sorted: &[u32], p: f64) -> u32 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    let i = ((sorted.len() - 1) as f64 * p / 100.0).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
 }
 
 /// Runs `crease watch`.
