@@ -165,8 +165,6 @@ struct RoomState {
     valid: Vec<bool>,
     base_encoder: FrameEncoder,
     detail_encoder: FrameEncoder,
-    /// The control points as received (the residual is measured against these).
-    received: Vec<Vec3>,
     /// One filter per control point (empty when the room does not filter).
     filters: Vec<OneEuro>,
     /// The previous frame's capture time and arrival, for the filter's time step.
@@ -236,20 +234,21 @@ fn recycle(old: Option<Arc<MeshUpdate>>, spare: &mut Vec<Vec3>) {
     }
 }
 
-/// RMS over the valid control points of the distance between `targets[i]` and the predicted
-/// position of control vertex `i`; 0 when none is valid.
+/// RMS over the valid control points of the distance between the received point `i`
+/// (`x, y, z` in `targets`, the frame's wire positions) and the predicted position of control
+/// vertex `i`; 0 when none is valid.
 fn control_residual(
     controls: &[ControlPoint],
     predicted: &[Vec3],
-    targets: &[Vec3],
+    targets: &[f32],
     valid: &[bool],
 ) -> f32 {
     let (sum, n) = controls
         .iter()
-        .zip(targets.iter().zip(valid))
+        .zip(targets.chunks_exact(3).zip(valid))
         .filter(|(_, (_, ok))| **ok)
         .fold((0.0f64, 0usize), |(s, n), (c, (t, _))| {
-            let d = predicted[c.vertex as usize].distance_squared(*t);
+            let d = predicted[c.vertex as usize].distance_squared(Vec3::new(t[0], t[1], t[2]));
             (s + f64::from(d), n + 1)
         });
     if n == 0 {
@@ -303,7 +302,6 @@ impl Room {
                 valid: vec![true; n],
                 base_encoder,
                 detail_encoder,
-                received: vec![Vec3::ZERO; n],
                 filters: Vec::new(),
                 last_time: None,
                 spare: [Vec::new(), Vec::new()],
@@ -412,7 +410,6 @@ impl Room {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let state = &mut *guard;
         let held = read_control_frame(frame, &mut state.controls, &mut state.valid)?;
-        state.received.copy_from_slice(&state.controls);
         if !state.filters.is_empty() {
             // The time step: capture times when the publisher sends increasing ones, else
             // arrival times.
@@ -448,7 +445,7 @@ impl Room {
         let control_rms = control_residual(
             &self.model.model.controls,
             predicted,
-            &state.received,
+            &frame.positions,
             &state.valid,
         );
         // In the streamed order; this vector is the frame's (kept for on-demand keyframes).
