@@ -111,19 +111,20 @@ pub fn fit_rotation(a: &[Vec3], b: &[Vec3]) -> Option<Quat> {
 /// form) or fixed.
 pub fn fit_similarity(a: &[Vec3], b: &[Vec3], fixed_scale: Option<f32>) -> Option<Similarity> {
     let rotation = fit_rotation(a, b)?;
-    let (ca, cb) = (centroid(a), centroid(b));
-    let scale = match fixed_scale {
-        Some(s) => s,
-        None => {
-            let (num, den) = scale_sums(a, b, rotation);
-            (num / den) as f32
-        }
-    };
-    Some(Similarity {
+    let scale = fixed_scale.unwrap_or_else(|| {
+        let (num, den) = scale_sums(a, b, rotation);
+        (num / den) as f32
+    });
+    Some(with_rotation(a, b, rotation, scale))
+}
+
+/// The similarity with `rotation` and `scale` that puts the centroid of `a` on that of `b`.
+fn with_rotation(a: &[Vec3], b: &[Vec3], rotation: Quat, scale: f32) -> Similarity {
+    Similarity {
         scale,
         rotation,
-        translation: cb - scale * (rotation * ca),
-    })
+        translation: centroid(b) - scale * (rotation * centroid(a)),
+    }
 }
 
 /// `(Σ b'·R a', Σ |a'|²)` over the centred sets: the least-squares scale is their ratio.
@@ -214,32 +215,40 @@ impl Registration {
         let Some(rotation) = fit_rotation(&self.a, &self.b) else {
             return false;
         };
+        self.accumulate(rotation);
+        true
+    }
+
+    /// Adds the collected frame, aligned by `rotation`, to the scale fit, and fixes the scale
+    /// once `calibration_frames` frames are in.
+    fn accumulate(&mut self, rotation: Quat) {
         let (n, d) = scale_sums(&self.a, &self.b, rotation);
         self.sums = (self.sums.0 + n, self.sums.1 + d, self.sums.2 + 1);
         if self.sums.2 >= self.calibration_frames && self.sums.1 > 0.0 {
             self.scale = Some((self.sums.0 / self.sums.1) as f32);
         }
-        true
     }
 
-    /// Registers one frame: `markers` and `valid` in target order.
+    /// Registers one frame: `markers` and `valid` in target order. While the scale is not
+    /// fixed, the frame also counts towards it, and the running estimate is used.
     pub fn update(&mut self, markers: &[Vec3], valid: &[bool]) -> Registered {
-        if self.scale.is_none() {
-            self.calibrate(markers, valid);
-        }
         if !self.collect(markers, valid) {
             return self.held();
         }
+        let Some(rotation) = fit_rotation(&self.a, &self.b) else {
+            return self.held();
+        };
+        if self.scale.is_none() {
+            self.accumulate(rotation);
+        }
         let scale = self
             .scale
-            .or_else(|| (self.sums.1 > 0.0).then(|| (self.sums.0 / self.sums.1) as f32));
-        match fit_similarity(&self.a, &self.b, scale) {
-            Some(s) if s.scale.is_finite() && s.scale > 0.0 => {
-                self.current = Some(s);
-                Registered::Fitted
-            }
-            _ => self.held(),
+            .unwrap_or_else(|| (self.sums.0 / self.sums.1) as f32);
+        if !(scale.is_finite() && scale > 0.0) {
+            return self.held();
         }
+        self.current = Some(with_rotation(&self.a, &self.b, rotation, scale));
+        Registered::Fitted
     }
 
     fn held(&self) -> Registered {

@@ -131,6 +131,8 @@ impl Retarget {
         self.map.control_count
     }
 
+    /// Mixes the frame's markers into one point per mapped control point, and gathers the
+    /// registration points' among them.
     fn mix(&mut self, frame: &MarkerFrame<'_>) {
         for (i, (_, terms)) in self.map.controls.iter().enumerate() {
             let mut p = Vec3::ZERO;
@@ -141,6 +143,10 @@ impl Retarget {
             }
             self.mixed[i] = p;
             self.seen[i] = ok && p.is_finite();
+        }
+        for (k, &i) in self.map.registration.iter().enumerate() {
+            self.reg_points[k] = self.mixed[i];
+            self.reg_seen[k] = self.seen[i];
         }
     }
 
@@ -154,10 +160,6 @@ impl Retarget {
                 break;
             }
             self.mix(&frame);
-            for (k, &i) in self.map.registration.iter().enumerate() {
-                self.reg_points[k] = self.mixed[i];
-                self.reg_seen[k] = self.seen[i];
-            }
             used += usize::from(
                 self.registration
                     .calibrate(&self.reg_points, &self.reg_seen),
@@ -179,10 +181,6 @@ impl Retarget {
         assert_eq!(positions.len(), self.map.control_count);
         assert_eq!(valid.len(), self.map.control_count);
         self.mix(frame);
-        for (k, &i) in self.map.registration.iter().enumerate() {
-            self.reg_points[k] = self.mixed[i];
-            self.reg_seen[k] = self.seen[i];
-        }
         let registered = self.registration.update(&self.reg_points, &self.reg_seen);
         positions.fill(Vec3::ZERO);
         valid.fill(false);
