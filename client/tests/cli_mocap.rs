@@ -98,6 +98,17 @@ fn short_tsv(src: &Path, dst: &Path, frames: usize, blank: std::ops::Range<usize
     std::fs::write(dst, out).unwrap();
 }
 
+/// The glove model and 200 frames of the Qualisys recording with every finger marker missing
+/// in frames 100..150, in a temporary folder; `None` (skipped) without the shared data.
+fn glove_clip() -> Option<(tempfile::TempDir, PathBuf, PathBuf)> {
+    let src = data(TSV)?;
+    let tmp = tempfile::tempdir().unwrap();
+    let model = glove_model(tmp.path());
+    let tsv = tmp.path().join("short.tsv");
+    short_tsv(&src, &tsv, 200, 100..150);
+    Some((tmp, model, tsv))
+}
+
 fn read_csv(path: &Path) -> Vec<Vec<f32>> {
     std::fs::read_to_string(path)
         .unwrap()
@@ -112,11 +123,9 @@ fn read_csv(path: &Path) -> Vec<Vec<f32>> {
 /// the pose it had (its fingers relative to the back of the hand).
 #[test]
 fn all_finger_markers_missing_still_yields_finite_meshes() {
-    let Some(src) = data(TSV) else { return };
-    let tmp = tempfile::tempdir().unwrap();
-    let model_path = glove_model(tmp.path());
-    let tsv = tmp.path().join("short.tsv");
-    short_tsv(&src, &tsv, 200, 100..150);
+    let Some((tmp, model_path, tsv)) = glove_clip() else {
+        return;
+    };
     let csv = tmp.path().join("controls.csv");
     let stdout = run_ok(
         crease()
@@ -245,11 +254,9 @@ fn report(path: &Path) -> serde_json::Value {
 /// held, the strip written; then the same clip resampled to 50 Hz.
 #[test]
 fn stream_tsv_into_a_mocap_room() {
-    let Some(src) = data(TSV) else { return };
-    let tmp = tempfile::tempdir().unwrap();
-    let model = glove_model(tmp.path());
-    let tsv = tmp.path().join("short.tsv");
-    short_tsv(&src, &tsv, 200, 100..150);
+    let Some((tmp, model, tsv)) = glove_clip() else {
+        return;
+    };
     let room = mocap_room(&model);
     let (json, strip) = (tmp.path().join("r.json"), tmp.path().join("strip.png"));
     let stdout = run_ok(

@@ -50,7 +50,7 @@ impl ModelControls {
             rest: info
                 .control_points
                 .iter()
-                .map(|c| c.rest.map_or(Vec3::ZERO, |r| Vec3::new(r.x, r.y, r.z)))
+                .map(|c| c.rest.map_or(Vec3::ZERO, Vec3::from))
                 .collect(),
         }
     }
