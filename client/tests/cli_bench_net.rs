@@ -197,9 +197,16 @@ fn bench_net_spawns_the_server_binary_when_it_is_built() {
     let report = check_short_run(&out.stdout);
     assert!(report["server"].as_str().unwrap().contains("spawned"));
     if cfg!(target_os = "linux") {
-        // The child's own CPU: it predicted and encoded every frame.
+        // The child's own CPU is measured (it is null for a server in another process). It
+        // may read 0: /proc counts in 10 ms ticks, and a one-second run on a small tube can
+        // use less than one.
         let cpu = &report["scenarios"][0]["server_cpu"];
-        assert!(f(&cpu["ms_per_frame"]) > 0.0, "{report}");
+        assert!(
+            cpu.is_object(),
+            "no server CPU for a spawned server: {report}"
+        );
+        let ms = f(&cpu["ms_per_frame"]);
+        assert!(ms.is_finite() && ms >= 0.0, "{report}");
     }
 }
 
