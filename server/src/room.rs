@@ -448,22 +448,27 @@ impl Room {
             &frame.positions,
             &state.valid,
         );
-        // In the streamed order; this vector is the frame's (kept for on-demand keyframes).
-        let order = self.vertex_order(Level::Base);
-        let mut positions = std::mem::take(&mut state.spare[0]);
-        positions.clear();
-        if order.is_empty() {
-            positions.extend_from_slice(predicted);
-        } else {
-            positions.extend(order.iter().map(|&m| predicted[m as usize]));
-        }
-        let update = |encoder: &mut FrameEncoder, positions: Vec<Vec3>| {
+        // One level's frame: the mesh in the streamed order (into the level's spare buffer;
+        // the vector stays with the frame for on-demand keyframes), encoded and handed to the
+        // level's subscribers; the frame it replaces gives its buffer back when nobody holds it.
+        let send = |tx: &watch::Sender<Option<Arc<MeshUpdate>>>,
+                    encoder: &mut FrameEncoder,
+                    spare: &mut Vec<Vec3>,
+                    order: &[u32],
+                    mesh: &[Vec3]| {
+            let mut positions = std::mem::take(spare);
+            positions.clear();
+            if order.is_empty() {
+                positions.extend_from_slice(mesh);
+            } else {
+                positions.extend(order.iter().map(|&m| mesh[m as usize]));
+            }
             let qbox = *encoder.qbox();
             let mut bytes = Vec::new();
             let header = encoder
                 .encode(&positions, None, &mut bytes)
                 .map_err(|e| internal("encoding", &e))?;
-            Ok::<_, WireError>(Some(Arc::new(MeshUpdate {
+            let old = tx.send_replace(Some(Arc::new(MeshUpdate {
                 seq: frame.seq,
                 capture_time_us: frame.capture_time_us,
                 received,
@@ -476,27 +481,28 @@ impl Room {
                 qbox,
                 positions,
                 key: OnceLock::new(),
-            })))
+            })));
+            recycle(old, spare);
+            Ok::<_, WireError>(())
         };
-        let old = self
-            .base
-            .send_replace(update(&mut state.base_encoder, positions)?);
-        recycle(old, &mut state.spare[0]);
+        let [base_spare, detail_spare] = &mut state.spare;
+        send(
+            &self.base,
+            &mut state.base_encoder,
+            base_spare,
+            self.vertex_order(Level::Base),
+            predicted,
+        )?;
         if self.detail_subscribers.load(Ordering::Relaxed) > 0
             && let Ok(detail) = self.predictor.predict_detail(&mut state.ctx)
         {
-            let mut positions = std::mem::take(&mut state.spare[1]);
-            positions.clear();
-            let order = self.vertex_order(Level::Detail);
-            if order.is_empty() {
-                positions.extend_from_slice(detail);
-            } else {
-                positions.extend(order.iter().map(|&m| detail[m as usize]));
-            }
-            let old = self
-                .detail
-                .send_replace(update(&mut state.detail_encoder, positions)?);
-            recycle(old, &mut state.spare[1]);
+            send(
+                &self.detail,
+                &mut state.detail_encoder,
+                detail_spare,
+                self.vertex_order(Level::Detail),
+                detail,
+            )?;
         }
         self.published.fetch_add(1, Ordering::Relaxed);
         Ok(Published {
