@@ -229,6 +229,23 @@ pub async fn subscribe(
     Ok((stream, topology))
 }
 
+/// The server's description of `room` (its model, settings and counters).
+///
+/// # Errors
+/// The server's refusal (no such room), naming the room.
+pub async fn get_room(
+    client: &mut crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>,
+    room: &str,
+) -> anyhow::Result<crease_proto::v1::RoomInfo> {
+    client
+        .get_room(crease_proto::v1::GetRoomRequest {
+            room: room.to_owned(),
+        })
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("room {room:?}: {}", s.message()))
+}
+
 /// `msg` with `authorization: Bearer <token>` metadata (admin and publish tokens).
 ///
 /// # Errors

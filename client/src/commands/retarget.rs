@@ -30,6 +30,20 @@ pub struct RecordingArgs {
     pub map: Option<PathBuf>,
 }
 
+/// Parses `--rate`: frames per second, in (0, 10000].
+pub fn parse_rate(s: &str) -> Result<f64, String> {
+    let rate: f64 = s
+        .parse()
+        .map_err(|_| format!("expected frames per second, got {s:?}"))?;
+    if rate.is_finite() && rate > 0.0 && rate <= 10_000.0 {
+        Ok(rate)
+    } else {
+        Err(format!(
+            "must be in (0, 10000] frames per second, got {rate}"
+        ))
+    }
+}
+
 /// A model's control points: names and rest positions, model order.
 #[derive(Clone, Debug)]
 pub struct ModelControls {
@@ -182,7 +196,7 @@ pub struct RetargetArgs {
     #[arg(long, value_name = "FILE")]
     pub model: PathBuf,
     /// Resample the recording to this rate first (Hz).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_rate)]
     pub rate: Option<f64>,
     /// Control-frame CSV to write (one frame per line; an invalid point is `nan,nan,nan`).
     #[arg(long, value_name = "FILE")]
@@ -217,11 +231,6 @@ pub fn write_csv(path: &Path, names: &[String], frames: &[ControlFrame]) -> anyh
 
 /// Runs `crease retarget`.
 pub fn run(args: &RetargetArgs) -> anyhow::Result<()> {
-    if let Some(rate) = args.rate
-        && !(rate.is_finite() && rate > 0.0 && rate <= 10_000.0)
-    {
-        bail!("--rate must be in (0, 10000] frames per second, got {rate}");
-    }
     let model = TrainedModel::load(&args.model)
         .with_context(|| format!("reading model {}", args.model.display()))?;
     let name = args
@@ -239,4 +248,18 @@ pub fn run(args: &RetargetArgs) -> anyhow::Result<()> {
         controls.names.len()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates() {
+        assert_eq!(parse_rate("60"), Ok(60.0));
+        assert_eq!(parse_rate("10000"), Ok(10_000.0));
+        for bad in ["0", "-1", "NaN", "inf", "10001", "fast"] {
+            assert!(parse_rate(bad).is_err(), "{bad}");
+        }
+    }
 }

@@ -5,7 +5,7 @@ use anyhow::{Context, bail};
 use crease_core::mocap::filter::OneEuroParams;
 use crease_proto::v1;
 
-use super::common::{ServerArgs, authorized};
+use super::common::{ServerArgs, authorized, get_room};
 
 /// Options of `crease room`.
 #[derive(Clone, Debug, clap::Args)]
@@ -167,13 +167,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         .map_err(|s| anyhow::anyhow!("{}", s.message()))
         .with_context(|| format!("opening room {:?} on model {:?}", args.room, args.model))?
         .into_inner();
-    let room = client
-        .get_room(v1::GetRoomRequest {
-            room: opened.room.clone(),
-        })
-        .await
-        .map_err(|s| anyhow::anyhow!("{}", s.message()))?
-        .into_inner();
+    let room = get_room(&mut client, &opened.room).await?;
     eprintln!(
         "opened room {:?} on model {:?}: beta {}, filter {}",
         room.room,
@@ -188,13 +182,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
 
 async fn info(args: &InfoArgs) -> anyhow::Result<()> {
     let mut client = args.server.connect().await?;
-    let room = client
-        .get_room(v1::GetRoomRequest {
-            room: args.room.clone(),
-        })
-        .await
-        .map_err(|s| anyhow::anyhow!("{}", s.message()))?
-        .into_inner();
+    let room = get_room(&mut client, &args.room).await?;
     let model = room.model.unwrap_or_default();
     println!(
         "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, {} subscribers, {} frames published",

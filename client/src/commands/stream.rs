@@ -20,8 +20,8 @@ use crease_core::render::{View, contact_sheet};
 use crease_proto::{control_frame, read_topology, v1};
 use serde::Serialize;
 
-use super::common::{authorized, percentile, unix_us};
-use super::retarget::{ModelControls, RecordingArgs, Retargeted};
+use super::common::{authorized, get_room, percentile, unix_us};
+use super::retarget::{ModelControls, RecordingArgs, Retargeted, parse_rate};
 use super::synth::read_control_frames;
 
 /// Options of `crease stream`.
@@ -43,7 +43,7 @@ pub struct StreamArgs {
     pub recording: RecordingArgs,
     /// Frames per second. A recording plays at its own rate unless this is given, and is then
     /// resampled to it (e.g. 100 Hz to a 60 Hz room). Control-frame files default to 60.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_rate)]
     pub rate: Option<f64>,
     /// Play again and again until interrupted.
     #[arg(long = "loop")]
@@ -68,11 +68,6 @@ pub struct StreamArgs {
 
 /// Runs `crease stream`.
 pub fn run(args: &StreamArgs) -> anyhow::Result<()> {
-    if let Some(rate) = args.rate
-        && !(rate.is_finite() && rate > 0.0 && rate <= 10_000.0)
-    {
-        bail!("--rate must be in (0, 10000] frames per second, got {rate}");
-    }
     if !(args.speed.is_finite() && args.speed > 0.0) {
         bail!("--speed must be a positive factor, got {}", args.speed);
     }
@@ -133,13 +128,7 @@ struct MeshCheck {
 
 async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let mut client = args.server.connect().await?;
-    let room = client
-        .get_room(v1::GetRoomRequest {
-            room: args.room.clone(),
-        })
-        .await
-        .map_err(|s| anyhow::anyhow!("room {:?}: {}", args.room, s.message()))?
-        .into_inner();
+    let room = get_room(&mut client, &args.room).await?;
     let model = room
         .model
         .clone()
