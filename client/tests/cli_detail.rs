@@ -3,38 +3,12 @@
 //! level), and `crease eval --json` carries `base_rms_mean` and `detail_rms_mean` for every
 //! predictor and the `static-detail` and `cascaded-detail` rows.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 
-fn crease() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_crease"))
-}
-
-fn cactus() -> Option<&'static Path> {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/cactus"
-    ));
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        eprintln!("skipping: {} is absent", dir.display());
-        None
-    }
-}
-
-fn run(cmd: &mut Command) -> String {
-    let out = cmd.output().expect("crease runs");
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
+use common::{crease, run_ok, shared_data};
 
 const COMMON: [&str; 8] = [
     "--base-vertices",
@@ -49,15 +23,19 @@ const COMMON: [&str; 8] = [
 
 #[test]
 fn train_synth_and_eval_with_the_detail_layer() {
-    let Some(dir) = cactus() else { return };
+    let Some(dir) = shared_data("cactus") else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let model_path = tmp.path().join("cactus.crease");
-    run(crease()
-        .args(["train", "--examples"])
-        .arg(dir)
-        .args(COMMON)
-        .args(["--control-points", "auto:6", "--method", "local", "--out"])
-        .arg(&model_path));
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(&dir)
+            .args(COMMON)
+            .args(["--control-points", "auto:6", "--method", "local", "--out"])
+            .arg(&model_path),
+    );
     let model = TrainedModel::load(&model_path).unwrap();
     let layer = model.detail.as_ref().expect("a detail layer");
     // One level (the count closest to the 5,261 detailed vertices): V + E of the base.
@@ -89,13 +67,15 @@ fn train_synth_and_eval_with_the_detail_layer() {
     )
     .unwrap();
     let out = tmp.path().join("frames");
-    run(crease()
-        .args(["synth", "--detail", "--model"])
-        .arg(&model_path)
-        .arg("--controls")
-        .arg(&csv)
-        .arg("--out")
-        .arg(&out));
+    run_ok(
+        crease()
+            .args(["synth", "--detail", "--model"])
+            .arg(&model_path)
+            .arg("--controls")
+            .arg(&csv)
+            .arg("--out")
+            .arg(&out),
+    );
     for f in ["frame_00000.obj", "frame_00001.obj"] {
         let m = Mesh::read(out.join(f)).unwrap();
         assert_eq!(m.vertex_count(), high, "{f}");
@@ -105,12 +85,14 @@ fn train_synth_and_eval_with_the_detail_layer() {
 
     // A base-only model refuses --detail with a clear message.
     let base_only = tmp.path().join("base.crease");
-    run(crease()
-        .args(["train", "--examples"])
-        .arg(dir)
-        .args(COMMON)
-        .args(["--no-detail", "--control-points", "auto:6", "--out"])
-        .arg(&base_only));
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(&dir)
+            .args(COMMON)
+            .args(["--no-detail", "--control-points", "auto:6", "--out"])
+            .arg(&base_only),
+    );
     let refused = crease()
         .args(["synth", "--detail", "--model"])
         .arg(&base_only)
@@ -124,11 +106,13 @@ fn train_synth_and_eval_with_the_detail_layer() {
     assert!(String::from_utf8_lossy(&refused.stderr).contains("detail layer"));
 
     // Leave-one-out with the detail rows.
-    let json = run(crease()
-        .args(["eval", "--loo", "--json", "--examples"])
-        .arg(dir)
-        .args(COMMON)
-        .args(["--control-points", "auto:6", "--methods", "global,local"]));
+    let json = run_ok(
+        crease()
+            .args(["eval", "--loo", "--json", "--examples"])
+            .arg(&dir)
+            .args(COMMON)
+            .args(["--control-points", "auto:6", "--methods", "global,local"]),
+    );
     let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     let loo = &v["loo"];
     for row in ["global", "local", "static-detail", "cascaded-detail"] {

@@ -2,26 +2,14 @@
 //! can read (manifests, control-point layouts), joint angles that `crease pose` turns back
 //! into the same meshes, and a contact sheet that is not blank.
 
+mod common;
+
 use std::path::Path;
-use std::process::Command;
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::{ExampleSet, Mesh};
 
-fn crease() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_crease"))
-}
-
-fn run(cmd: &mut Command) -> String {
-    let out = cmd.output().expect("crease runs");
-    assert!(
-        out.status.success(),
-        "crease failed: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
+use common::{crease, run_ok};
 
 /// Luminance mean and variance of a PNG, and its size.
 fn png_stats(path: &Path) -> (u32, u32, f64, f64) {
@@ -46,11 +34,13 @@ fn png_stats(path: &Path) -> (u32, u32, f64, f64) {
 fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
     let dir = tempfile::tempdir().expect("temp dir");
     let out = dir.path().join("hands");
-    let stdout = run(crease()
-        .args([
-            "handgen", "--train", "12", "--test", "3", "--seed", "5", "--out",
-        ])
-        .arg(&out));
+    let stdout = run_ok(
+        crease()
+            .args([
+                "handgen", "--train", "12", "--test", "3", "--seed", "5", "--out",
+            ])
+            .arg(&out),
+    );
     assert!(stdout.contains("base: "), "{stdout}");
     assert!(stdout.contains("detailed: "), "{stdout}");
 
@@ -124,11 +114,13 @@ fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
     // Joint angles round trip: `crease pose --angles` reproduces a test mesh exactly.
     let angles = out.join("poses/test/001-sampled.json");
     let posed = dir.path().join("posed.ply");
-    run(crease()
-        .args(["pose", "--angles"])
-        .arg(&angles)
-        .arg("--out")
-        .arg(&posed));
+    run_ok(
+        crease()
+            .args(["pose", "--angles"])
+            .arg(&angles)
+            .arg("--out")
+            .arg(&posed),
+    );
     let a = Mesh::read(&posed).expect("posed mesh");
     let b = Mesh::read(out.join("base/test/001-sampled.ply")).expect("test mesh");
     let worst = a
@@ -144,9 +136,11 @@ fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
 
     // A named pose differs from the flat hand.
     let fist = dir.path().join("fist.obj");
-    run(crease()
-        .args(["pose", "--pose", "fist", "--out"])
-        .arg(&fist));
+    run_ok(
+        crease()
+            .args(["pose", "--pose", "fist", "--out"])
+            .arg(&fist),
+    );
     let fist = Mesh::read(&fist).expect("fist");
     let moved = fist
         .positions

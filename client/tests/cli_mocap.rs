@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{crease, open_room, serve_model, shared_data};
+use common::{crease, open_room, run_ok, serve_model, shared_data};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
@@ -21,17 +21,6 @@ fn data(file: &str) -> Option<PathBuf> {
 
 fn map(name: &str) -> PathBuf {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../bench/mocap")).join(name)
-}
-
-fn run_ok(cmd: &mut std::process::Command) -> String {
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 /// A glove13 hand: `crease handgen` (base only) and `crease train` on its glove13 manifest.

@@ -12,6 +12,18 @@ pub fn crease() -> Command {
     Command::new(env!("CARGO_BIN_EXE_crease"))
 }
 
+/// Runs `cmd`, which must succeed (the panic shows its stdout and stderr); returns its stdout.
+pub fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("the command starts");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8 output")
+}
+
 pub const RINGS: usize = 8;
 pub const AROUND: usize = 6;
 /// Control points: a base vertex, two at mid height, two at the tip.
