@@ -17,7 +17,7 @@ use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
 use crease_core::mocap::RetargetStats;
 use crease_core::render::{View, contact_sheet};
-use crease_proto::{control_frame, read_topology, v1};
+use crease_proto::{StreamTopology, control_frame, read_topology, v1};
 use serde::Serialize;
 
 use super::common::{authorized, get_room, percentile, unix_us};
@@ -168,69 +168,20 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     // The checker subscribes before the first frame goes out.
     let want_check = args.check || args.strip.is_some();
     let checker = if want_check {
-        let (mut mesh_stream, topology) =
+        let (mesh_stream, topology) =
             super::common::subscribe(&mut client, &args.room, v1::Level::Base).await?;
-        let topo = read_topology(&topology).context("reading the topology")?;
-        let triangles = topo.model_triangles();
-        let last_seq = total.saturating_sub(1);
-        // The strip covers the first pass (with --loop the stream never ends).
-        let pass = frames.len() as u64;
-        let strip_every = args.strip.is_some().then_some(args.strip_every);
-        // Give up on a silent stream after three frame periods, at least 5 s.
-        let patience = Duration::from_secs_f64((3.0 / (rate * args.speed)).max(5.0));
-        Some(tokio::spawn(async move {
-            let mut check = MeshCheck::default();
-            let mut decoder = FrameDecoder::new(topo.vertex_count);
-            let (mut streamed, mut model_order) = (Vec::new(), Vec::new());
-            let mut latencies = Vec::new();
-            let mut next_strip = 0.0f64;
-            loop {
-                let msg = match tokio::time::timeout(patience, mesh_stream.message()).await {
-                    Ok(Ok(Some(m))) => m,
-                    _ => break,
-                };
-                let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
-                    continue;
-                };
-                // Keep the codec state, count only this run's frames.
-                let decoded = decoder.decode(&f.data);
-                if f.capture_time_us < start_us {
-                    continue;
-                }
-                check.received += 1;
-                check.skipped += u64::from(f.skipped);
-                latencies.push(unix_us() - f.capture_time_us);
-                if decoded.is_err() {
-                    check.decode_errors += 1;
-                    continue;
-                }
-                decoder.positions(&mut streamed);
-                if !streamed.iter().all(|p| p.is_finite()) {
-                    check.non_finite += 1;
-                }
-                if let Some(every) = strip_every {
-                    let t = f.seq as f64 / rate;
-                    if t + 0.5 / rate >= next_strip && f.seq < pass {
-                        topo.to_model_order(&streamed, &mut model_order);
-                        check.strip.push((
-                            format!("t = {t:.1} s"),
-                            Mesh {
-                                positions: model_order.clone(),
-                                triangles: triangles.clone(),
-                            },
-                        ));
-                        next_strip = (t / every + 1e-9).floor() * every + every;
-                    }
-                }
-                if f.seq >= last_seq {
-                    break;
-                }
-            }
-            latencies.sort_unstable();
-            check.latency_us_p50 = percentile(&latencies, 50.0);
-            check.latency_us_p99 = percentile(&latencies, 99.0);
-            check
-        }))
+        let topology = read_topology(&topology).context("reading the topology")?;
+        let plan = CheckPlan {
+            start_us,
+            last_seq: total.saturating_sub(1),
+            // The strip covers the first pass (with --loop the stream never ends).
+            pass: frames.len() as u64,
+            rate,
+            strip_every: args.strip.is_some().then_some(args.strip_every),
+            // Give up on a silent stream after three frame periods, at least 5 s.
+            patience: Duration::from_secs_f64((3.0 / (rate * args.speed)).max(5.0)),
+        };
+        Some(tokio::spawn(check_meshes(mesh_stream, topology, plan)))
     } else {
         None
     };
@@ -397,6 +348,92 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         bail!("no frame was accepted");
     }
     Ok(())
+}
+
+/// What [`check_meshes`] needs to know of the run.
+#[derive(Clone, Copy, Debug)]
+struct CheckPlan {
+    /// Frames captured before this (an earlier run into the room) are not counted.
+    start_us: i64,
+    /// The sequence number of the last frame to be sent.
+    last_seq: u64,
+    /// Frames in one pass over the source (the strip covers the first pass).
+    pass: u64,
+    /// Frames per second of the source.
+    rate: f64,
+    /// Seconds between the strip's pictures, with `--strip`.
+    strip_every: Option<f64>,
+    /// How long a silent stream is waited for.
+    patience: Duration,
+}
+
+/// Decodes every mesh of the subscription until the last frame sent, checking each is finite
+/// and keeping the strip's pictures.
+async fn check_meshes(
+    mut mesh_stream: tonic::Streaming<v1::MeshFrame>,
+    topo: StreamTopology,
+    plan: CheckPlan,
+) -> MeshCheck {
+    let CheckPlan {
+        start_us,
+        last_seq,
+        pass,
+        rate,
+        strip_every,
+        patience,
+    } = plan;
+    let triangles = topo.model_triangles();
+    let mut check = MeshCheck::default();
+    let mut decoder = FrameDecoder::new(topo.vertex_count);
+    let (mut streamed, mut model_order) = (Vec::new(), Vec::new());
+    let mut latencies = Vec::new();
+    let mut next_strip = 0.0f64;
+    loop {
+        let msg = match tokio::time::timeout(patience, mesh_stream.message()).await {
+            Ok(Ok(Some(m))) => m,
+            _ => break,
+        };
+        let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+            continue;
+        };
+        // Keep the codec state, count only this run's frames.
+        let decoded = decoder.decode(&f.data);
+        if f.capture_time_us < start_us {
+            continue;
+        }
+        check.received += 1;
+        check.skipped += u64::from(f.skipped);
+        latencies.push(unix_us() - f.capture_time_us);
+        if decoded.is_err() {
+            check.decode_errors += 1;
+            continue;
+        }
+        decoder.positions(&mut streamed);
+        if !streamed.iter().all(|p| p.is_finite()) {
+            check.non_finite += 1;
+        }
+        if let Some(every) = strip_every {
+            let t = f.seq as f64 / rate;
+            if t + 0.5 / rate >= next_strip && f.seq < pass {
+                topo.to_model_order(&streamed, &mut model_order);
+                check.strip.push((
+                    format!("t = {t:.1} s"),
+                    Mesh {
+                        positions: model_order.clone(),
+                        triangles: triangles.clone(),
+                    },
+                ));
+                next_strip = (t / every + 1e-9).floor() * every + every;
+            }
+        }
+        if f.seq >= last_seq {
+            break;
+        }
+    }
+    latencies.sort_unstable();
+    check.latency_us_p50 = percentile(&latencies, 50.0);
+    check.latency_us_p99 = percentile(&latencies, 99.0);
+    check
 }
 
 fn write_report(args: &StreamArgs, report: &Report) -> anyhow::Result<()> {
