@@ -32,12 +32,13 @@ pub struct LoadedModel {
     detail_spatial: OnceLock<Option<SpatialStream>>,
 }
 
-/// The base mesh in a spatial streaming order (`core::codec::spatial_order`).
+/// A mesh (the base, or the detail layer's) in a spatial streaming order
+/// (`core::codec::spatial_order`).
 #[derive(Debug)]
 pub struct SpatialStream {
     /// Streamed vertex `i` is model vertex `order[i]`.
     pub order: Vec<u32>,
-    /// The base triangles in the streamed order.
+    /// The mesh's triangles in the streamed order.
     pub triangles: Vec<[u32; 3]>,
 }
 

@@ -380,13 +380,6 @@ fn control_frames(
     args: &BenchNetArgs,
     model: &TrainedModel,
 ) -> anyhow::Result<(Vec<v1::ControlFrame>, String)> {
-    let frame = |positions: Vec<f32>, valid: Vec<u8>| v1::ControlFrame {
-        room: String::new(),
-        seq: 0,
-        capture_time_us: 0,
-        positions,
-        valid,
-    };
     if let Some(path) = &args.controls {
         let read = read_control_frames(path, model.controls.len())?;
         let frames = read
@@ -416,16 +409,17 @@ fn control_frames(
     }
     // Every mesh has the rest's vertex count (ExampleSet checks), the model's (checked above),
     // and the model's control vertices are below it (TrainedModel::load validates).
+    let valid = vec![true; model.controls.len()];
     let frames = set
         .examples
         .iter()
         .map(|e| {
-            let positions = model
+            let points: Vec<crease_core::glam::Vec3> = model
                 .controls
                 .iter()
-                .flat_map(|c| e.mesh.positions[c.vertex as usize].to_array())
+                .map(|c| e.mesh.positions[c.vertex as usize])
                 .collect();
-            frame(positions, Vec::new())
+            control_frame("", 0, 0, &points, &valid)
         })
         .collect::<Vec<_>>();
     let source = format!("{} ({} frames)", dir.display(), frames.len());
