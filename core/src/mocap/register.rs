@@ -19,7 +19,7 @@
 //! - Translation: `t = b̄ - s R ā` (the centroids coincide).
 //! - Fewer than three valid registration markers: the last transform is held (and counted).
 
-use glam::{Mat3, Quat, Vec3};
+use glam::{DMat3, Quat, Vec3};
 
 /// `x -> scale * rotation * x + translation`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,7 +80,7 @@ pub fn fit_rotation(a: &[Vec3], b: &[Vec3]) -> Option<Quat> {
     }
     // Degenerate when the source spans less than a plane: the cross-covariance then has rank
     // below two and the optimal rotation is not unique.
-    let cov = Mat3::from_cols_array_2d(&m.map(|r| r.map(|v| v as f32))).transpose();
+    let cov = DMat3::from_cols_array_2d(&m).transpose();
     let scale = m.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
     if scale == 0.0 || !scale.is_finite() {
         return None;
@@ -88,7 +88,7 @@ pub fn fit_rotation(a: &[Vec3], b: &[Vec3]) -> Option<Quat> {
     let cross = cov.x_axis.cross(cov.y_axis).length()
         + cov.y_axis.cross(cov.z_axis).length()
         + cov.z_axis.cross(cov.x_axis).length();
-    if f64::from(cross) < 1e-9 * scale * scale {
+    if cross < 1e-9 * scale * scale {
         return None;
     }
     let [[sxx, sxy, sxz], [syx, syy, syz], [szx, szy, szz]] = m;
@@ -339,8 +339,8 @@ mod tests {
         let mut reg = Registration::new(targets.clone(), 4, None);
         let valid = [true; 3];
         for f in 0..10 {
-            // The recording: the targets mapped by the inverse of a moving similarity, with
-            // noise on the first frames (the fitted scale averages over them).
+            // The recording: the targets mapped by the inverse of a moving similarity of one
+            // scale (the fitted scale averages over the first four frames, then stays).
             let mut t = random_similarity(&mut rng);
             t.scale = true_scale;
             let inv = t.inverse();
