@@ -19,27 +19,9 @@ chromium_bin="/usr/bin/chromium"
 
 ready_timeout=180
 
-# start_demo_server, stop_server, the EXIT trap (stops the server, prints its log on failure).
+# apt_install, start_demo_server, stop_server, the EXIT trap (stops the server, prints its
+# log on failure).
 source tests/lib/server.sh
-
-# apt-get install "$@" as root or through sudo; fails with a reason when neither is possible.
-apt_install() {
-    if ! command -v apt-get >/dev/null 2>&1; then
-        echo "FAIL: $* needed and there is no apt-get here: install it by hand" >&2
-        exit 1
-    fi
-    local sudo=""
-    if [[ $(id -u) -ne 0 ]]; then
-        if ! command -v sudo >/dev/null 2>&1; then
-            echo "FAIL: $* needed and this user cannot run apt-get (not root, no sudo)" >&2
-            exit 1
-        fi
-        sudo="sudo"
-    fi
-    echo "apt-get install $*"
-    $sudo apt-get update
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y "$@"
-}
 
 echo "== chromium, node"
 if [[ ! -x "$chromium_bin" ]]; then

@@ -1,6 +1,7 @@
-# Shared by tests/python/run.sh and tests/browser/run.sh (sourced, not run): starting and stopping the demo
-# server they start, and the EXIT trap that stops it and prints its log on failure. The caller
-# sets `log` (the server's log file) and `server_pid` (once started).
+# Shared by tests/python/run.sh and tests/browser/run.sh (sourced, not run): installing the
+# Debian packages they need, starting and stopping the demo server they start, and the EXIT
+# trap that stops it and prints its log on failure. The caller sets `log` (the server's log
+# file) and `server_pid` (once started).
 
 server_pid=""
 
@@ -80,4 +81,23 @@ start_demo_server() {
         exit 1
     fi
     echo "listening after $((SECONDS - start)) s: gRPC $grpc_addr, HTTP $http_addr (pid $server_pid)"
+}
+
+# apt-get install "$@" as root or through sudo; fails with a reason when neither is possible.
+apt_install() {
+    if ! command -v apt-get >/dev/null 2>&1; then
+        echo "FAIL: $* needed and there is no apt-get here: install it by hand" >&2
+        exit 1
+    fi
+    local sudo=""
+    if [[ $(id -u) -ne 0 ]]; then
+        if ! command -v sudo >/dev/null 2>&1; then
+            echo "FAIL: $* needed and this user cannot run apt-get (not root, no sudo)" >&2
+            exit 1
+        fi
+        sudo="sudo"
+    fi
+    echo "apt-get install $*"
+    $sudo apt-get update
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y "$@"
 }

@@ -19,28 +19,15 @@ log="$work/server.log"
 
 ready_timeout=180
 
-# start_demo_server, stop_server, the EXIT trap (stops the server, prints its log on failure).
+# apt_install, start_demo_server, stop_server, the EXIT trap (stops the server, prints its
+# log on failure).
 source tests/lib/server.sh
-
 
 echo "== python (venv)"
 # Debian splits venv's ensurepip into python3-venv: `python3 -m venv` without it makes no venv.
 if ! command -v python3 >/dev/null 2>&1 || ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then
-    if ! command -v apt-get >/dev/null 2>&1; then
-        echo "FAIL: python3 with the venv module (and ensurepip) is needed; install it (no apt-get here)" >&2
-        exit 1
-    fi
-    sudo=""
-    if [[ $(id -u) -ne 0 ]]; then
-        if ! command -v sudo >/dev/null 2>&1; then
-            echo "FAIL: python3-venv is missing and this user cannot run apt-get (not root, no sudo)" >&2
-            exit 1
-        fi
-        sudo="sudo"
-    fi
-    echo "python3 with venv is missing: apt-get install python3 python3-venv python3-pip"
-    $sudo apt-get update
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y python3 python3-venv python3-pip
+    echo "python3 with venv is missing"
+    apt_install python3 python3-venv python3-pip
 fi
 python3 --version
 
