@@ -1,4 +1,5 @@
-//! Atomic file writes, shared by every writer in the crate (meshes, model files).
+//! Atomic file writes, shared by every writer of the workspace (meshes, model files, PNG
+//! pictures, data sets).
 
 use std::fs;
 use std::io::{self, BufWriter, Write};

@@ -1,26 +1,26 @@
-//! crease-core: the runtime numerics of crease. No async, no network, nothing from the rest of
-//! the workspace.
+//! crease-core: what runs per frame. No async, no network, nothing from the rest of the
+//! workspace (ARCHITECTURE.md's dependency rules, checked by `tests/dependency_rules.rs`).
 //!
 //! Layout:
 //! - [`mesh`]: [`mesh::Mesh`], readers/writers (OBJ, PLY, glTF/GLB), normals, edges, adjacency,
-//!   and example sets (a folder or a TOML manifest of meshes sharing one topology).
-//! - [`runtime`]: per-frame synthesis. Today: linear-blend and dual-quaternion skinning into
-//!   caller-provided buffers.
+//!   geodesic-ready topology, example sets (a folder or a TOML manifest of meshes sharing one
+//!   topology), and Loop subdivision as a sparse matrix.
+//! - [`runtime`]: per-frame synthesis into reusable buffers: skinning, the kernel vector, the
+//!   rotation regressors, the translation solve (FKY08 eq. 11), the detail layer (HZY11), the
+//!   per-frame [`runtime::predictor::Predictor`], and the One Euro filter that smooths a room's
+//!   control points ([`runtime::filter`]).
 //! - [`model`]: the on-disk container (versioned header, checksummed sections, atomic writes),
-//!   the [`model::Rig`] it stores, and the skinned-glTF export of a rig.
-//! - [`sweep`]: the LYK06 sweep hand; today its skeleton, poses and forward kinematics.
-//! - [`codec`]: compact per-frame vertex buffers for streaming (16-bit quantisation, octahedral
+//!   the [`model::Rig`] and [`model::TrainedModel`] it stores, and the skinned-glTF export.
+//! - [`codec`]: compact per-frame vertex buffers for streaming (quantisation, octahedral
 //!   normals, keyframes and deltas, meshopt's vertex and index codecs, a self-describing header).
-//! - [`mocap`]: marker recordings (Qualisys TSV, C3D) to control frames: marker maps,
-//!   registration into the model's hand frame, gap filling, the One Euro filter.
+//! - [`atomic`]: atomic file writes shared by every writer of the workspace.
+//!
+//! The sweep hand and the rasteriser live in `crease-hand`, marker recordings in `crease-mocap`.
 
-mod atomic;
+pub mod atomic;
 pub mod codec;
 pub mod mesh;
-pub mod mocap;
 pub mod model;
-pub mod render;
 pub mod runtime;
-pub mod sweep;
 
 pub use glam;

@@ -14,8 +14,8 @@
 //!   streamed vertex order ([`StreamTopology::to_model_order`] puts decoded frames back).
 
 use crease_core::glam::Vec3;
-use crease_core::mocap::filter::OneEuroParams;
 use crease_core::model::TrainedModel;
+use crease_core::runtime::filter::OneEuroParams;
 
 /// The generated `crease.v1` package.
 #[allow(missing_docs, clippy::all, missing_debug_implementations)]

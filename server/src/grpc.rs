@@ -5,7 +5,7 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::time::Instant;
 
-use crease_core::mocap::filter::OneEuroParams;
+use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
 use crease_proto::v1::{self, FrameError};
 use tokio::sync::mpsc;
@@ -275,7 +275,7 @@ impl Crease for CreaseService {
 /// Publishes one control frame (any transport): finds the room, checks the token, predicts off
 /// the async threads, counts it in the metrics, and answers with the ack (an error ack for a
 /// refused frame; the room is unchanged then).
-pub(crate) async fn publish_one(
+pub async fn publish_one(
     state: &Arc<AppState>,
     token: Option<&str>,
     frame: v1::ControlFrame,

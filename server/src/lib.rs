@@ -8,12 +8,9 @@
 //!   [`ws`]: `/ws/rooms/{id}`, subscribe and publish over WebSocket.
 //! - [`serve`]: binds the listeners and runs until shut down.
 //!
-//! - [`demo`]: the embedded default (a trained demo hand and an animated room).
-//!
-//! Depends on `crease-core` and `crease-proto`, and on `crease-train` for the demo's training
-//! only (ARCHITECTURE.md).
+//! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the embedded demo and the
+//! `crease-server` binary are in `crease-demo`.
 
-pub mod demo;
 pub mod grpc;
 pub mod http;
 pub mod metrics;

@@ -19,8 +19,8 @@ use crease_core::codec::{
     encode_keyframe,
 };
 use crease_core::glam::Vec3;
-use crease_core::mocap::filter::{OneEuro, OneEuroParams};
 use crease_core::model::ControlPoint;
+use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_core::runtime::predictor::{FrameContext, PredictError, Predictor};
 use crease_proto::{WireError, read_control_frame, v1};
 use prost::bytes::Bytes;

@@ -44,7 +44,7 @@ echo "== npm ci (web/, tests/browser/)"
 (cd tests/browser && npm ci --no-audit --no-fund)
 
 echo "== build (crease-server)"
-cargo build --release --locked -p crease-server
+cargo build --release --locked -p crease-demo
 
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 start_demo_server --demo-token "$token"

@@ -48,7 +48,7 @@ fi
 echo
 
 echo "== build (crease-server, crease)"
-cargo build --release --locked -p crease-server -p crease-cli
+cargo build --release --locked -p crease-demo -p crease-cli
 
 start_demo_server
 

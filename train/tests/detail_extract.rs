@@ -9,9 +9,9 @@ mod common;
 use std::time::Instant;
 
 use crease_core::glam::Vec3;
-use crease_core::sweep::rig::{HandRig, Layers};
-use crease_core::sweep::skeleton::{HandPose, NamedPose};
-use crease_core::sweep::surface::Resolution;
+use crease_hand::rig::{HandRig, Layers};
+use crease_hand::skeleton::{HandPose, NamedPose};
+use crease_hand::surface::Resolution;
 use crease_train::detail::{
     DetailError, DetailExample, DisplacementSource, DisplacementTarget, ExtractStats, extract_all,
 };

@@ -6,10 +6,10 @@
 
 use crease_core::glam::Vec3;
 use crease_core::runtime::detail::DetailSynth;
-use crease_core::sweep::dataset::{Layout, landmarks};
-use crease_core::sweep::rig::{HandRig, Layers};
-use crease_core::sweep::skeleton::{HandPose, NamedPose, PoseSampler};
-use crease_core::sweep::surface::Resolution;
+use crease_hand::dataset::{Layout, landmarks};
+use crease_hand::rig::{HandRig, Layers};
+use crease_hand::skeleton::{HandPose, NamedPose, PoseSampler};
+use crease_hand::surface::Resolution;
 use crease_train::detail::regress::{self, DetailInput};
 use crease_train::detail::{DisplacementSource, DisplacementTarget};
 use crease_train::kcca::KccaOptions;

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use crease_core::sweep::dataset::{DatasetProgress, write_dataset};
-use crease_core::sweep::rig::{HandRig, Layers};
-use crease_core::sweep::skeleton::{HandPose, JointLimits, NamedPose};
-use crease_core::sweep::surface::Resolution;
+use crease_hand::dataset::{DatasetProgress, write_dataset};
+use crease_hand::rig::{HandRig, Layers};
+use crease_hand::skeleton::{HandPose, JointLimits, NamedPose};
+use crease_hand::surface::Resolution;
 
 /// Options of `crease handgen`.
 #[derive(Clone, Debug, clap::Args)]

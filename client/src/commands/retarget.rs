@@ -8,9 +8,9 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
-use crease_core::mocap::map::MarkerMap;
-use crease_core::mocap::{Recording, Retarget, RetargetStats};
 use crease_core::model::TrainedModel;
+use crease_mocap::map::MarkerMap;
+use crease_mocap::{Recording, Retarget, RetargetStats};
 use crease_proto::v1;
 
 use super::synth::ControlFrame;

@@ -2,7 +2,7 @@
 //! server's admin token). `open` prints the publish token `crease stream --token` takes.
 
 use anyhow::{Context, bail};
-use crease_core::mocap::filter::OneEuroParams;
+use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 
 use super::common::{ServerArgs, authorized, get_room};

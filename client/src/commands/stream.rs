@@ -1,6 +1,6 @@
 //! `crease stream`: publish control frames into a room in real time over gRPC: a file of
 //! control frames (CSV/JSON), or a marker recording (Qualisys TSV, C3D) retargeted onto the
-//! room's model through a marker map (`crease_core::mocap`). Prints refused frames as they come
+//! room's model through a marker map (`crease_mocap`). Prints refused frames as they come
 //! and at the end acks, latency, invalid markers and how closely the mesh followed them.
 //!
 //! With `--check` (or `--strip`) it also subscribes to the room and decodes every mesh the
@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
-use crease_core::mocap::RetargetStats;
-use crease_core::render::{View, contact_sheet};
+use crease_hand::render::{View, contact_sheet};
+use crease_mocap::RetargetStats;
 use crease_proto::{StreamTopology, control_frame, read_topology, v1};
 use serde::Serialize;
 

@@ -12,10 +12,13 @@
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 //! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
+//! - [`filter`]: the One Euro filter (Casiez et al. 2012), the input smoothing of a room's
+//!   control points.
 
 pub mod detail;
 pub mod displacement;
 pub mod edge_skin;
+pub mod filter;
 pub mod kernel;
 pub mod predict;
 pub mod predictor;

@@ -1,0 +1,158 @@
+//! The demo room's animation: [`DemoAnimation`], the control points along a loop through the
+//! named poses (hold, then an eased blend of the joint angles to the next pose), sampled once at
+//! start and interpolated between samples at play time; and [`drive`], which publishes it into a
+//! room at a fixed rate through the same path as a gRPC publisher
+//! ([`crease_server::grpc::publish_one`]), until the server shuts down.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crease_core::glam::Vec3;
+use crease_core::model::TrainedModel;
+use crease_hand::rig::{HandRig, Layers, RigScratch};
+use crease_hand::skeleton::{HandPose, NamedPose};
+use crease_hand::surface::Resolution;
+use crease_proto::v1;
+use crease_server::AppState;
+use crease_server::room::Room;
+
+use crate::DemoError;
+
+/// Seconds a named pose is held.
+const HOLD_S: f32 = 0.7;
+/// Seconds of the blend to the next pose.
+const BLEND_S: f32 = 1.1;
+/// Samples of the control points per second of animation (interpolated between at play time).
+const SAMPLES_PER_S: f32 = 20.0;
+
+/// The demo's control points along a loop through the named poses (module docs).
+#[derive(Clone, Debug)]
+pub struct DemoAnimation {
+    /// Control-point positions per sample, `SAMPLES_PER_S` samples per second, looping.
+    samples: Vec<Vec<Vec3>>,
+}
+
+impl DemoAnimation {
+    /// The animation of `model`'s control points on the base sweep hand. The control points
+    /// must be vertices of the base hand (the demo model's are).
+    ///
+    /// # Errors
+    /// [`DemoError::Hand`] if the hand cannot be built or a control point is not one of its
+    /// vertices.
+    pub fn new(model: &TrainedModel) -> Result<Self, DemoError> {
+        let rig = HandRig::build(Resolution::Base).map_err(|e| DemoError::Hand(e.to_string()))?;
+        let n = rig.vertex_count();
+        if let Some(c) = model.controls.iter().find(|c| c.vertex as usize >= n) {
+            return Err(DemoError::Hand(format!(
+                "control point {:?} is vertex {}, the hand has {n}",
+                c.name, c.vertex
+            )));
+        }
+        // Flat first: the loop starts and ends at the rest pose.
+        let cycle: Vec<HandPose> = NamedPose::ALL.iter().map(|&p| HandPose::named(p)).collect();
+        let per_pose = ((HOLD_S + BLEND_S) * SAMPLES_PER_S).round() as usize;
+        let hold = (HOLD_S * SAMPLES_PER_S).round() as usize;
+        let mut scratch = RigScratch::new();
+        let mut mesh = vec![Vec3::ZERO; n];
+        let mut samples = Vec::with_capacity(cycle.len() * per_pose);
+        for (k, pose) in cycle.iter().enumerate() {
+            let next = &cycle[(k + 1) % cycle.len()];
+            for s in 0..per_pose {
+                let t = s.saturating_sub(hold) as f32 / (per_pose - hold) as f32;
+                // Smoothstep: starts and stops at rest in joint space.
+                let eased = t * t * (3.0 - 2.0 * t);
+                let posed = pose.lerp(next, eased);
+                rig.deform(&posed, Layers::default(), &mut scratch, &mut mesh);
+                samples.push(
+                    model
+                        .controls
+                        .iter()
+                        .map(|c| mesh[c.vertex as usize])
+                        .collect(),
+                );
+            }
+        }
+        Ok(Self { samples })
+    }
+
+    /// Length of one loop.
+    pub fn period(&self) -> Duration {
+        Duration::from_secs_f32(self.samples.len() as f32 / SAMPLES_PER_S)
+    }
+
+    /// The control points at `t` seconds (looping), linearly interpolated between samples,
+    /// written as flat `x, y, z` into `out` (cleared first).
+    pub fn controls_at(&self, t: f64, out: &mut Vec<f32>) {
+        out.clear();
+        let n = self.samples.len();
+        let x = (t * f64::from(SAMPLES_PER_S)).rem_euclid(n as f64);
+        let i = (x as usize).min(n - 1);
+        let f = (x - i as f64) as f32;
+        let (a, b) = (&self.samples[i], &self.samples[(i + 1) % n]);
+        out.extend(a.iter().zip(b).flat_map(|(p, q)| p.lerp(*q, f).to_array()));
+    }
+}
+
+/// How long the animation pauses after someone else published into the demo room (an animator
+/// dragging a control point in the viewer), so the two do not fight over the hand.
+const YIELD_S: f64 = 3.0;
+
+/// Publishes `animation` into `room` at `rate_hz` until the server shuts down: the frames go
+/// through [`crease_server::grpc::publish_one`] with the room's token, as a remote publisher's would
+/// (metrics, acks, latency), one at a time; a tick missed while a frame was still being
+/// predicted is skipped, not queued. When another publisher's frames arrive, the animation
+/// pauses until none came for `YIELD_S` seconds, and resumes where it left off.
+pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimation, rate_hz: f64) {
+    let period = Duration::from_secs_f64(1.0 / rate_hz.clamp(1.0, 1000.0));
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let closing = state.closing();
+    tokio::pin!(closing);
+    let token = room.token().to_owned();
+    let mut positions = Vec::new();
+    // Animation time (it stands still while others publish), and what the room had counted
+    // after our last frame.
+    let (mut t, mut last_tick) = (0.0f64, Instant::now());
+    let (mut ours, mut others_at) = (room.published(), None::<Instant>);
+    for seq in 0u64.. {
+        tokio::select! {
+            _ = tick.tick() => {}
+            () = &mut closing => return,
+        }
+        if state.room(&room.id).is_none() {
+            tracing::info!(room = %room.id, "demo room closed: the animation stops");
+            return;
+        }
+        let now = Instant::now();
+        if room.published() > ours {
+            others_at = Some(now);
+            ours = room.published();
+        }
+        if others_at.is_some_and(|at| now.duration_since(at).as_secs_f64() < YIELD_S) {
+            last_tick = now;
+            continue;
+        }
+        t += now.duration_since(last_tick).as_secs_f64();
+        last_tick = now;
+        animation.controls_at(t, &mut positions);
+        let frame = v1::ControlFrame {
+            room: room.id.clone(),
+            seq,
+            capture_time_us: now_us(),
+            positions: std::mem::take(&mut positions),
+            valid: Vec::new(),
+        };
+        let ack = crease_server::grpc::publish_one(&state, Some(&token), frame).await;
+        ours = room.published();
+        if let Some(e) = ack.error {
+            tracing::warn!(code = e.code, message = %e.message, "demo frame refused");
+        }
+    }
+}
+
+/// Microseconds since the Unix epoch.
+fn now_us() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}

@@ -1,0 +1,269 @@
+//! The `crease-server` binary's job as one library call: [`run`] (or [`start`], for callers
+//! that stop the server themselves) takes a [`Config`], loads the models, trains or loads the
+//! demo hand off the async threads, opens and animates room `demo`, binds the listeners, and
+//! tells the user where to look.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use crease_server::registry::{ModelRegistry, RegistryError};
+use crease_server::room::{Room, RoomError};
+use crease_server::{AddRoomError, AppState, Running};
+
+use crate::animation::{DemoAnimation, drive};
+use crate::hand_model::{DemoError, default_cache_dir, demo_model};
+use crate::{DEMO_BETA, DEMO_MODEL, DEMO_ROOM};
+
+/// Everything `crease-server` is told: what to serve and how.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// The server library's configuration: addresses, admin token, limits, TLS, web folder.
+    pub server: crease_server::Config,
+    /// Folder of `*.crease` model files; `None` serves only the demo.
+    pub models: Option<PathBuf>,
+    /// Run the demo next to `models` too (always on when `models` is `None`).
+    pub demo: bool,
+    /// Where the demo model is cached; `None`: [`default_cache_dir`].
+    pub cache: Option<PathBuf>,
+    /// The demo room's publish token; `None`: a random one, printed at start.
+    pub demo_token: Option<String>,
+    /// Frames per second of the demo animation.
+    pub demo_rate: f64,
+    /// How long in-flight calls may finish after shutdown starts.
+    pub drain: Duration,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            server: crease_server::Config::default(),
+            models: None,
+            demo: false,
+            cache: None,
+            demo_token: None,
+            // A display's refresh rate: the hand moves smoothly in the viewer.
+            demo_rate: 60.0,
+            // Long enough for an ack in flight, short enough for a container's grace period.
+            drain: Duration::from_secs(5),
+        }
+    }
+}
+
+impl Config {
+    /// Whether this configuration runs the demo.
+    pub fn runs_demo(&self) -> bool {
+        self.models.is_none() || self.demo
+    }
+}
+
+/// The `web/` folder of the source tree this binary was built from, if it exists (the default
+/// of `--web`).
+pub fn source_tree_web() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../web");
+    dir.is_dir().then_some(dir)
+}
+
+/// Where [`start`] reports progress (one line each), from any thread.
+pub type Progress = Arc<dyn Fn(&str) + Send + Sync>;
+
+/// Why the server could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchError {
+    /// The model folder could not be read, or a model in it not loaded.
+    #[error(transparent)]
+    Models(#[from] RegistryError),
+    /// The model folder holds no model and the demo is off.
+    #[error("{0}: no *.crease model files (train one with `crease train`, or add --demo)")]
+    NoModels(PathBuf),
+    /// The demo model could not be built.
+    #[error(transparent)]
+    Demo(#[from] DemoError),
+    /// The demo room could not be opened.
+    #[error("the demo room: {0}")]
+    Room(#[from] RoomError),
+    /// The demo room could not be added.
+    #[error("the demo room: {0}")]
+    AddRoom(#[from] AddRoomError),
+    /// Binding a listener, or the TLS files.
+    #[error("serving: {0}")]
+    Io(#[from] std::io::Error),
+    /// The demo's training task panicked.
+    #[error("the demo model's training task: {0}")]
+    Join(#[from] tokio::task::JoinError),
+}
+
+/// A started server.
+#[derive(Debug)]
+pub struct Started {
+    /// The listeners; [`Running::shutdown`] stops them.
+    pub running: Running,
+    /// The demo room's publish token, when the demo runs.
+    pub demo_token: Option<String>,
+    /// Whether the listeners speak TLS.
+    pub tls: bool,
+}
+
+impl Started {
+    /// The lines that tell a user where things are: the listeners, and with the demo the
+    /// viewer URL, a `crease watch` command that runs from here, and the publish token (unless
+    /// the operator chose it).
+    pub fn banner(&self, token_chosen: bool) -> Vec<String> {
+        let (grpc, http) = (self.running.grpc, self.running.http);
+        let mut lines = vec![format!(
+            "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /metrics /ws/rooms/ROOM)"
+        )];
+        let Some(token) = &self.demo_token else {
+            return lines;
+        };
+        let scheme = if self.tls { "https" } else { "http" };
+        let host = |addr: SocketAddr| {
+            if addr.ip().is_unspecified() {
+                "localhost".to_owned()
+            } else {
+                addr.ip().to_string()
+            }
+        };
+        lines.push(format!(
+            "demo: room {DEMO_ROOM:?} is live. Open {scheme}://{}:{}/?room={DEMO_ROOM} or run \
+             `{} watch --server {scheme}://{}:{} --room {DEMO_ROOM}`",
+            host(http),
+            http.port(),
+            crease_command(),
+            host(grpc),
+            grpc.port()
+        ));
+        if !token_chosen {
+            lines.push(format!(
+                "demo: publish token {token} (enter it in the viewer to drag control points)"
+            ));
+        }
+        lines
+    }
+}
+
+/// How to run `crease` from the working directory: the binary built beside this one (`cargo
+/// build --release` puts both in `target/release`), relative to the working directory when it
+/// is below it; else `cargo run --release -p crease-cli --`, which builds it first.
+pub fn crease_command() -> String {
+    let beside = std::env::current_exe()
+        .ok()
+        .map(|exe| exe.with_file_name(format!("crease{}", std::env::consts::EXE_SUFFIX)))
+        .filter(|p| p.is_file());
+    match beside {
+        Some(path) => {
+            let cwd = std::env::current_dir().unwrap_or_default();
+            match path.strip_prefix(&cwd) {
+                Ok(rel) => format!("./{}", rel.display()),
+                Err(_) => path.display().to_string(),
+            }
+        }
+        None => "cargo run --release -p crease-cli --".to_owned(),
+    }
+}
+
+/// Loads the models, builds the demo (off the async threads), opens and animates room `demo`,
+/// and binds the listeners. `progress` gets the demo's training progress and warnings, as they
+/// happen.
+///
+/// # Errors
+/// [`LaunchError`]: the model folder, the demo, or binding.
+pub async fn start(config: Config, progress: Progress) -> Result<Started, LaunchError> {
+    let mut models = match &config.models {
+        Some(dir) => {
+            let models = ModelRegistry::load_dir(dir)?;
+            if models.is_empty() && !config.demo {
+                return Err(LaunchError::NoModels(dir.clone()));
+            }
+            models
+        }
+        None => ModelRegistry::default(),
+    };
+    let demo = if config.runs_demo() {
+        let cache = config.cache.clone().unwrap_or_else(default_cache_dir);
+        let say = Arc::clone(&progress);
+        // Training and sampling the animation take seconds: the blocking pool, not the executor.
+        let (model, animation) = tokio::task::spawn_blocking(move || {
+            let model = demo_model(&cache, &mut |line| say(&format!("demo: {line}")))?;
+            let animation = DemoAnimation::new(&model)?;
+            Ok::<_, DemoError>((model, animation))
+        })
+        .await??;
+        Some((models.insert(DEMO_MODEL, model), animation))
+    } else {
+        None
+    };
+    for m in models.iter() {
+        tracing::info!(model = %m.name, vertices = m.info.base_vertices, detail = m.info.detail_vertices, "loaded");
+    }
+    if let Some(dir) = &config.server.web
+        && !dir.join("node_modules/three").is_dir()
+    {
+        progress(&format!(
+            "warning: {} has no node_modules: the viewer needs three.js and meshoptimizer \
+             (run `npm ci --prefix {}`)",
+            dir.display(),
+            dir.display()
+        ));
+    }
+    let tls = config.server.tls.is_some();
+    let state = AppState::new(models, config.server);
+    let mut demo_token = None;
+    if let Some((model, animation)) = demo {
+        // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
+        let mut room = Room::open(DEMO_ROOM, model, Some(DEMO_BETA), state.config.stream)?;
+        if let Some(token) = &config.demo_token {
+            room = room.with_token(token);
+        }
+        let room = state.add_room(room)?;
+        demo_token = Some(room.token().to_owned());
+        tokio::spawn(drive(Arc::clone(&state), room, animation, config.demo_rate));
+    }
+    let running = crease_server::serve(state).await?;
+    Ok(Started {
+        running,
+        demo_token,
+        tls,
+    })
+}
+
+/// [`start`], the banner on stderr, then serving until `shutdown` resolves (the binary passes
+/// [`shutdown_signal`]), then a graceful stop within the configured drain.
+///
+/// # Errors
+/// [`LaunchError`] from [`start`], or a transport error while stopping.
+pub async fn run(
+    config: Config,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let token_chosen = config.demo_token.is_some();
+    let drain = config.drain;
+    let started = start(config, Arc::new(|line: &str| eprintln!("{line}"))).await?;
+    for line in started.banner(token_chosen) {
+        eprintln!("{line}");
+    }
+    shutdown.await;
+    eprintln!("shutting down");
+    started.running.shutdown(drain).await?;
+    Ok(())
+}
+
+/// Resolves on Ctrl-C, or on SIGTERM (what container runtimes send) on Unix; also when the
+/// signal handlers cannot be installed (the server then stops rather than run unstoppable).
+pub async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        let Ok(mut term) =
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        else {
+            return;
+        };
+        tokio::select! {
+            _ = tokio::signal::ctrl_c() => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = tokio::signal::ctrl_c().await;
+}

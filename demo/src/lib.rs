@@ -1,0 +1,31 @@
+//! crease-demo: the embedded default of `crease-server` (DESIGN.md, "The product in one
+//! paragraph"), and the launch of the server binary. With no model folder the server trains a
+//! hand from the procedural sweep hand (LYK06) at two resolutions, so it has a detail layer
+//! (HZY11), opens room `demo` and animates it through the named poses; a newcomer sees a moving
+//! hand in the browser at once.
+//!
+//! Layout:
+//! - [`hand_model`]: the demo model, from the cache folder or trained and cached there.
+//! - [`animation`]: the control points along a loop through the named poses, and the task that
+//!   publishes them into the demo room through the server's publish path.
+//! - [`launch`]: the binary's whole job as a library call: one [`launch::Config`] (models,
+//!   demo, the server's own configuration) -> loaded models, the demo room, the listeners, and
+//!   the lines a user needs (viewer URL, publish token, a `crease watch` command that runs).
+//!
+//! This crate, not the server library, depends on `crease-train` and `crease-hand`
+//! (ARCHITECTURE.md, "Rules").
+
+pub mod animation;
+pub mod hand_model;
+pub mod launch;
+
+pub use animation::{DemoAnimation, drive};
+pub use hand_model::{DemoError, default_cache_dir, demo_model};
+
+/// The demo model's name (`GetModel`, `OpenRoom`).
+pub const DEMO_MODEL: &str = "demo-hand";
+/// The demo room's id.
+pub const DEMO_ROOM: &str = "demo";
+/// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
+/// control point is followed closely.
+pub const DEMO_BETA: f32 = 3.0;

@@ -1,0 +1,111 @@
+//! `crease-server`: hosts live rooms on trained models and streams predicted meshes. With no
+//! arguments it runs the embedded demo (crate `crease-demo`): a hand model trained on first
+//! start and cached, and room `demo` animated through the named poses. Arguments become one
+//! [`crease_demo::launch::Config`]; [`crease_demo::launch::run`] does the rest.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::Parser;
+use crease_demo::launch::{self, Config};
+use crease_server::{DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
+
+/// Hosts live rooms on trained crease models and streams predicted meshes over gRPC and
+/// WebSocket. With no --models it serves the embedded demo: a hand trained on first start
+/// (cached; ~15 s) and room "demo" animated through the named poses.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Args {
+    /// Folder of `*.crease` model files (`crease train --out`). Without it the server runs the
+    /// embedded demo.
+    #[arg(long, value_name = "DIR")]
+    models: Option<PathBuf>,
+    /// Also run the demo (model `demo-hand`, room `demo`) next to --models.
+    #[arg(long)]
+    demo: bool,
+    /// Where the demo model is cached. Default: $CREASE_CACHE_DIR, else $XDG_CACHE_HOME/crease,
+    /// else ~/.cache/crease.
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
+    /// The demo room's publish token (default: a random one, printed). With it, the viewer's
+    /// control-point dragging can publish into room `demo`.
+    #[arg(long, env = "CREASE_DEMO_TOKEN", hide_env_values = true)]
+    demo_token: Option<String>,
+    /// Frames per second of the demo animation.
+    #[arg(long, default_value_t = Config::default().demo_rate)]
+    demo_rate: f64,
+    /// gRPC listen address.
+    #[arg(long, default_value = DEFAULT_GRPC)]
+    grpc: SocketAddr,
+    /// HTTP listen address: the viewer (/), WebSocket (/ws/rooms/{id}), /healthz, /readyz,
+    /// /metrics.
+    #[arg(long, default_value = DEFAULT_HTTP)]
+    http: SocketAddr,
+    /// Static files served at / (the browser viewer). Default: the web/ folder of the source
+    /// tree this binary was built from, if it exists.
+    #[arg(long, value_name = "DIR")]
+    web: Option<PathBuf>,
+    /// Token that opens and closes rooms (`authorization: Bearer <token>`); without it rooms
+    /// cannot be opened remotely. Also read from CREASE_ADMIN_TOKEN.
+    #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
+    admin_token: Option<String>,
+    /// TLS certificate chain (PEM): serve gRPC and HTTP/WebSocket over TLS (rustls).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM) of --tls-cert.
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// Most rooms open at once.
+    #[arg(long, default_value_t = Limits::default().rooms)]
+    max_rooms: usize,
+    /// Most live subscriptions per room.
+    #[arg(long, default_value_t = Limits::default().subscribers_per_room)]
+    max_subscribers: usize,
+    /// Most control frames per second a room accepts.
+    #[arg(long, default_value_t = Limits::default().publish_hz)]
+    max_publish_hz: f64,
+    /// Largest gRPC or WebSocket message accepted, bytes.
+    #[arg(long, default_value_t = Limits::default().message_bytes)]
+    max_message_bytes: usize,
+}
+
+impl From<Args> for Config {
+    fn from(args: Args) -> Self {
+        Config {
+            server: crease_server::Config {
+                grpc: args.grpc,
+                http: args.http,
+                admin_token: args.admin_token,
+                limits: Limits {
+                    rooms: args.max_rooms,
+                    subscribers_per_room: args.max_subscribers,
+                    publish_hz: args.max_publish_hz,
+                    message_bytes: args.max_message_bytes,
+                },
+                web: args.web.or_else(launch::source_tree_web),
+                tls: args
+                    .tls_cert
+                    .zip(args.tls_key)
+                    .map(|(cert, key)| TlsFiles { cert, key }),
+                ..crease_server::Config::default()
+            },
+            models: args.models,
+            demo: args.demo,
+            cache: args.cache,
+            demo_token: args.demo_token,
+            demo_rate: args.demo_rate,
+            ..Config::default()
+        }
+    }
+}
+
+#[tokio::main]
+async fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    launch::run(Args::parse().into(), launch::shutdown_signal()).await
+}

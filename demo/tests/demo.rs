@@ -1,0 +1,213 @@
+//! The embedded default end to end: the demo model is trained into an empty cache folder, its
+//! animation starts at the rest pose and passes through every named pose (checked against the
+//! sweep hand posed independently), and the real `crease-server` binary started with no model
+//! folder loads it from the cache, serves room `demo` with frames that decode, the viewer page
+//! at `/`, and stops cleanly on SIGTERM.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crease_core::codec::FrameDecoder;
+use crease_core::glam::Vec3;
+use crease_demo::{DEMO_MODEL, DEMO_ROOM, DemoAnimation, demo_model};
+use crease_hand::rig::{HandRig, Layers};
+use crease_hand::skeleton::{HandPose, NamedPose};
+use crease_hand::surface::Resolution;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+
+/// Largest distance between two control-point lists, flat xyz against points.
+fn max_distance(flat: &[f32], points: &[Vec3]) -> f32 {
+    assert_eq!(flat.len(), points.len() * 3);
+    flat.chunks(3)
+        .zip(points)
+        .map(|(c, p)| Vec3::new(c[0], c[1], c[2]).distance(*p))
+        .fold(0.0, f32::max)
+}
+
+#[test]
+fn demo_trains_animates_and_serves() {
+    let cache = tempfile::tempdir().unwrap();
+    let start = Instant::now();
+    let mut lines = Vec::new();
+    let model = demo_model(cache.path(), &mut |l| lines.push(l.to_owned())).unwrap();
+    eprintln!(
+        "demo model trained in {:.1} s: {lines:?}",
+        start.elapsed().as_secs_f32()
+    );
+    assert!(
+        lines.iter().any(|l| l.starts_with("cached the demo model")),
+        "{lines:?}"
+    );
+    assert_eq!(model.controls.len(), 15, "the back layout's 15 landmarks");
+    assert!(model.controls.iter().all(|c| !c.name.is_empty()));
+    assert!(model.detail.is_some(), "the demo has a detail layer");
+
+    // The animation: the rest pose at t = 0, every named pose during its hold, a loop.
+    let animation = DemoAnimation::new(&model).unwrap();
+    let period = animation.period().as_secs_f64();
+    assert!(
+        (period - 18.0).abs() < 1e-3,
+        "10 poses x 1.8 s, got {period}"
+    );
+    let mut flat = Vec::new();
+    animation.controls_at(0.0, &mut flat);
+    let rest: Vec<Vec3> = model
+        .controls
+        .iter()
+        .map(|c| model.rig.rest.positions[c.vertex as usize])
+        .collect();
+    assert!(max_distance(&flat, &rest) < 1e-5, "t = 0 is the rest pose");
+    let rig = HandRig::build(Resolution::Base).unwrap();
+    for (k, &named) in NamedPose::ALL.iter().enumerate() {
+        let posed = rig.posed_mesh(&HandPose::named(named), Layers::default());
+        let want: Vec<Vec3> = model
+            .controls
+            .iter()
+            .map(|c| posed.positions[c.vertex as usize])
+            .collect();
+        // Inside the pose's hold (0.7 s from its start), and one period later.
+        for t in [k as f64 * 1.8 + 0.3, k as f64 * 1.8 + 0.3 + period] {
+            animation.controls_at(t, &mut flat);
+            assert!(
+                max_distance(&flat, &want) < 1e-5,
+                "{named:?} at t = {t}: off by {}",
+                max_distance(&flat, &want)
+            );
+        }
+    }
+    // Between poses the control points move continuously (no jump between samples).
+    let mut prev = Vec::new();
+    animation.controls_at(0.0, &mut prev);
+    let mut step_max = 0.0f32;
+    for i in 1..=(period * 120.0) as usize {
+        animation.controls_at(i as f64 / 120.0, &mut flat);
+        let pts: Vec<Vec3> = prev
+            .chunks(3)
+            .map(|c| Vec3::new(c[0], c[1], c[2]))
+            .collect();
+        step_max = step_max.max(max_distance(&flat, &pts));
+        std::mem::swap(&mut prev, &mut flat);
+    }
+    let (lo, hi) = model.rig.rest.bounding_box();
+    let size = (hi - lo).max_element();
+    assert!(
+        step_max < 0.05 * size,
+        "a control point jumps {step_max} (hand size {size}) in 1/120 s"
+    );
+
+    // The binary with no model folder: the demo, loaded from the cache.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
+        .args(["--grpc", "127.0.0.1:0", "--http", "127.0.0.1:0", "--cache"])
+        .arg(cache.path())
+        .env("RUST_LOG", "warn")
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut log = String::new();
+    let (grpc, http) = loop {
+        let mut line = String::new();
+        assert!(
+            stderr.read_line(&mut line).unwrap() > 0,
+            "server exited: {log}"
+        );
+        log.push_str(&line);
+        if let Some(rest) = line.strip_prefix("crease-server: gRPC on ") {
+            let (grpc, rest) = rest.split_once(", HTTP on ").unwrap();
+            let http = rest.split_whitespace().next().unwrap();
+            break (grpc.to_owned(), http.to_owned());
+        }
+    };
+    let mut line = String::new();
+    stderr.read_line(&mut line).unwrap();
+    log.push_str(&line);
+    assert!(log.contains("loaded the demo model from"), "{log}");
+    assert!(
+        line.contains(&format!("/?room={DEMO_ROOM}")),
+        "the viewer URL: {line}"
+    );
+
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let mut client = CreaseClient::connect(format!("http://{grpc}"))
+            .await
+            .unwrap();
+        let info = client
+            .get_model(v1::GetModelRequest {
+                model: DEMO_MODEL.into(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(info.base_vertices as usize, model.rig.rest.vertex_count());
+        assert_eq!(info.control_points.len(), 15);
+        let mut sub = client
+            .subscribe(v1::SubscribeRequest {
+                room: DEMO_ROOM.into(),
+                level: v1::Level::Base as i32,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let Some(v1::mesh_frame::Body::Topology(topo)) = sub.message().await.unwrap().unwrap().body
+        else {
+            panic!("no topology");
+        };
+        let topology = crease_proto::read_topology(&topo).unwrap();
+        let mut decoder = FrameDecoder::new(topology.vertex_count);
+        let mut seqs = Vec::new();
+        let (mut streamed, mut positions) = (Vec::new(), Vec::new());
+        while seqs.len() < 5 {
+            let msg = tokio::time::timeout(Duration::from_secs(5), sub.message())
+                .await
+                .expect("the demo room publishes")
+                .unwrap()
+                .unwrap();
+            if let Some(v1::mesh_frame::Body::Frame(f)) = msg.body {
+                decoder.decode(&f.data).unwrap();
+                seqs.push(f.seq);
+            }
+        }
+        assert!(seqs.windows(2).all(|w| w[0] < w[1]), "{seqs:?}");
+        // The hand is where the model's poses are: within the pose box, not collapsed.
+        decoder.positions(&mut streamed);
+        topology.to_model_order(&streamed, &mut positions);
+        let (lo, hi) = model.rig.rest.bounding_box();
+        let margin = 0.5 * (hi - lo).max_element();
+        assert!(positions.iter().all(|p| {
+            p.cmpge(lo - Vec3::splat(margin)).all() && p.cmple(hi + Vec3::splat(margin)).all()
+        }));
+    });
+
+    // The viewer page and readiness over plain HTTP.
+    let get = |path: &str| {
+        use std::io::{Read, Write};
+        let mut s = std::net::TcpStream::connect(&http).unwrap();
+        write!(
+            s,
+            "GET {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut text = String::new();
+        s.read_to_string(&mut text).unwrap();
+        text
+    };
+    let index = get("/?room=demo");
+    assert!(index.starts_with("HTTP/1.1 200"), "{index}");
+    assert!(index.contains("<title>crease</title>"));
+    assert!(get("/readyz").starts_with("HTTP/1.1 200"));
+    assert!(get("/no-such-file.js").starts_with("HTTP/1.1 404"));
+
+    // SIGTERM (what a container runtime sends): a clean exit.
+    Command::new("kill")
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let mut rest = String::new();
+    let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
+    assert!(status.success(), "exit {status}: {rest}");
+    assert!(rest.contains("shutting down"), "{rest}");
+}
