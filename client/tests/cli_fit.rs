@@ -1,5 +1,6 @@
 //! End to end: the real `crease` binary fits a rig from example files, writes the rig and a
 //! skinned glTF, and prints the JSON summary the issue specifies.
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 use std::process::Command;

@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use crease_core::glam::{DVec3, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError, subdivided_vertex_count};
-use crease_core::runtime::detail::{DetailSynth, NormalsMethod, VertexFans, scatter_normals};
+use crease_core::runtime::detail::{DetailSynth, NormalsMethod, VertexFans};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 

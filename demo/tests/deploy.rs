@@ -701,7 +701,7 @@ impl Dockerfile {
 mod yaml {
     /// A parsed value. Scalars stay strings (`8080`, `true`): comparisons are textual.
     #[derive(Clone, Debug, PartialEq)]
-    pub enum Node {
+    pub(crate) enum Node {
         Scalar(String),
         Seq(Vec<Node>),
         Map(Vec<(String, Node)>),
@@ -710,7 +710,7 @@ mod yaml {
     impl Node {
         /// The value at a dotted path of mapping keys (keys containing dots, like
         /// `prometheus.io/port`, are tried whole first).
-        pub fn opt(&self, path: &str) -> Option<&Node> {
+        pub(crate) fn opt(&self, path: &str) -> Option<&Node> {
             if let Node::Map(entries) = self {
                 if let Some((_, v)) = entries.iter().find(|(k, _)| k == path) {
                     return Some(v);
@@ -728,31 +728,31 @@ mod yaml {
         }
 
         /// Like [`Node::opt`], panicking with the path when absent.
-        pub fn at(&self, path: &str) -> &Node {
+        pub(crate) fn at(&self, path: &str) -> &Node {
             self.opt(path).unwrap_or_else(|| panic!("missing `{path}`"))
         }
 
-        pub fn str(&self) -> &str {
+        pub(crate) fn str(&self) -> &str {
             match self {
                 Node::Scalar(s) => s,
                 other => panic!("expected a scalar, got {other:?}"),
             }
         }
 
-        pub fn u16(&self) -> u16 {
+        pub(crate) fn u16(&self) -> u16 {
             self.str()
                 .parse()
                 .unwrap_or_else(|_| panic!("expected a port number, got {}", self.str()))
         }
 
-        pub fn seq(&self) -> &[Node] {
+        pub(crate) fn seq(&self) -> &[Node] {
             match self {
                 Node::Seq(items) => items,
                 other => panic!("expected a sequence, got {other:?}"),
             }
         }
 
-        pub fn map(&self) -> &[(String, Node)] {
+        pub(crate) fn map(&self) -> &[(String, Node)] {
             match self {
                 Node::Map(entries) => entries,
                 other => panic!("expected a mapping, got {other:?}"),
@@ -767,7 +767,7 @@ mod yaml {
     }
 
     /// Every document of `src`; `file` names it in errors.
-    pub fn parse(src: &str, file: &str) -> Vec<Node> {
+    pub(crate) fn parse(src: &str, file: &str) -> Vec<Node> {
         let mut docs = Vec::new();
         let mut lines = Vec::new();
         for (i, raw) in src.lines().enumerate() {
@@ -920,7 +920,7 @@ mod yaml {
     }
 
     /// A scalar, or a flow sequence of scalars, or `{}`.
-    pub fn scalar(text: &str, file: &str, no: usize) -> Node {
+    pub(crate) fn scalar(text: &str, file: &str, no: usize) -> Node {
         let text = text.trim();
         if let Some(inner) = text.strip_prefix('[') {
             let inner = inner

@@ -11,6 +11,7 @@
 //!
 //! `cargo bench -p crease-mocap --bench mocap`. Needs ../shared/data/mocap; says so and stops
 //! without it.
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 mod common;
 use common::timings;

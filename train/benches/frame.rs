@@ -3,6 +3,7 @@
 //! then times each stage and the whole frame on the 12 test poses' control points.
 //!
 //! `RAYON_NUM_THREADS=1 cargo bench -p crease-train --bench frame -- --quick`
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 use std::sync::Arc;

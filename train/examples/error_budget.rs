@@ -11,6 +11,7 @@
 //! weights, and the model's vector edge skin (also on the test frames, with fitted rotations).
 //!
 //! `cargo run --release -p crease-train --example error_budget -- TRAIN TEST [BONES] [K] [BETA]`
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::sync::Arc;
 

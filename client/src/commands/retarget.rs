@@ -190,6 +190,7 @@ impl RecordingArgs {
 #[derive(Clone, Debug, clap::Args)]
 #[command(group(clap::ArgGroup::new("source").required(true).args(["tsv", "c3d"])))]
 pub struct RetargetArgs {
+    /// The recording to read and how (file, map, rate).
     #[command(flatten)]
     pub recording: RecordingArgs,
     /// The trained model whose control points the map names.

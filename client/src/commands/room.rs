@@ -10,6 +10,7 @@ use super::common::{ServerArgs, authorized, get_room};
 /// Options of `crease room`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RoomArgs {
+    /// What to do with the room.
     #[command(subcommand)]
     pub action: RoomAction,
 }
@@ -37,8 +38,10 @@ pub struct AdminArgs {
 /// Options of `crease room open`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct OpenArgs {
+    /// The server to talk to.
     #[command(flatten)]
     pub server: ServerArgs,
+    /// The admin token that opens and closes rooms.
     #[command(flatten)]
     pub admin: AdminArgs,
     /// Room id: 1-64 characters of A-Z, a-z, 0-9, _ and -.
@@ -67,6 +70,7 @@ pub const MOCAP_BETA: f32 = 0.3;
 /// Options of `crease room info`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct InfoArgs {
+    /// The server to talk to.
     #[command(flatten)]
     pub server: ServerArgs,
     /// The room.
@@ -77,8 +81,10 @@ pub struct InfoArgs {
 /// Options of `crease room close`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct CloseArgs {
+    /// The server to talk to.
     #[command(flatten)]
     pub server: ServerArgs,
+    /// The admin token that opens and closes rooms.
     #[command(flatten)]
     pub admin: AdminArgs,
     /// The room.

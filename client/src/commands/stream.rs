@@ -28,6 +28,7 @@ use super::synth::read_control_frames;
 #[derive(Clone, Debug, clap::Args)]
 #[command(group(clap::ArgGroup::new("source").required(true).args(["frames", "tsv", "c3d"])))]
 pub struct StreamArgs {
+    /// The server to talk to.
     #[command(flatten)]
     pub server: super::common::ServerArgs,
     /// The room to publish into.
@@ -39,6 +40,7 @@ pub struct StreamArgs {
     /// Control frames: CSV or JSON, as `crease synth --controls` reads them.
     #[arg(long, value_name = "FILE")]
     pub frames: Option<PathBuf>,
+    /// The recording to read and how (file, map, rate).
     #[command(flatten)]
     pub recording: RecordingArgs,
     /// Frames per second. A recording plays at its own rate unless this is given, and is then

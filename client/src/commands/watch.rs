@@ -14,6 +14,7 @@ use super::common::percentile;
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct WatchArgs {
+    /// The server to talk to.
     #[command(flatten)]
     pub server: super::common::ServerArgs,
     /// The room to watch.

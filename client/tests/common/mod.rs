@@ -1,6 +1,7 @@
 //! Helpers shared by the command-line tests: the `crease` binary and a bending tube trained
 //! into a small model.
 #![allow(dead_code)]
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 use std::process::Command;
@@ -8,12 +9,12 @@ use std::process::Command;
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 
-pub fn crease() -> Command {
+pub(crate) fn crease() -> Command {
     Command::new(env!("CARGO_BIN_EXE_crease"))
 }
 
 /// Runs `cmd`, which must succeed (the panic shows its stdout and stderr); returns its stdout.
-pub fn run_ok(cmd: &mut Command) -> String {
+pub(crate) fn run_ok(cmd: &mut Command) -> String {
     let out = cmd.output().expect("the command starts");
     assert!(
         out.status.success(),
@@ -24,13 +25,13 @@ pub fn run_ok(cmd: &mut Command) -> String {
     String::from_utf8(out.stdout).expect("utf-8 output")
 }
 
-pub const RINGS: usize = 8;
-pub const AROUND: usize = 6;
+pub(crate) const RINGS: usize = 8;
+pub(crate) const AROUND: usize = 6;
 /// Control points: a base vertex, two at mid height, two at the tip.
-pub const CONTROLS: [usize; 5] = [0, 4 * AROUND, 4 * AROUND + 3, 7 * AROUND, 7 * AROUND + 3];
+pub(crate) const CONTROLS: [usize; 5] = [0, 4 * AROUND, 4 * AROUND + 3, 7 * AROUND, 7 * AROUND + 3];
 
 /// A tube along z from 0 to 7 (unit radius), `RINGS` rings of `AROUND` vertices.
-pub fn tube() -> Mesh {
+pub(crate) fn tube() -> Mesh {
     let mut positions = Vec::new();
     for r in 0..RINGS {
         for a in 0..AROUND {
@@ -55,7 +56,7 @@ pub fn tube() -> Mesh {
 }
 
 /// The tube with its upper half rotated by `angle` about the x axis through z = 3.5.
-pub fn bent(rest: &Mesh, angle: f32) -> Mesh {
+pub(crate) fn bent(rest: &Mesh, angle: f32) -> Mesh {
     let q = Quat::from_rotation_x(angle);
     let pivot = Vec3::new(0.0, 0.0, 3.5);
     Mesh {
@@ -76,7 +77,7 @@ pub fn bent(rest: &Mesh, angle: f32) -> Mesh {
 
 /// Writes the rest tube and six bent poses, trains a 2-bone global model on them and returns
 /// the model's path.
-pub fn train_model(dir: &Path) -> std::path::PathBuf {
+pub(crate) fn train_model(dir: &Path) -> std::path::PathBuf {
     let examples = dir.join("examples");
     std::fs::create_dir_all(&examples).unwrap();
     let rest = tube();
@@ -116,7 +117,7 @@ pub fn train_model(dir: &Path) -> std::path::PathBuf {
 /// Starts a crease server on free loopback ports hosting `model` as `tube`, with `admin` as
 /// the admin token, and leaves it running for the rest of the test process. Returns its gRPC
 /// address.
-pub async fn serve_tube(
+pub(crate) async fn serve_tube(
     model: crease_core::model::TrainedModel,
     admin: Option<&str>,
 ) -> std::net::SocketAddr {
@@ -125,7 +126,7 @@ pub async fn serve_tube(
 
 /// Starts a crease server on free loopback ports hosting `model` as `name`, with `admin` as
 /// its admin token and `limits`; returns the gRPC address.
-pub async fn serve_model(
+pub(crate) async fn serve_model(
     name: &str,
     model: crease_core::model::TrainedModel,
     admin: Option<&str>,
@@ -151,7 +152,7 @@ pub async fn serve_model(
 
 /// `rel` below the shared data folder (`../shared/data` beside the checkout), or `None` with a
 /// note on stderr when it is not there (the test then skips).
-pub fn shared_data(rel: &str) -> Option<std::path::PathBuf> {
+pub(crate) fn shared_data(rel: &str) -> Option<std::path::PathBuf> {
     let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel);
     if path.exists() {
         Some(path)
@@ -166,7 +167,7 @@ pub fn shared_data(rel: &str) -> Option<std::path::PathBuf> {
 
 /// Opens `room` on `model` at the server `addr` with the admin token `admin`; returns the
 /// room's publish token.
-pub async fn open_room(
+pub(crate) async fn open_room(
     addr: std::net::SocketAddr,
     admin: &str,
     request: crease_proto::v1::OpenRoomRequest,

@@ -4,7 +4,7 @@ use std::time::{Duration, Instant};
 
 /// Median and minimum wall time of `f` over `iters` runs (after a warm-up). The minimum is the
 /// figure to trust on a machine shared with other work.
-pub fn timings(iters: usize, mut f: impl FnMut()) -> (Duration, Duration) {
+pub(crate) fn timings(iters: usize, mut f: impl FnMut()) -> (Duration, Duration) {
     for _ in 0..iters / 10 + 1 {
         f();
     }

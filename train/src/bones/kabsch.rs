@@ -11,13 +11,13 @@ pub(crate) struct Rigid {
 }
 
 impl Rigid {
-    pub const IDENTITY: Self = Self {
+    pub(super) const IDENTITY: Self = Self {
         m: Mat3A::IDENTITY,
         t: Vec3A::ZERO,
     };
 
     #[inline]
-    pub fn apply(&self, p: Vec3A) -> Vec3A {
+    pub(super) fn apply(&self, p: Vec3A) -> Vec3A {
         self.m * p + self.t
     }
 }
@@ -43,14 +43,14 @@ pub(crate) struct PairSums {
 impl PairSums {
     /// Adds a pair with weight `w`.
     #[inline]
-    pub fn add(&mut self, w: f64, p: Vec3A, q: Vec3A) {
+    pub(super) fn add(&mut self, w: f64, p: Vec3A, q: Vec3A) {
         self.add_scaled(w, w, p, q);
     }
 
     /// Adds a pair where the point weight is `wp` and the target is pre-multiplied: contributes
     /// `wp` to sw, `wp p` to sp, `wq q` to sq and `wq p q^T` to h.
     #[inline]
-    pub fn add_scaled(&mut self, wp: f64, wq: f64, p: Vec3A, q: Vec3A) {
+    pub(super) fn add_scaled(&mut self, wp: f64, wq: f64, p: Vec3A, q: Vec3A) {
         let p = [p.x as f64, p.y as f64, p.z as f64];
         let q = [q.x as f64, q.y as f64, q.z as f64];
         self.sw += wp;
@@ -67,7 +67,7 @@ impl PairSums {
     /// The optimal rigid transform, or `None` when the weights vanish. A rank-deficient set
     /// (one point, collinear points) still yields a proper rotation; `fallback` supplies the
     /// rotation when the covariance is numerically zero (a single point).
-    pub fn solve(&self, fallback: Mat3A) -> Option<Rigid> {
+    pub(super) fn solve(&self, fallback: Mat3A) -> Option<Rigid> {
         if !self.sw.is_finite() || self.sw <= 1e-300 {
             return None;
         }

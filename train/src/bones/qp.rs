@@ -43,7 +43,14 @@ impl SimplexQp {
     /// `g_mat` is `n x n` row-major, symmetric positive semi-definite. `w` holds a feasible start
     /// on entry (non-negative, sums to 1, zero where not allowed; if it is not, the start is
     /// the best single allowed variable) and the solution on exit.
-    pub fn solve(&mut self, n: usize, g_mat: &[f64], g: &[f64], allowed: &[bool], w: &mut [f64]) {
+    pub(crate) fn solve(
+        &mut self,
+        n: usize,
+        g_mat: &[f64],
+        g: &[f64],
+        allowed: &[bool],
+        w: &mut [f64],
+    ) {
         debug_assert!(n <= MAX_CANDIDATES && g_mat.len() >= n * n);
         let sum: f64 = w[..n].iter().sum();
         let feasible = (sum - 1.0).abs() < 1e-6

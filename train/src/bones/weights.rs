@@ -56,14 +56,20 @@ pub(crate) struct WeightSolver {
 }
 
 impl WeightSolver {
-    pub fn new(_problem: &Problem, options: &FitOptions) -> Self {
+    pub(super) fn new(_problem: &Problem, options: &FitOptions) -> Self {
         Self {
             nearest_bones: options.nearest_bones.min(MAX_CANDIDATES / 2),
         }
     }
 
     /// Replaces `weights` with the per-vertex optimum given transforms `xf` (`[t * bones + b]`).
-    pub fn update(&mut self, problem: &Problem, bones: usize, xf: &[Rigid], weights: &mut Weights) {
+    pub(super) fn update(
+        &mut self,
+        problem: &Problem,
+        bones: usize,
+        xf: &[Rigid],
+        weights: &mut Weights,
+    ) {
         let k = weights.k;
         let f = problem.f;
         let centres = bone_centres(problem, bones, weights);

@@ -6,7 +6,7 @@ use crease_core::mesh::Mesh;
 
 /// A tube along z from 0 to `length`: `rings` rings of `around` unit-radius vertices,
 /// triangulated.
-pub fn tube(rings: usize, around: usize, length: f32) -> Mesh {
+pub(crate) fn tube(rings: usize, around: usize, length: f32) -> Mesh {
     let mut positions = Vec::new();
     for r in 0..rings {
         let z = length * r as f32 / (rings - 1) as f32;
@@ -34,7 +34,7 @@ pub fn tube(rings: usize, around: usize, length: f32) -> Mesh {
 
 /// Unit icosphere: an icosahedron, `levels` times split 1-to-4 with midpoints pushed to the
 /// sphere. 12 vertices, then 42, 162, 642, 2562.
-pub fn icosphere(levels: usize) -> Mesh {
+pub(crate) fn icosphere(levels: usize) -> Mesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut positions: Vec<Vec3> = [
         [-1.0, t, 0.0],
