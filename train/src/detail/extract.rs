@@ -25,7 +25,7 @@
 //! triangles around it, and a ray with a zero direction component lying in a box's face
 //! misses that box — both routine here (a target built as `v + h n` puts every hit on a
 //! vertex; axis-aligned normals are common). Ours run in f64, accept barycentric coordinates
-//! down to [`BARYCENTRIC_SLACK`] below zero and pad every box by [`BOX_PAD`] of the target's
+//! down to `BARYCENTRIC_SLACK` below zero and pad every box by `BOX_PAD` of the target's
 //! size. parry works in its own `glam` version; points are converted at this module's
 //! boundary and nothing of parry's appears in the public API.
 
@@ -158,7 +158,7 @@ impl ExtractStats {
 pub struct DisplacementTarget {
     mesh: TriMesh,
     dropped: usize,
-    /// [`BOX_PAD`] times the largest absolute target coordinate.
+    /// `BOX_PAD` times the largest absolute target coordinate.
     pad: f64,
 }
 
@@ -385,7 +385,7 @@ impl DisplacementTarget {
 }
 
 /// Distance along the ray `o + t d` (`t >= 0`) to triangle `abc`, or `None`: Möller-Trumbore
-/// in f64, with barycentric coordinates allowed [`BARYCENTRIC_SLACK`] below zero so that rays
+/// in f64, with barycentric coordinates allowed `BARYCENTRIC_SLACK` below zero so that rays
 /// through shared vertices and edges are not lost to rounding. A ray in the triangle's plane
 /// is a miss (the triangles around it answer).
 fn ray_triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
