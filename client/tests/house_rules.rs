@@ -218,7 +218,11 @@ fn crates_depend_only_on_what_architecture_md_allows() {
         );
     }
     let bad = table_violations(&table, &ours, &edges);
-    assert!(bad.is_empty(), "dependency rules broken:\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "dependency rules broken:\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
@@ -236,7 +240,10 @@ fn the_checker_catches_a_forbidden_edge() {
     });
     let bad = table_violations(&table, &ours, &edges);
     assert_eq!(bad.len(), 1, "{bad:?}");
-    assert!(bad[0].starts_with("crease-server depends on crease-train"), "{bad:?}");
+    assert!(
+        bad[0].starts_with("crease-server depends on crease-train"),
+        "{bad:?}"
+    );
 }
 
 #[test]

@@ -26,6 +26,37 @@ fn max_distance(flat: &[f32], points: &[Vec3]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// Runs the `crease watch` command the server printed in `line` (between backticks) for three
+/// frames, as a user would paste it: it must succeed. The command is the `crease` built beside
+/// the server binary when there is one; else it is a `cargo run` line, which this test does not
+/// start (a nested cargo build), and says so.
+fn run_the_printed_watch_command(line: &str) {
+    let command = line
+        .split('`')
+        .nth(1)
+        .unwrap_or_else(|| panic!("no `command` in the banner line: {line}"));
+    let words: Vec<&str> = command.split_whitespace().collect();
+    assert!(
+        words.contains(&"watch") && words.contains(&"--room"),
+        "not a watch command: {command}"
+    );
+    if words[0] == "cargo" {
+        eprintln!("skipping the watch command: no crease binary beside crease-server ({command})");
+        return;
+    }
+    let out = Command::new(words[0])
+        .args(&words[1..])
+        .args(["--frames", "3"])
+        .output()
+        .unwrap_or_else(|e| panic!("{command}: {e}"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "`{command} --frames 3` failed: {stderr}"
+    );
+    assert!(stderr.contains("watching room \"demo\""), "{stderr}");
+}
+
 #[test]
 fn demo_trains_animates_and_serves() {
     let cache = tempfile::tempdir().unwrap();
@@ -128,6 +159,7 @@ fn demo_trains_animates_and_serves() {
         line.contains(&format!("/?room={DEMO_ROOM}")),
         "the viewer URL: {line}"
     );
+    run_the_printed_watch_command(&line);
 
     let runtime = tokio::runtime::Runtime::new().unwrap();
     runtime.block_on(async {
