@@ -36,9 +36,9 @@
 //!   to the digit within half a spacing of its arc: the median follows the skin of the
 //!   phalanx and ignores the few web and nail-edge vertices. Centres are `T(s)` of the posed
 //!   sweep, recomputed every frame.
-//! - **Palm planes**: there is no palm-control surface yet, so the tangent planes are sampled
-//!   on the skin itself. At build time, palm vertices (not bound to a digit beyond its MCP)
-//!   on the palmar side (rest normal within ~45° of `-Z`, `y >= 0`, i.e. palm not wrist) are
+//! - **Palm planes**: the tangent planes are sampled on the skin itself (not on the
+//!   palm-control surface of [`crate::palm`]). At build time, palm vertices (not bound to a
+//!   digit beyond its MCP) on the palmar side (rest normal within ~45° of `-Z`, `y >= 0`, i.e. palm not wrist) are
 //!   sampled on a [`PALM_SPACING`] grid in the rest palm plane; each sample keeps four palmar
 //!   neighbours about [`PALM_NEIGHBOUR_OFFSET`] away in `±X` and `±Y`. Every frame the plane
 //!   passes through the deformed sample vertex with normal `(p₋ₓ - p₊ₓ) × (p₊ᵧ - p₋ᵧ)`
