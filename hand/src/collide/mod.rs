@@ -38,13 +38,13 @@
 //!   sweep, recomputed every frame.
 //! - **Palm planes**: the tangent planes are sampled on the skin itself (not on the
 //!   palm-control surface of [`crate::palm`]). At build time, palm vertices (not bound to a
-//!   digit beyond its MCP) on the palmar side (rest normal within ~45° of `-Z`, `y >= 0`, i.e. palm not wrist) are
-//!   sampled on a [`PALM_SPACING`] grid in the rest palm plane; each sample keeps four palmar
-//!   neighbours about [`PALM_NEIGHBOUR_OFFSET`] away in `±X` and `±Y`. Every frame the plane
-//!   passes through the deformed sample vertex with normal `(p₋ₓ - p₊ₓ) × (p₊ᵧ - p₋ᵧ)`
-//!   normalised (outward, palmar), so the planes follow the sweep deformation of the palm. A
-//!   plane acts as a patch: within [`PALM_PATCH_RADIUS`] of its point along the plane and
-//!   [`PALM_DEPTH`] below it.
+//!   digit beyond its MCP) on the palmar side (rest normal within ~45° of `-Z`, `y >= 0`,
+//!   i.e. palm not wrist) are sampled on a [`PALM_SPACING`] grid in the rest palm plane; each
+//!   sample keeps four palmar neighbours about [`PALM_NEIGHBOUR_OFFSET`] away in `±X` and `±Y`.
+//!   Every frame the plane passes through the deformed sample vertex with normal
+//!   `(p₋ₓ - p₊ₓ) × (p₊ᵧ - p₋ᵧ)` normalised (outward, palmar), so the planes follow the sweep
+//!   deformation of the palm. A plane acts as a patch: within [`PALM_PATCH_RADIUS`] of its
+//!   point along the plane and [`PALM_DEPTH`] below it.
 //!
 //! # Detection ([`Contact`])
 //!
