@@ -359,7 +359,7 @@ fn shared_rigid_transform_is_recovered_exactly() {
 }
 
 #[test]
-fn solve_matrices_and_apply_agree_with_solve() {
+fn unnormalised_rotations_and_apply_agree_with_solve() {
     let pb = problem(7, 5, 5);
     let solver = pb.solver(1.0);
     let mut scratch = solver.scratch();
@@ -367,11 +367,19 @@ fn solve_matrices_and_apply_agree_with_solve() {
     let (rot, ctl) = random_frame(&mut rng, pb.bones, pb.controls.len());
     let mut a = vec![Vec3::ZERO; pb.bones];
     solver.solve(&rot, &ctl, &mut scratch, &mut a).unwrap();
-    let mats: Vec<Mat3A> = rot.iter().map(|&q| Mat3A::from_quat(q)).collect();
+    // The solve is against the independent dense least squares, not only against itself.
+    let want = pb.dense_solve(&rot, &ctl, 1.0);
+    let tol = 1e-4 * (1.0 + max_norm(&want));
+    assert!(max_diff(&a, &want) <= tol, "{a:?}\n{want:?}");
+    // `solve` normalises its quaternions: the same rotations scaled by different non-unit
+    // factors give the same translations.
+    let scaled: Vec<Quat> = rot
+        .iter()
+        .enumerate()
+        .map(|(i, &q)| q * (0.5 + i as f32))
+        .collect();
     let mut b = vec![Vec3::ZERO; pb.bones];
-    solver
-        .solve_matrices(&mats, &ctl, &mut scratch, &mut b)
-        .unwrap();
+    solver.solve(&scaled, &ctl, &mut scratch, &mut b).unwrap();
     assert!(max_diff(&a, &b) < 1e-5);
     let mut bones: Vec<RigidTransform> = rot
         .iter()

@@ -2,7 +2,8 @@
 //! nothing per frame.
 //!
 //! Layout:
-//! - [`skin`]: linear-blend and dual-quaternion skinning.
+//! - [`skin`]: linear-blend and dual-quaternion skinning: bone transforms, skin weights, the
+//!   per-frame bone palette, and the packed LBS the predictor runs.
 //! - [`edge_skin`]: how the translation solver predicts mesh edges from bone rotations.
 //! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
 //!   kernel vector `xi(c)` (FKY08 §4.2).

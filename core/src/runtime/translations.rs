@@ -62,7 +62,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
-use glam::{DMat3, DVec3, Mat3A, Quat, Vec3};
+use glam::{DMat3, DVec3, Quat, Vec3};
 
 use super::edge_skin::{EdgeSkin, EdgeSkinError};
 use super::skin::{RigidTransform, SkinError, SkinWeights};
@@ -279,8 +279,8 @@ fn add_entry<T: Acc>(list: &mut Vec<(u32, T)>, bone: u32, x: T, s: f64) {
 /// The Poisson translation solver of FKY08 §5 (eq. 11), factored for one mesh, rig and `beta`.
 ///
 /// Build once per model with [`TranslationSolver::new`]; per frame call
-/// [`TranslationSolver::solve`] (or [`solve_matrices`](TranslationSolver::solve_matrices),
-/// [`apply`](TranslationSolver::apply)) with a [`TranslationScratch`] kept by the caller.
+/// [`TranslationSolver::solve`] (or [`apply`](TranslationSolver::apply)) with a
+/// [`TranslationScratch`] kept by the caller.
 #[derive(Debug)]
 pub struct TranslationSolver {
     bones: usize,
@@ -640,21 +640,6 @@ impl TranslationSolver {
             controls,
             scratch,
         )?;
-        self.write(scratch, out.iter_mut());
-        Ok(())
-    }
-
-    /// As [`solve`](Self::solve), with rotations as 3x3 matrices (used as given: the problem is
-    /// linear in them, orthonormal or not).
-    pub fn solve_matrices(
-        &self,
-        rotations: &[Mat3A],
-        controls: &[Vec3],
-        scratch: &mut TranslationScratch,
-        out: &mut [Vec3],
-    ) -> Result<(), TranslationError> {
-        self.check_sizes(rotations.len(), controls.len(), out.len())?;
-        self.solve_rotations(rotations.iter().map(|r| r.as_dmat3()), controls, scratch)?;
         self.write(scratch, out.iter_mut());
         Ok(())
     }
