@@ -126,3 +126,67 @@ pub async fn subscribe(
     };
     Ok(Subscription { topology, stream })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crease_core::codec::{FrameEncoder, QuantBox, encode_indices};
+
+    #[test]
+    fn frames_decode_into_model_order_and_a_bad_topology_is_named() {
+        // Streamed order [2, 0, 3, 1]: streamed vertex i is model vertex order[i].
+        let order = [2u32, 0, 3, 1];
+        let mut indices = Vec::new();
+        encode_indices(&[[1, 3, 0], [0, 3, 2]], 4, &mut indices).unwrap();
+        let topology = v1::Topology {
+            vertex_count: 4,
+            triangle_count: 2,
+            indices,
+            vertex_order: order.to_vec(),
+            bits: 16,
+            ..Default::default()
+        };
+        let mut reader = MeshReader::new(&topology).unwrap();
+        assert_eq!(reader.topology().vertex_count, 4);
+        let model = [
+            Vec3::new(-1.0, 0.5, 0.0),
+            Vec3::new(1.0, 0.25, -0.5),
+            Vec3::new(0.25, 1.5, 0.75),
+            Vec3::new(0.5, -1.75, 0.0),
+        ];
+        let streamed: Vec<Vec3> = order.iter().map(|&m| model[m as usize]).collect();
+        let qbox = QuantBox::from_bounds(Vec3::splat(-2.0), Vec3::splat(2.0), 0.0, 16).unwrap();
+        let mut encoder = FrameEncoder::new(4, qbox, 1).unwrap();
+        let mut data = Vec::new();
+        encoder.encode(&streamed, None, &mut data).unwrap();
+        reader.decode(&data).unwrap();
+        // 16 bits over a box of side 4: half a step is 4 / 65535 / 2.
+        let bound = 2.0 / 65535.0 + 1e-6;
+        for (got, want) in reader.streamed().iter().zip(&streamed) {
+            assert!(
+                (*got - *want).abs().max_element() <= bound,
+                "{got} vs {want}"
+            );
+        }
+        let mut out = Vec::new();
+        reader.model_positions(&mut out);
+        for (v, (got, want)) in out.iter().zip(model).enumerate() {
+            assert!(
+                (*got - want).abs().max_element() <= bound,
+                "vertex {v}: {got} vs {want}"
+            );
+        }
+        // A truncated frame is the codec's error, not a panic.
+        assert!(reader.decode(&data[..data.len() / 2]).is_err());
+        let bad = v1::Topology {
+            vertex_order: vec![0, 0, 1, 2],
+            ..topology
+        };
+        let e = MeshReader::new(&bad).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(
+            e.contains("reading the topology") && e.contains("vertex_order[1]"),
+            "{e}"
+        );
+    }
+}
