@@ -10,19 +10,19 @@
 //!
 //! This is the smooth skinning decomposition with rigid bones (Le & Deng 2012, "SSDR"), the
 //! modern form of the papers' "cluster triangles of similar transformation, then fit weights"
-//! (FKY08 §3 after [JT05], HZY11 §5.1). Stages, each its own module:
+//! (FKY08 §3 after \[JT05\], HZY11 §5.1). Stages, each its own module:
 //!
-//! 1. [`cluster`]: rigid clustering. Vertices are grouped by similar rigid motion across the
+//! 1. `cluster`: rigid clustering. Vertices are grouped by similar rigid motion across the
 //!    examples: start from one bone, repeatedly split the bones with the largest error at their
 //!    worst vertex (seeded with the rigid motion of that vertex's neighbourhood) and run Lloyd
 //!    iterations (assign each vertex to the bone whose transforms reproduce its trajectory best,
 //!    refit each bone by Kabsch) until there are `B` bones.
 //! 2. Alternation until the relative improvement falls below a tolerance or an iteration cap:
-//!    - [`weights`]: per vertex, a QP on the simplex ([`qp`]) over a small candidate set of
+//!    - `weights`: per vertex, a QP on the simplex (`qp`) over a small candidate set of
 //!      bones (those of the vertex and its neighbours, plus the nearest bone centres), then the
 //!      `K` largest kept and the QP re-solved on them;
-//!    - [`transforms`]: per frame, per bone in turn, the weighted Procrustes update of SSDR
-//!      (Le & Deng 2012 eq. 7) against the residual of the other bones ([`kabsch`]).
+//!    - `transforms`: per frame, per bone in turn, the weighted Procrustes update of SSDR
+//!      (Le & Deng 2012 eq. 7) against the residual of the other bones (`kabsch`).
 //!
 //! Every stage is deterministic (no random seeds), parallel over vertices or frames with rayon
 //! behind the `parallel` feature, and never produces a non-finite number: a degenerate bone keeps

@@ -25,7 +25,7 @@
 //! triangles around it, and a ray with a zero direction component lying in a box's face
 //! misses that box — both routine here (a target built as `v + h n` puts every hit on a
 //! vertex; axis-aligned normals are common). Ours run in f64, accept barycentric coordinates
-//! down to [`BARYCENTRIC_SLACK`] below zero and pad every box by [`BOX_PAD`] of the target's
+//! down to `BARYCENTRIC_SLACK` below zero and pad every box by `BOX_PAD` of the target's
 //! size. parry works in its own `glam` version; points are converted at this module's
 //! boundary and nothing of parry's appears in the public API.
 

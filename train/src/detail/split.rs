@@ -2,7 +2,7 @@
 //! that come at a single resolution.
 //!
 //! HZY11 §4 gets its smooth low-resolution meshes `P̄_i` by "mesh retiling and Laplacian
-//! smoothing techniques [Tur92]" and measures the detail of each example `P_i` against the
+//! smoothing techniques \[Tur92\]" and measures the detail of each example `P_i` against the
 //! subdivided `P̄_i`. Here the retiling is a vertex subset of the rest mesh chosen by
 //! meshoptimizer's edge-collapse simplifier (whose output index buffer only references original
 //! vertices), so the same subset taken from every example gives base meshes `B_i` in
@@ -22,7 +22,7 @@
 //! [`VERTEX_COUNT_TOLERANCE`]: meshoptimizer stops at a target *index* count, so the target is
 //! searched (proportional steps inside a bisection bracket, a handful of simplifier runs). The
 //! result is compacted (subset ascending, triangles renumbered, degenerate triangles and
-//! two-sided "pillows" dropped, see [`compact`]) and must be accepted by
+//! two-sided "pillows" dropped, see `compact`) and must be accepted by
 //! [`LoopSubdivision::new`], which the detail layer runs on it: a simplification it still
 //! refuses (a non-manifold edge or vertex) is retried with nearby targets, and if none is
 //! accepted the split fails with the subdivision's reason. On the horse (8,431 vertices) every
