@@ -5,10 +5,27 @@
 //! Layout:
 //! - [`commands::fit`]: `crease fit` — proxy bones and skinning weights from example meshes.
 //! - [`commands::train`]: `crease train` — a whole model (bones, controls, regressors).
-//! - [`commands::synth`]: `crease synth` — control frames in, meshes out.
 //! - [`commands::eval`]: `crease eval` — leave-one-out and test tables of every method.
+//! - [`commands::synth`]: `crease synth` — control frames in, meshes out, here;
+//!   [`commands::remote_synth`]: the same on a server (`--server`).
 //! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
-//! - [`commands::common`]: example loading, control-point specs, progress display.
+//! - [`commands::watch`], [`commands::stream`], [`commands::room`], [`commands::retarget`]:
+//!   watching and publishing into rooms, managing them, marker recordings to control frames.
+//! - [`commands::bench_net`]: `crease bench-net` — the network load benchmark (its load,
+//!   server and report in submodules).
+//!
+//! Shared by the commands (these use no command module):
+//! - [`commands::common`]: example loading, control-point specs, progress display, the one
+//!   gRPC `connect` (plain or TLS), request helpers, the one `percentile`.
+//! - [`commands::training_args`]: the training flags of `train` and `eval`, method and kernel
+//!   names.
+//! - [`commands::layers`]: base and detailed example sets and the detail layer's flags.
+//! - [`commands::control_file`]: control-frame files (CSV/JSON) read by `synth`, `stream` and
+//!   `bench-net`, written by `retarget`.
+//! - [`commands::mesh_stream`]: the one mesh-stream reader: subscribe, topology, decoding with
+//!   the codec's `FrameDecoder`, positions in model order.
+//!
+//! No module cycles: `tests/module_cycles.rs` fails on any, in every workspace crate.
 
 pub mod commands;
 
@@ -62,7 +79,11 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Fit(args) => commands::fit::run(&args),
         Command::Train(args) => commands::train::run(&args),
-        Command::Synth(args) => commands::synth::run(&args),
+        // Remote synthesis builds on local synthesis's arguments, so the choice is made here.
+        Command::Synth(args) => match &args.server {
+            Some(server) => commands::remote_synth::run(&args, server),
+            None => commands::synth::run(&args),
+        },
         Command::Eval(args) => commands::eval::run(&args),
         Command::Handgen(args) => commands::handgen::run(&args),
         Command::Pose(args) => commands::handgen::run_pose(&args),

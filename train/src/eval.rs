@@ -48,11 +48,14 @@ use crease_core::model::DetailLayer;
 use crease_core::runtime::detail::DetailSynth;
 use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
 
+use crate::base::{TrainError, TrainInput, TrainOptions, TrainedBase};
 use crate::bones::{self, IterationStat};
 use crate::detail::layer::{self as detail_layer, DetailFrames, DetailOptions};
-use crate::pipeline::{self, TrainError, TrainInput, TrainOptions, TrainedBase};
+pub use crate::metrics::rms_normalized;
+use crate::pipeline;
 use crate::regress::{Method, RegressOptions};
-use crate::select::{self, Candidate};
+use crate::select;
+use crate::selection::Candidate;
 
 /// Gauss–Seidel sweeps of the oracle's transform fit.
 const ORACLE_PASSES: usize = 12;
@@ -163,16 +166,6 @@ pub struct HeldOut<'a> {
     pub names: &'a [String],
     /// Frame positions.
     pub frames: &'a [&'a [Vec3]],
-}
-
-/// RMS vertex distance, normalised by `scale` (the rest pose's largest bounding-box side).
-pub fn rms_normalized(a: &[Vec3], b: &[Vec3], scale: f32) -> f64 {
-    let sse: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| (*x - *y).length_squared() as f64)
-        .sum();
-    (sse / a.len().max(1) as f64).sqrt() / scale as f64
 }
 
 /// Trains on `train` once and evaluates every row on `test`.

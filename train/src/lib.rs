@@ -12,11 +12,20 @@
 //!   local, RBF baseline) as a runtime `RotationModel`.
 //! - [`detail`]: the detail layer (HZY11 §4, §5.2): displacement extraction by ray casting,
 //!   and the per-vertex detail regressor collapsed into one matrix.
+//! - [`metrics`]: RMS vertex errors normalised by the rest pose's size (HZY11 Table 2).
+//! - [`selection`]: the data of model selection: the candidate grid, scored candidates, outcomes.
+//! - [`base`]: the shared base of training: inputs, options, errors, report, and the fitted part
+//!   every method shares ([`base::TrainedBase`]).
 //! - [`select`]: kernel, width, regularisation and beta chosen by leave-one-out inside the
-//!   training set.
-//! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
+//!   training set; control points improved the same way.
 //! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
+//! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
+//!
+//! The training modules point one way: [`eval`] -> [`pipeline`] -> [`select`] -> [`base`] ->
+//! [`selection`], with [`metrics`] below [`select`] and [`eval`] (`client/tests/module_cycles.rs`
+//! keeps every crate's modules free of cycles).
 
+pub mod base;
 pub mod bones;
 pub mod controls;
 pub mod detail;
@@ -25,7 +34,9 @@ pub mod eval;
 pub mod geodesic;
 pub mod kcca;
 mod linalg;
+pub mod metrics;
 mod par;
 pub mod pipeline;
 pub mod regress;
 pub mod select;
+pub mod selection;

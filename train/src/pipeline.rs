@@ -1,4 +1,5 @@
-//! `crease train` as a function: examples in, [`TrainedModel`] out.
+//! `crease train` as a function: examples in, [`TrainedModel`] out. Its inputs, options,
+//! errors and report live in [`crate::base`] (re-exported here).
 //!
 //! 1. proxy bones and weights ([`crate::bones`]);
 //! 2. control points: given, or automatic ([`crate::controls`]);
@@ -11,205 +12,18 @@
 use std::time::Instant;
 
 use crease_core::glam::{Quat, Vec3};
-use crease_core::mesh::Mesh;
-use crease_core::model::{ControlPoint, Rig, RigExample, TrainedModel};
+use crease_core::model::{Rig, RigExample, TrainedModel};
 use crease_core::runtime::edge_skin::EdgeSkin;
 
-use crate::bones::{self, FitInput, FitOptions, FitReport, IterationStat};
-use crate::controls;
-use crate::detail::layer::{
-    self as detail_layer, DetailFrames, DetailOptions, DetailReport, DetailTrainError,
+pub use crate::base::{
+    ControlSpec, EdgeModel, TrainError, TrainInput, TrainOptions, TrainReport, TrainedBase,
 };
+use crate::bones::{self, FitInput, IterationStat};
+use crate::controls;
+use crate::detail::layer::{self as detail_layer, DetailFrames};
 use crate::edges;
-use crate::regress::{self, Method, RegressInput, RegressOptions};
-use crate::select::{self, SelectGrid, Selection};
-
-/// Where the control points come from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ControlSpec {
-    /// These vertex indices (from a manifest or the command line).
-    Vertices(Vec<u32>),
-    /// Chosen automatically: this many (PCA + varimax, FKY08 §3).
-    Auto(usize),
-    /// This many: the `Auto` choice improved by swaps with twice as many PCA + varimax
-    /// representatives, scored by leave-one-out inside the training set
-    /// ([`select::select_controls`]).
-    Select(usize),
-}
-
-/// Options of [`train`].
-#[derive(Clone, Debug)]
-pub struct TrainOptions {
-    /// Proxy-bone fit.
-    pub fit: FitOptions,
-    /// Control points.
-    pub controls: ControlSpec,
-    /// Names of the control points (e.g. a manifest's `control_point_names`), used when there
-    /// is one per chosen point; otherwise they are named `c0`, `c1`, ...
-    pub control_names: Option<Vec<String>>,
-    /// Regression.
-    pub regress: RegressOptions,
-    /// Bones per edge in the edge skin; defaults to the vertex K.
-    pub edge_influences: Option<usize>,
-    /// The edge skin of the translation solver.
-    pub edge_model: EdgeModel,
-    /// Default beta stored in the model (FKY08 eq. 11; HZY11 Fig. 11: about 3 for keyframing,
-    /// 0.3 for noisy mocap).
-    pub beta: f32,
-    /// Choose the kernel, its regularisation and beta by leave-one-out inside the training set
-    /// over this grid ([`crate::select`]), overriding `regress.kernel`, the KCCA `kappa` (RBF
-    /// ridge) and `beta`.
-    pub select: Option<SelectGrid>,
-    /// The detail layer, trained when [`train_layers`] gets detailed examples.
-    pub detail: DetailOptions,
-}
-
-impl Default for TrainOptions {
-    fn default() -> Self {
-        Self {
-            fit: FitOptions::default(),
-            controls: ControlSpec::Auto(8),
-            control_names: None,
-            regress: RegressOptions::default(),
-            edge_influences: None,
-            edge_model: EdgeModel::default(),
-            beta: 1.0,
-            select: None,
-            detail: DetailOptions::default(),
-        }
-    }
-}
-
-/// How the translation solver predicts edges (see `crease_core::runtime::edge_skin`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum EdgeModel {
-    /// FKY08 eq. 10: scalar weights, `e^s = sum_b w^_b R_b e^0`.
-    Scalar,
-    /// Free rest-frame vectors per (edge, bone) on the endpoints' bones
-    /// ([`edges::fit_edge_vectors`]); `ridge: None` cross-validates it.
-    Vector {
-        /// Relative ridge (`lambda = ridge * frames`).
-        ridge: Option<f64>,
-    },
-}
-
-impl Default for EdgeModel {
-    fn default() -> Self {
-        Self::Vector { ridge: None }
-    }
-}
-
-/// Errors of [`train`].
-#[derive(Debug, thiserror::Error)]
-pub enum TrainError {
-    /// The proxy-bone fit refused the input.
-    #[error(transparent)]
-    Fit(#[from] bones::FitError),
-    /// Control points could not be chosen or are invalid.
-    #[error("control points: {0}")]
-    Controls(String),
-    /// The edge skin could not be fitted.
-    #[error("edge skin: {0}")]
-    Edges(#[from] edges::EdgeWeightError),
-    /// Model selection failed.
-    #[error("model selection: {0}")]
-    Select(String),
-    /// Too few examples.
-    #[error("need at least 2 examples (the rest pose and one more), got {0}")]
-    TooFewExamples(usize),
-    /// The detail layer could not be trained.
-    #[error(transparent)]
-    Detail(#[from] DetailTrainError),
-}
-
-/// Timings and reports of a training run.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct TrainReport {
-    /// The bone fit.
-    pub fit: FitReport,
-    /// Seconds choosing control points.
-    pub controls_seconds: f64,
-    /// Seconds fitting the rotation regressors.
-    pub regress_seconds: f64,
-    /// Seconds fitting the edge skin.
-    pub edges_seconds: f64,
-    /// The vector edge skin's ridge and its cross-validation (`None` for scalar weights).
-    pub edge_vectors: Option<edges::EdgeVectorReport>,
-    /// Model selection, when asked for (its time is part of `regress_seconds`).
-    pub selection: Option<Selection>,
-    /// Control-point selection, for [`ControlSpec::Select`] (its time is part of `seconds`).
-    pub control_selection: Option<select::ControlSelection>,
-    /// The detail layer, when trained (its time is part of `seconds`).
-    pub detail: Option<DetailReport>,
-    /// Total seconds.
-    pub seconds: f64,
-}
-
-/// Examples to train on: a rest mesh and frames (the rest pose among them, as frame 0).
-#[derive(Clone, Copy, Debug)]
-pub struct TrainInput<'a> {
-    /// Rest pose.
-    pub rest: &'a Mesh,
-    /// Example frames, rest pose first.
-    pub frames: &'a [&'a [Vec3]],
-    /// One name per frame.
-    pub names: &'a [String],
-}
-
-/// Everything of a trained model but the rotation regressors: the part shared by all methods
-/// (evaluation fits it once and compares methods on it).
-#[derive(Clone, Debug)]
-pub struct TrainedBase {
-    /// The rig (rest, bones, weights, examples' transforms).
-    pub rig: Rig,
-    /// Control-point vertices.
-    pub control_vertices: Vec<u32>,
-    /// Per example, the control positions.
-    pub example_controls: Vec<Vec<Vec3>>,
-    /// Per example, per bone, rotations.
-    pub rotations: Vec<Vec<Quat>>,
-    /// Mesh edges and their weights (FKY08 eq. 10).
-    pub edges: Vec<[u32; 2]>,
-    /// The edge skin of the translation solver.
-    pub edge_skin: EdgeSkin,
-    /// Timings so far.
-    pub report: TrainReport,
-}
-
-impl TrainedBase {
-    /// Fits the rotation regressors of `options.method` and assembles the model.
-    pub fn model(&self, options: &RegressOptions, beta: f32) -> TrainedModel {
-        let rotations = regress::build_rotation_model(
-            RegressInput {
-                rest: &self.rig.rest,
-                skin: &self.rig.skin,
-                bone_count: self.rig.bone_count,
-                control_vertices: &self.control_vertices,
-                controls: &self.example_controls,
-                rotations: &self.rotations,
-            },
-            options,
-        );
-        TrainedModel {
-            rig: self.rig.clone(),
-            controls: self
-                .control_vertices
-                .iter()
-                .enumerate()
-                .map(|(i, &vertex)| ControlPoint {
-                    vertex,
-                    name: format!("c{i}"),
-                })
-                .collect(),
-            method: options.method.name().to_string(),
-            rotations,
-            edges: self.edges.clone(),
-            edge_skin: self.edge_skin.clone(),
-            beta,
-            detail: None,
-        }
-    }
-}
+use crate::regress::{Method, RegressOptions};
+use crate::select;
 
 /// Trains a model's base layer. `progress` sees the bone fit's steps.
 pub fn train(

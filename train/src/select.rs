@@ -4,7 +4,7 @@
 //!
 //! Each candidate is scored by the quantity the user sees: the RMS vertex error of the whole
 //! predicted mesh (rotations regressed without the held-out example, translations solved by
-//! eq. 11 from its control points, LBS), normalised like [`crate::eval`]. The rig (bones,
+//! eq. 11 from its control points, LBS), normalised as [`crate::metrics`] does. The rig (bones,
 //! weights, edge skin) is the one fitted on all training examples, held-out one included: the
 //! selection is about the regression, and refitting the bones per fold (as `crease eval --loo`
 //! does) would multiply its cost by the bone fit's. The rest pose (example 0) is never held
@@ -20,86 +20,12 @@ use crease_core::runtime::predict::RotationScratch;
 use crease_core::runtime::skin::{BonePalette, RigidTransform, skin_lbs};
 use crease_core::runtime::translations::{TranslationScratch, TranslationSolver};
 
-use crate::eval::rms_normalized;
+use crate::base::{TrainError, TrainedBase};
+use crate::metrics::rms_normalized;
 use crate::par;
-use crate::pipeline::{TrainError, TrainedBase};
-use crate::regress::{self, KernelChoice, Method, RegressInput, RegressOptions};
-
-/// The candidates: every combination of `kernels x kappas x betas` is scored.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct SelectGrid {
-    /// Regression kernels (Gaussian widths as multiples of the data's spread, polynomials).
-    pub kernels: Vec<KernelChoice>,
-    /// KCCA `kappa` ([`crate::kcca::KccaOptions::kappa`]); the RBF baseline uses it as its
-    /// ridge.
-    pub kappas: Vec<f64>,
-    /// Translation weights `beta`.
-    pub betas: Vec<f32>,
-}
-
-impl Default for SelectGrid {
-    /// Gaussian widths 0.5–2 of the default, Gaussian plus linear (widths 1 and 2, linear
-    /// weights 0.1 and 1), the quadratic and cubic polynomial kernels (FKY08 §7 uses both
-    /// kinds), `kappa` 1e-4–1e-1, `beta` 0.3–10 (HZY11 Fig. 11's range).
-    fn default() -> Self {
-        let mut kernels: Vec<KernelChoice> = [0.5f32, 0.7, 1.0, 1.4, 2.0]
-            .into_iter()
-            .map(|scale| KernelChoice::Gaussian { scale })
-            .collect();
-        for scale in [1.0, 2.0] {
-            kernels.extend([0.1, 1.0].map(|gamma| KernelChoice::GaussianLinear { scale, gamma }));
-        }
-        kernels.extend([2u32, 3].map(|degree| KernelChoice::Polynomial { c: 1.0, degree }));
-        Self {
-            kernels,
-            kappas: vec![1e-4, 1e-3, 1e-2, 1e-1],
-            betas: vec![0.3, 1.0, 3.0, 10.0],
-        }
-    }
-}
-
-/// One scored candidate.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Candidate {
-    /// Kernel.
-    pub kernel: KernelChoice,
-    /// KCCA `kappa` (RBF ridge).
-    pub kappa: f64,
-    /// Translation weight.
-    pub beta: f32,
-    /// Mean over the held-out examples of the normalised RMS vertex error.
-    pub rms: f64,
-}
-
-/// The outcome of [`select`].
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Selection {
-    /// The candidate with the lowest held-out error.
-    pub best: Candidate,
-    /// Every candidate, in grid order (kernel-major, then kappa, then beta).
-    pub table: Vec<Candidate>,
-    /// Wall time.
-    pub seconds: f64,
-}
-
-impl Selection {
-    /// `options` with the selected kernel and regularisation.
-    pub fn apply(&self, options: &RegressOptions) -> RegressOptions {
-        with_choice(options, self.best.kernel, self.best.kappa)
-    }
-}
-
-/// `options` with `kernel` and `kappa` (the RBF ridge for [`Method::Rbf`]).
-fn with_choice(options: &RegressOptions, kernel: KernelChoice, kappa: f64) -> RegressOptions {
-    let mut o = options.clone();
-    o.kernel = kernel;
-    if o.method == Method::Rbf {
-        o.rbf_ridge = kappa;
-    } else {
-        o.kcca.kappa = kappa;
-    }
-    o
-}
+use crate::regress::{self, KernelChoice, RegressInput, RegressOptions};
+use crate::selection::with_choice;
+pub use crate::selection::{Candidate, ControlSelection, SelectGrid, Selection};
 
 /// Scores every candidate of `grid` for `options.method` by leave-one-out over `base`'s
 /// examples (see the module docs). `frames` are the training meshes, rest pose first, as given
@@ -232,21 +158,6 @@ fn loo_errors(
     Ok((0..candidates.len() * solvers.len())
         .map(|idx| per_fold.iter().map(|e| e[idx]).sum::<f64>() / folds)
         .collect())
-}
-
-/// The outcome of [`select_controls`].
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct ControlSelection {
-    /// The chosen control vertices.
-    pub chosen: Vec<u32>,
-    /// The starting set's leave-one-out error, then the error after each accepted swap.
-    pub errors: Vec<f64>,
-    /// The accepted swaps, `(removed, added)`.
-    pub swaps: Vec<(u32, u32)>,
-    /// The candidate pool.
-    pub pool: Vec<u32>,
-    /// Wall time.
-    pub seconds: f64,
 }
 
 /// Most passes of [`select_controls`]' swap search.

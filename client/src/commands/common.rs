@@ -1,5 +1,6 @@
 //! Pieces shared by the subcommands: loading example sets, parsing control-point specs,
-//! progress display, connecting to a server.
+//! progress display, connecting to a server, the requests' small pieces (rooms, tokens, clocks)
+//! and percentiles.
 
 use std::io::IsTerminal;
 use std::path::Path;
@@ -198,37 +199,6 @@ impl ServerArgs {
     }
 }
 
-/// Subscribes to `room` at `level` and reads the stream's first message, the topology.
-///
-/// # Errors
-/// The server's refusal, or a stream that ends or starts with something else.
-pub async fn subscribe(
-    client: &mut crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>,
-    room: &str,
-    level: crease_proto::v1::Level,
-) -> anyhow::Result<(
-    tonic::Streaming<crease_proto::v1::MeshFrame>,
-    crease_proto::v1::Topology,
-)> {
-    use crease_proto::v1;
-    let mut stream = client
-        .subscribe(v1::SubscribeRequest {
-            room: room.to_owned(),
-            level: level as i32,
-        })
-        .await
-        .with_context(|| format!("subscribing to room {room:?}"))?
-        .into_inner();
-    let first = stream
-        .message()
-        .await?
-        .context("the server closed the stream before the topology")?;
-    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
-        bail!("room {room:?}: the first message is not the topology");
-    };
-    Ok((stream, topology))
-}
-
 /// The server's description of `room` (its model, settings and counters).
 ///
 /// # Errors
@@ -268,11 +238,30 @@ pub fn unix_us() -> i64 {
         .map_or(0, |d| d.as_micros() as i64)
 }
 
-/// Percentile `p` (0..=100) of sorted values, nearest rank; the default value when empty.
+/// Percentile `p` (0..=100) of sorted values by nearest rank: the smallest value with at least
+/// `p`% of the sample at or below it; the default value when empty.
 pub fn percentile<T: Copy + Default>(sorted: &[T], p: f64) -> T {
     if sorted.is_empty() {
         return T::default();
     }
-    let i = ((sorted.len() - 1) as f64 * p / 100.0).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
+    let k = (p / 100.0 * sorted.len() as f64).ceil() as usize;
+    sorted[k.clamp(1, sorted.len()) - 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<u32> = (1..=100).collect();
+        assert_eq!(percentile(&v, 50.0), 50);
+        assert_eq!(percentile(&v, 99.0), 99);
+        assert_eq!(percentile(&v, 100.0), 100);
+        assert_eq!(percentile(&v, 0.0), 1);
+        assert_eq!(percentile(&[7i64], 99.0), 7);
+        assert_eq!(percentile::<u64>(&[], 50.0), 0);
+        // Four values: the median is the second (half of them at or below it).
+        assert_eq!(percentile(&[1, 2, 3, 4], 50.0), 2);
+    }
 }

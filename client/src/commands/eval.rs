@@ -9,11 +9,11 @@ use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 use crease_train::eval::{self, DetailEval, EvalOptions, EvalTable, HeldOut, ROWS};
 use crease_train::pipeline::TrainInput;
-use crease_train::regress::{KernelChoice, Method};
+use crease_train::regress::Method;
 
 use super::common::Progress;
 use super::layers;
-use super::train::RegressArgs;
+use super::training_args::{RegressArgs, kernel_name, parse_method};
 
 /// Options of `crease eval`.
 #[derive(Clone, Debug, clap::Args)]
@@ -29,7 +29,7 @@ pub struct EvalArgs {
     #[arg(long, value_name = "DIR|MANIFEST")]
     pub test: Option<PathBuf>,
     /// Methods to compare (comma-separated); default all.
-    #[arg(long, value_delimiter = ',', value_parser = super::train::parse_method)]
+    #[arg(long, value_delimiter = ',', value_parser = parse_method)]
     pub methods: Vec<Method>,
     /// Shared regression options.
     #[command(flatten)]
@@ -266,14 +266,5 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
         eprint!("{text}");
     } else {
         print!("{text}");
-    }
-}
-
-/// `gaussian*1.4`, `gaussian*1+linear:0.1`, `poly:2`: how a selected kernel is printed.
-pub fn kernel_name(k: &KernelChoice) -> String {
-    match k {
-        KernelChoice::Gaussian { scale } => format!("gaussian*{scale}"),
-        KernelChoice::GaussianLinear { scale, gamma } => format!("gaussian*{scale}+linear:{gamma}"),
-        KernelChoice::Polynomial { degree, .. } => format!("poly:{degree}"),
     }
 }

@@ -2,14 +2,17 @@
 
 pub mod bench_net;
 pub mod common;
+pub mod control_file;
 pub mod eval;
 pub mod fit;
 pub mod handgen;
 pub mod layers;
+pub mod mesh_stream;
 pub mod remote_synth;
 pub mod retarget;
 pub mod room;
 pub mod stream;
 pub mod synth;
 pub mod train;
+pub mod training_args;
 pub mod watch;

@@ -13,19 +13,17 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, anyhow, bail};
-use crease_core::codec::{FrameDecoder, FrameHeader};
+use crease_core::codec::FrameHeader;
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::gltf_export;
 use crease_proto::v1::mesh_frame::Body;
-use crease_proto::{StreamTopology, control_frame, read_topology, v1};
+use crease_proto::{StreamTopology, control_frame, v1};
 use tokio_stream::{Stream, StreamExt};
 
-use super::synth::{ControlFrame, SynthArgs, frame_path, read_control_frames};
-
-/// Default most control frames per request (`--chunk-frames`): bounds one request's server
-/// work and what a failed request throws away; ~160 KB of request for a 5-point model.
-pub const CHUNK_FRAMES: usize = 2000;
+use super::control_file::{ControlFrame, read_control_frames};
+use super::mesh_stream::MeshReader;
+use super::synth::{SynthArgs, frame_path};
 
 /// Most bytes of control frames per request: 1 MiB below the 4 MiB message limit that
 /// crease-server enforces by default (`Limits::message_bytes`, gRPC's usual default), leaving
@@ -35,6 +33,7 @@ const CHUNK_BYTES: usize = 3 << 20;
 /// Runs `crease synth --server URL` (the rest of `args` as for local synthesis; `--model` is a
 /// model name).
 pub fn run(args: &SynthArgs, server: &str) -> anyhow::Result<()> {
+    args.check()?;
     if args.chunk_frames == 0 {
         bail!("--chunk-frames must be at least 1");
     }
@@ -283,8 +282,6 @@ struct Sink<'a> {
     topology: Option<StreamTopology>,
     /// The frame being written: model triangles, positions in model order.
     mesh: Mesh,
-    /// A decoded frame in the streamed order.
-    streamed: Vec<Vec3>,
     /// Every frame's positions (model order), frame after frame, when `keep` is set.
     animation: Vec<Vec3>,
     keep: bool,
@@ -317,7 +314,6 @@ impl<'a> Sink<'a> {
                 positions: Vec::with_capacity(vertices),
                 triangles: Vec::new(),
             },
-            streamed: Vec::with_capacity(vertices),
             animation: Vec::new(),
             keep,
             frames: 0,
@@ -345,7 +341,8 @@ impl<'a> Sink<'a> {
             })) => t,
             Some(Ok(_)) => bail!("the server sent a frame before the topology"),
         };
-        let topology = read_topology(&topology).context("reading the topology")?;
+        let mut reader = MeshReader::new(&topology)?;
+        let topology = reader.topology();
         if topology.vertex_count != self.vertices {
             bail!(
                 "the topology has {} vertices, the model info said {}",
@@ -354,7 +351,7 @@ impl<'a> Sink<'a> {
             );
         }
         match &self.topology {
-            Some(t) if *t != topology => {
+            Some(t) if t != topology => {
                 bail!("the server's topology changed between requests (at frame {first})")
             }
             Some(_) => {}
@@ -363,7 +360,6 @@ impl<'a> Sink<'a> {
                 self.topology = Some(topology.clone());
             }
         }
-        let mut decoder = FrameDecoder::new(topology.vertex_count);
         while self.frames < first + count {
             let frame = match stream.next().await {
                 None => bail!("the stream ended after {} of {total} frames", self.frames),
@@ -383,10 +379,10 @@ impl<'a> Sink<'a> {
                     frame.seq
                 );
             }
-            let header = decoder
+            let header = reader
                 .decode(&frame.data)
                 .with_context(|| format!("decoding frame {}", self.frames))?;
-            self.take(&topology, &decoder, &header, frame.data.len())?;
+            self.take(&mut reader, &header, frame.data.len())?;
         }
         match stream.next().await {
             None => Ok(()),
@@ -398,17 +394,16 @@ impl<'a> Sink<'a> {
     /// The decoder's frame: back in model order, counted, written.
     fn take(
         &mut self,
-        topology: &StreamTopology,
-        decoder: &FrameDecoder,
+        reader: &mut MeshReader,
         header: &FrameHeader,
         bytes: usize,
     ) -> anyhow::Result<()> {
-        decoder.positions(&mut self.streamed);
-        topology.to_model_order(&self.streamed, &mut self.mesh.positions);
+        reader.model_positions(&mut self.mesh.positions);
         self.bytes += bytes as u64;
         self.error_bound = self.error_bound.max(header.qbox.error_bound());
         let top = header.qbox.max_level();
-        if decoder
+        if reader
+            .decoder()
             .lanes()
             .iter()
             .any(|l| l[..3].iter().any(|&q| q == 0 || q == top))

@@ -2,7 +2,6 @@
 //! control points, written as a control-frame CSV that `crease synth --controls` and
 //! `crease stream --frames` read. The same steps feed `crease stream --tsv/--c3d` live.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -13,7 +12,7 @@ use crease_mocap::map::MarkerMap;
 use crease_mocap::{Recording, Retarget, RetargetStats};
 use crease_proto::v1;
 
-use super::synth::ControlFrame;
+use super::control_file::{ControlFrame, write_csv};
 
 /// A recording and its marker map (shared by `stream` and `retarget`).
 #[derive(Clone, Debug, clap::Args)]
@@ -202,32 +201,6 @@ pub struct RetargetArgs {
     /// Control-frame CSV to write (one frame per line; an invalid point is `nan,nan,nan`).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-}
-
-/// Writes frames as the CSV `crease synth --controls` reads: a header of point names, then
-/// `x,y,z` per point per line (`nan` for invalid points).
-pub fn write_csv(path: &Path, names: &[String], frames: &[ControlFrame]) -> anyhow::Result<()> {
-    let mut text = String::with_capacity(frames.len() * names.len() * 30 + 256);
-    let header: Vec<String> = names
-        .iter()
-        .flat_map(|n| ["x", "y", "z"].map(|a| format!("{n}_{a}")))
-        .collect();
-    text.push_str(&header.join(","));
-    text.push('\n');
-    for f in frames {
-        for (i, (p, ok)) in f.positions.iter().zip(&f.valid).enumerate() {
-            if i > 0 {
-                text.push(',');
-            }
-            if *ok {
-                let _ = write!(text, "{},{},{}", p.x, p.y, p.z);
-            } else {
-                text.push_str("nan,nan,nan");
-            }
-        }
-        text.push('\n');
-    }
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Runs `crease retarget`.

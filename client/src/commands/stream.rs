@@ -13,16 +13,16 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
 use crease_hand::render::{View, contact_sheet};
 use crease_mocap::RetargetStats;
-use crease_proto::{StreamTopology, control_frame, read_topology, v1};
+use crease_proto::{control_frame, v1};
 use serde::Serialize;
 
 use super::common::{authorized, get_room, percentile, unix_us};
+use super::control_file::read_control_frames;
+use super::mesh_stream::{self, MeshReader, Subscription};
 use super::retarget::{ModelControls, RecordingArgs, Retargeted, parse_rate};
-use super::synth::read_control_frames;
 
 /// Options of `crease stream`.
 #[derive(Clone, Debug, clap::Args)]
@@ -170,9 +170,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     // The checker subscribes before the first frame goes out.
     let want_check = args.check || args.strip.is_some();
     let checker = if want_check {
-        let (mesh_stream, topology) =
-            super::common::subscribe(&mut client, &args.room, v1::Level::Base).await?;
-        let topology = read_topology(&topology).context("reading the topology")?;
+        let sub = mesh_stream::subscribe(&mut client, &args.room, v1::Level::Base).await?;
+        let reader = sub.reader()?;
         let plan = CheckPlan {
             start_us,
             last_seq: total.saturating_sub(1),
@@ -183,7 +182,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             // Give up on a silent stream after three frame periods, at least 5 s.
             patience: Duration::from_secs_f64((3.0 / (rate * args.speed)).max(5.0)),
         };
-        Some(tokio::spawn(check_meshes(mesh_stream, topology, plan)))
+        Some(tokio::spawn(check_meshes(sub, reader, plan)))
     } else {
         None
     };
@@ -371,11 +370,7 @@ struct CheckPlan {
 
 /// Decodes every mesh of the subscription until the last frame sent, checking each is finite
 /// and keeping the strip's pictures.
-async fn check_meshes(
-    mut mesh_stream: tonic::Streaming<v1::MeshFrame>,
-    topo: StreamTopology,
-    plan: CheckPlan,
-) -> MeshCheck {
+async fn check_meshes(mut sub: Subscription, mut reader: MeshReader, plan: CheckPlan) -> MeshCheck {
     let CheckPlan {
         start_us,
         last_seq,
@@ -384,22 +379,18 @@ async fn check_meshes(
         strip_every,
         patience,
     } = plan;
-    let triangles = topo.model_triangles();
+    let triangles = reader.topology().model_triangles();
     let mut check = MeshCheck::default();
-    let mut decoder = FrameDecoder::new(topo.vertex_count);
-    let (mut streamed, mut model_order) = (Vec::new(), Vec::new());
+    let mut model_order = Vec::new();
     let mut latencies = Vec::new();
     let mut next_strip = 0.0f64;
     loop {
-        let msg = match tokio::time::timeout(patience, mesh_stream.message()).await {
-            Ok(Ok(Some(m))) => m,
+        let f = match tokio::time::timeout(patience, sub.next_frame()).await {
+            Ok(Ok(Some(f))) => f,
             _ => break,
         };
-        let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
-            continue;
-        };
         // Keep the codec state, count only this run's frames.
-        let decoded = decoder.decode(&f.data);
+        let decoded = reader.decode(&f.data);
         if f.capture_time_us < start_us {
             continue;
         }
@@ -410,14 +401,13 @@ async fn check_meshes(
             check.decode_errors += 1;
             continue;
         }
-        decoder.positions(&mut streamed);
-        if !streamed.iter().all(|p| p.is_finite()) {
+        if !reader.streamed().iter().all(|p| p.is_finite()) {
             check.non_finite += 1;
         }
         if let Some(every) = strip_every {
             let t = f.seq as f64 / rate;
             if t + 0.5 / rate >= next_strip && f.seq < pass {
-                topo.to_model_order(&streamed, &mut model_order);
+                reader.model_positions(&mut model_order);
                 check.strip.push((
                     format!("t = {t:.1} s"),
                     Mesh {

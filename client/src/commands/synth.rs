@@ -1,15 +1,21 @@
 //! `crease synth`: a batch of control frames in, one mesh per frame out: predicted here, or by a
-//! server's `Synthesize` RPC with `--server` ([`super::remote_synth`]).
+//! server's `Synthesize` RPC with `--server` ([`super::remote_synth`], which builds on this
+//! module's [`SynthArgs`] and [`frame_path`]; the crate root picks one of the two).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::{TrainedModel, gltf_export};
 use crease_core::runtime::predictor::Predictor;
+
+use super::control_file::read_control_frames;
+
+/// Default most control frames per request (`--chunk-frames`): bounds one request's server
+/// work and what a failed request throws away; ~160 KB of request for a 5-point model.
+pub const CHUNK_FRAMES: usize = 2000;
 
 /// Options of `crease synth`.
 #[derive(Clone, Debug, clap::Args)]
@@ -32,7 +38,7 @@ pub struct SynthArgs {
     #[arg(long, value_name = "FILE")]
     pub ca: Option<PathBuf>,
     /// With `--server`: most control frames per request.
-    #[arg(long, value_name = "N", default_value_t = super::remote_synth::CHUNK_FRAMES)]
+    #[arg(long, value_name = "N", default_value_t = CHUNK_FRAMES)]
     pub chunk_frames: usize,
     /// Control frames: CSV (one frame per line, x y z of every control point in model order;
     /// an empty or `nan` field marks an occluded point; `#` comments and a header line are
@@ -64,25 +70,24 @@ pub struct SynthArgs {
     pub detail: bool,
 }
 
-/// One frame of control points with its validity mask.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ControlFrame {
-    /// Positions (occluded ones are NaN).
-    pub positions: Vec<Vec3>,
-    /// `false` where occluded.
-    pub valid: Vec<bool>,
+impl SynthArgs {
+    /// Refuses what neither local nor remote synthesis can do: nothing to write, a bad `--fps`.
+    pub fn check(&self) -> anyhow::Result<()> {
+        if self.out.is_none() && self.gltf.is_none() {
+            bail!("nothing to write: give --out DIR (one mesh per frame), --gltf FILE, or both");
+        }
+        if self.gltf.is_some() && !(self.fps.is_finite() && self.fps > 0.0) {
+            bail!("--fps must be > 0, got {}", self.fps);
+        }
+        Ok(())
+    }
 }
 
-/// Runs `crease synth`.
+/// Runs `crease synth` here (the crate root hands `--server` to [`super::remote_synth::run`]).
 pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
-    if args.out.is_none() && args.gltf.is_none() {
-        bail!("nothing to write: give --out DIR (one mesh per frame), --gltf FILE, or both");
-    }
-    if args.gltf.is_some() && !(args.fps.is_finite() && args.fps > 0.0) {
-        bail!("--fps must be > 0, got {}", args.fps);
-    }
+    args.check()?;
     if let Some(server) = &args.server {
-        return super::remote_synth::run(args, server);
+        bail!("--server {server}: local synthesis got a remote request (see remote_synth::run)");
     }
     let model = TrainedModel::load(&args.model)
         .with_context(|| format!("loading model {}", args.model.display()))?;
@@ -183,170 +188,4 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
 /// The file of frame `i` in `out`: `frame_00000.obj`, ... (local and remote synthesis).
 pub fn frame_path(out: &Path, i: usize, format: &str) -> PathBuf {
     out.join(format!("frame_{i:05}.{format}"))
-}
-
-/// Reads control frames from CSV or JSON (by extension) for a model with `count` control points.
-pub fn read_control_frames(path: &Path, count: usize) -> anyhow::Result<Vec<ControlFrame>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let is_json = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    let frames = if is_json {
-        parse_json(&text, count)
-    } else {
-        parse_csv(&text, count)
-    }
-    .with_context(|| format!("{}", path.display()))?;
-    if frames.is_empty() {
-        bail!("{}: no control frames", path.display());
-    }
-    Ok(frames)
-}
-
-fn frame_from_values(values: &[Option<f32>]) -> ControlFrame {
-    let mut positions = Vec::with_capacity(values.len() / 3);
-    let mut valid = Vec::with_capacity(values.len() / 3);
-    for c in values.chunks_exact(3) {
-        match (c[0], c[1], c[2]) {
-            (Some(x), Some(y), Some(z)) if x.is_finite() && y.is_finite() && z.is_finite() => {
-                positions.push(Vec3::new(x, y, z));
-                valid.push(true);
-            }
-            _ => {
-                positions.push(Vec3::NAN);
-                valid.push(false);
-            }
-        }
-    }
-    ControlFrame { positions, valid }
-}
-
-/// CSV: one frame per line, `3 * count` fields.
-pub fn parse_csv(text: &str, count: usize) -> anyhow::Result<Vec<ControlFrame>> {
-    let mut frames = Vec::new();
-    for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = line.split([',', ';', '\t']).map(str::trim).collect();
-        let parsed: Vec<Result<Option<f32>, _>> = fields
-            .iter()
-            .map(|f| {
-                if f.is_empty() || f.eq_ignore_ascii_case("nan") {
-                    Ok(None)
-                } else {
-                    f.parse::<f32>().map(Some)
-                }
-            })
-            .collect();
-        if frames.is_empty()
-            && parsed.iter().any(|p| p.is_err())
-            && line.chars().any(|c| c.is_ascii_alphabetic())
-        {
-            continue; // header
-        }
-        if fields.len() != 3 * count {
-            bail!(
-                "line {}: {} fields, expected {} (x, y, z of {count} control points)",
-                n + 1,
-                fields.len(),
-                3 * count
-            );
-        }
-        let mut values = Vec::with_capacity(fields.len());
-        for (i, p) in parsed.into_iter().enumerate() {
-            values.push(p.with_context(|| {
-                format!(
-                    "line {}, field {}: {:?} is not a number",
-                    n + 1,
-                    i + 1,
-                    fields[i]
-                )
-            })?);
-        }
-        frames.push(frame_from_values(&values));
-    }
-    Ok(frames)
-}
-
-/// JSON: an array of frames; each frame an array of `count` points (`[x, y, z]` or `null`) or
-/// of `3 * count` numbers.
-pub fn parse_json(text: &str, count: usize) -> anyhow::Result<Vec<ControlFrame>> {
-    let value: serde_json::Value = serde_json::from_str(text).context("not valid JSON")?;
-    let Some(frames) = value.as_array() else {
-        bail!("expected a JSON array of frames")
-    };
-    frames
-        .iter()
-        .enumerate()
-        .map(|(i, f)| {
-            let Some(items) = f.as_array() else {
-                bail!("frame {i}: expected an array")
-            };
-            let mut values = Vec::with_capacity(3 * count);
-            if items.len() == count && items.iter().all(|p| p.is_array() || p.is_null()) {
-                for (j, p) in items.iter().enumerate() {
-                    match p.as_array() {
-                        None => values.extend([None, None, None]),
-                        Some(xyz) if xyz.len() == 3 => {
-                            values.extend(xyz.iter().map(|v| v.as_f64().map(|x| x as f32)))
-                        }
-                        Some(xyz) => bail!(
-                            "frame {i}, point {j}: {} coordinates, expected 3",
-                            xyz.len()
-                        ),
-                    }
-                }
-            } else if items.len() == 3 * count {
-                values.extend(items.iter().map(|v| v.as_f64().map(|x| x as f32)));
-            } else {
-                bail!(
-                    "frame {i}: {} entries, expected {count} points or {} numbers",
-                    items.len(),
-                    3 * count
-                );
-            }
-            Ok(frame_from_values(&values))
-        })
-        .collect()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn csv_with_header_comments_and_occlusion() {
-        let text = "# frames\nx0,y0,z0,x1,y1,z1\n1,2,3,4,5,6\n1,2,3,,nan,6\n";
-        let f = parse_csv(text, 2).unwrap();
-        assert_eq!(f.len(), 2);
-        assert_eq!(
-            f[0].positions,
-            vec![Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)]
-        );
-        assert_eq!(f[1].valid, vec![true, false]);
-        let err = parse_csv("1,2,3\n", 2).unwrap_err().to_string();
-        assert!(
-            err.contains("line 1") && err.contains("expected 6"),
-            "{err}"
-        );
-        let err = parse_csv("1,2,3,4,5,6\n1,2,x,4,5,6\n", 2).unwrap_err();
-        assert!(format!("{err:#}").contains("line 2, field 3"), "{err:#}");
-    }
-
-    #[test]
-    fn json_points_null_and_flat() {
-        let f = parse_json("[[[1,2,3],null],[1,2,3,4,5,6]]", 2).unwrap();
-        assert_eq!(f[0].valid, vec![true, false]);
-        assert_eq!(f[1].positions[1], Vec3::new(4.0, 5.0, 6.0));
-        assert!(
-            parse_json("[[1,2]]", 2)
-                .unwrap_err()
-                .to_string()
-                .contains("frame 0")
-        );
-        assert!(parse_json("{}", 2).is_err());
-    }
 }

@@ -4,147 +4,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use crease_train::bones::FitOptions;
-use crease_train::kcca::KccaOptions;
-use crease_train::pipeline::{self, EdgeModel, TrainInput, TrainOptions};
-use crease_train::regress::{KernelChoice, Method, RegressOptions};
-use crease_train::select::SelectGrid;
+use anyhow::Context;
+use crease_train::pipeline::{self, TrainInput};
+use crease_train::regress::Method;
 
-use super::common::{self, Progress};
+use super::common::Progress;
 use super::layers;
-
-/// Regression options shared by `train` and `eval`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct RegressArgs {
-    /// Number of proxy bones.
-    #[arg(long, default_value_t = FitOptions::default().bones)]
-    pub bones: usize,
-    /// Most bones per vertex (K, 1..=8).
-    #[arg(long, default_value_t = 8)]
-    pub max_influences: usize,
-    /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), `select:N` (auto:N improved by
-    /// swaps with 2N PCA + varimax representatives, scored by leave-one-out inside the training
-    /// set), or vertex
-    /// indices `12,400,7`. Default: the manifest's list, else auto:8.
-    #[arg(long, value_name = "SPEC")]
-    pub control_points: Option<String>,
-    /// Control points per bone for the geometry-local methods (HZY11 k_c).
-    #[arg(long, default_value_t = 7)]
-    pub kc: usize,
-    /// Poses per local model and blended at run time (HZY11 k_p).
-    #[arg(long, default_value_t = 7)]
-    pub kp: usize,
-    /// Regression kernel: `gaussian` (width from --sigma-scale), `gaussian+linear:G` (plus a
-    /// linear part of weight G) or `poly:D` (inhomogeneous polynomial of degree D, FKY08 §7).
-    #[arg(long, default_value = "gaussian", value_name = "KERNEL")]
-    pub kernel: String,
-    /// Gaussian kernel width as a multiple of the RMS spread of the training control vectors.
-    #[arg(long, default_value_t = 1.0)]
-    pub sigma_scale: f32,
-    /// KCCA regularisation kappa, relative to the kernel matrix's largest eigenvalue.
-    #[arg(long, default_value_t = 1e-3)]
-    pub kappa: f64,
-    /// Choose kernel, width, kappa and beta by leave-one-out inside the training examples
-    /// (overrides --kernel, --sigma-scale, --kappa and --beta).
-    #[arg(long)]
-    pub select: bool,
-    /// Control-point weight of the translation solve (FKY08 eq. 11; ~3 keyframing, ~0.3 mocap).
-    #[arg(long, default_value_t = 1.0)]
-    pub beta: f32,
-    /// Edge skin of the translation solve: `vector` (per-bone edge vectors, ridge chosen by
-    /// cross-validation) or `scalar` (FKY08 eq. 10 weights).
-    #[arg(long, default_value = "vector", value_parser = ["vector", "scalar"])]
-    pub edge_skin: String,
-    /// Ridge of the vector edge skin instead of cross-validating it (`inf` = scalar weights).
-    #[arg(long, value_name = "RIDGE")]
-    pub edge_ridge: Option<f64>,
-}
-
-impl RegressArgs {
-    /// Training options for `method`.
-    pub fn train_options(
-        &self,
-        method: Method,
-        set: &crease_core::mesh::ExampleSet,
-    ) -> anyhow::Result<TrainOptions> {
-        if !(self.beta.is_finite() && self.beta > 0.0) {
-            bail!("--beta must be > 0, got {}", self.beta);
-        }
-        if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
-            bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
-        }
-        if !(self.kappa.is_finite() && self.kappa >= 0.0) {
-            bail!("--kappa must be >= 0, got {}", self.kappa);
-        }
-        let kernel = match self.kernel.as_str() {
-            "gaussian" => KernelChoice::Gaussian {
-                scale: self.sigma_scale,
-            },
-            k => match (
-                k.strip_prefix("poly:").map(str::parse::<u32>),
-                k.strip_prefix("gaussian+linear:").map(str::parse::<f32>),
-            ) {
-                (Some(Ok(degree)), _) if (1..=8).contains(&degree) => {
-                    KernelChoice::Polynomial { c: 1.0, degree }
-                }
-                (_, Some(Ok(gamma))) if gamma.is_finite() && gamma >= 0.0 => {
-                    KernelChoice::GaussianLinear {
-                        scale: self.sigma_scale,
-                        gamma,
-                    }
-                }
-                _ => bail!(
-                    "--kernel {k}: expected gaussian, gaussian+linear:G (G >= 0) or poly:D (D in 1..=8)"
-                ),
-            },
-        };
-        if let Some(r) = self.edge_ridge.filter(|r| r.is_nan() || *r < 0.0) {
-            bail!("--edge-ridge must be >= 0, got {r}");
-        }
-        let edge_model = match self.edge_skin.as_str() {
-            "scalar" => {
-                if self.edge_ridge.is_some() {
-                    bail!("--edge-ridge applies to --edge-skin vector only");
-                }
-                EdgeModel::Scalar
-            }
-            _ => EdgeModel::Vector {
-                ridge: self.edge_ridge,
-            },
-        };
-        Ok(TrainOptions {
-            fit: FitOptions {
-                bones: self.bones,
-                max_influences: self.max_influences,
-                ..FitOptions::default()
-            },
-            controls: common::control_spec(self.control_points.as_deref(), set)?,
-            // The manifest's names go with the manifest's points.
-            control_names: self
-                .control_points
-                .is_none()
-                .then(|| set.control_point_names.clone())
-                .flatten(),
-            regress: RegressOptions {
-                method,
-                kc: self.kc,
-                kp: self.kp,
-                kernel,
-                kcca: KccaOptions {
-                    kappa: self.kappa,
-                    ..KccaOptions::default()
-                },
-                ..RegressOptions::default()
-            },
-            edge_influences: None,
-            edge_model,
-            beta: self.beta,
-            select: self.select.then(SelectGrid::default),
-            detail: Default::default(),
-        })
-    }
-}
+use super::training_args::{RegressArgs, kernel_name, parse_method};
 
 /// Options of `crease train`.
 #[derive(Clone, Debug, clap::Args)]
@@ -167,16 +33,6 @@ pub struct TrainArgs {
     /// Print one JSON object with the training report on stdout.
     #[arg(long)]
     pub json: bool,
-}
-
-/// clap value parser for [`Method`].
-pub fn parse_method(s: &str) -> Result<Method, String> {
-    Method::parse(s).ok_or_else(|| {
-        format!(
-            "unknown method {s:?}; one of: {}",
-            Method::ALL.map(|m| m.name()).join(", ")
-        )
-    })
 }
 
 /// Runs `crease train`.
@@ -236,7 +92,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     if let Some(s) = &report.selection {
         eprintln!(
             "selected by leave-one-out: {} kappa {:e} beta {} (LOO {:.4e}; {:.1} s)",
-            super::eval::kernel_name(&s.best.kernel),
+            kernel_name(&s.best.kernel),
             s.best.kappa,
             s.best.beta,
             s.best.rms,

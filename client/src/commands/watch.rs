@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use crease_core::codec::FrameDecoder;
 use crease_core::mesh::Mesh;
-use crease_proto::{read_topology, v1};
+use crease_proto::v1;
 
 use super::common::percentile;
+use super::mesh_stream;
 
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]
@@ -50,24 +50,22 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     } else {
         v1::Level::Base
     };
-    let (mut stream, topology) = super::common::subscribe(&mut client, &args.room, level).await?;
-    let stream_topology = read_topology(&topology).context("reading the topology")?;
-    let n = stream_topology.vertex_count;
-    let triangles = stream_topology.model_triangles();
+    let mut sub = mesh_stream::subscribe(&mut client, &args.room, level).await?;
+    let mut reader = sub.reader()?;
+    let n = reader.topology().vertex_count;
+    let triangles = reader.topology().model_triangles();
     eprintln!(
         "watching room {:?} (model {:?}, {} vertices, {} triangles)",
         args.room,
-        topology.model,
+        sub.topology.model,
         n,
         triangles.len()
     );
     if let Some(dir) = &args.dump {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    let mut decoder = FrameDecoder::new(n);
     // The dumped mesh, in model vertex order: the topology once, each frame's positions
     // decoded and put back in model order into it.
-    let mut streamed = Vec::new();
     let mut mesh = Mesh {
         positions: Vec::new(),
         triangles,
@@ -76,11 +74,8 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let mut latencies: Vec<u32> = Vec::new();
     let start = Instant::now();
     let mut window = (Instant::now(), 0u64, 0u64);
-    while let Some(msg) = stream.message().await? {
-        let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
-            continue;
-        };
-        decoder
+    while let Some(f) = sub.next_frame().await? {
+        reader
             .decode(&f.data)
             .with_context(|| format!("decoding frame {}", f.seq))?;
         frames += 1;
@@ -88,8 +83,7 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         skipped += u64::from(f.skipped);
         latencies.push(f.server_latency_us);
         if let Some(dir) = &args.dump {
-            decoder.positions(&mut streamed);
-            stream_topology.to_model_order(&streamed, &mut mesh.positions);
+            reader.model_positions(&mut mesh.positions);
             let path = dir.join(format!("frame_{:05}.obj", frames - 1));
             mesh.write(&path)
                 .with_context(|| format!("writing {}", path.display()))?;

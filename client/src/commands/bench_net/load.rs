@@ -1,0 +1,375 @@
+//! The load of `crease bench-net`: per scenario, the rooms opened, one publisher per room
+//! sending control frames at a fixed rate, subscribers each on its own connection reading (and
+//! the first of each room decoding) the mesh frames, and what they saw summarised into a
+//! [`ScenarioReport`].
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use crease_core::codec::{FrameKind, parse_frame};
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use tokio::task::JoinSet;
+use tokio::time::{Instant, MissedTickBehavior};
+use tonic::transport::Channel;
+
+use super::super::common::{authorized, connect, unix_us};
+use super::super::mesh_stream::{self, MeshReader, Subscription};
+use super::report::{Cpu, FrameBytes, Percentiles, ScenarioReport, Spread};
+use super::server::{Target, clock_ticks, cpu_seconds, random_token};
+use super::{BenchNetArgs, Scenario};
+
+/// Control frames queued per publisher before it waits: a few periods, so a slow ack stream
+/// shows up as late sends instead of a growing queue.
+const PUBLISH_QUEUE: usize = 8;
+
+/// When frames count: from `start` (after the warm-up) to `end`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Window {
+    start: Instant,
+    end: Instant,
+}
+
+impl Window {
+    fn contains(&self, t: Instant) -> bool {
+        self.start <= t && t < self.end
+    }
+}
+
+/// What a publisher saw.
+#[derive(Debug, Default)]
+struct PublisherStats {
+    sent_in_window: u64,
+    refused: u64,
+    first_refusal: Option<String>,
+    /// (seq, `PublishAck.server_latency_us`) of the acks read in the window.
+    acks: Vec<(u64, u32)>,
+}
+
+/// Publishes `frames` (looped) into `room` at `rate` from `first_tick` until the window ends,
+/// reading the acks.
+async fn publisher(
+    url: String,
+    room: String,
+    token: String,
+    frames: Arc<Vec<v1::ControlFrame>>,
+    period: Duration,
+    first_tick: Instant,
+    window: Window,
+) -> anyhow::Result<PublisherStats> {
+    let mut client = connect(&url, None).await?;
+    let (tx, rx) = tokio::sync::mpsc::channel(PUBLISH_QUEUE);
+    let sender = tokio::spawn(async move {
+        let mut ticker = tokio::time::interval_at(first_tick, period);
+        // A late tick is dropped, not made up by a burst that would distort the latency.
+        ticker.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut sent_in_window = 0u64;
+        for seq in 0u64.. {
+            if ticker.tick().await >= window.end {
+                break;
+            }
+            let mut frame = frames[(seq % frames.len() as u64) as usize].clone();
+            frame.room.clone_from(&room);
+            frame.seq = seq;
+            frame.capture_time_us = unix_us();
+            if tx.send(frame).await.is_err() {
+                break;
+            }
+            sent_in_window += u64::from(window.contains(Instant::now()));
+        }
+        sent_in_window
+    });
+    let req = authorized(tokio_stream::wrappers::ReceiverStream::new(rx), &token)?;
+    let mut acks = client
+        .publish(req)
+        .await
+        .context("publishing")?
+        .into_inner();
+    let mut stats = PublisherStats::default();
+    // The ack stream ends when the sender stops and the server has answered every frame.
+    while let Some(ack) = acks.message().await.context("reading acks")? {
+        match ack.error {
+            Some(e) => {
+                stats.refused += 1;
+                stats.first_refusal.get_or_insert_with(|| {
+                    format!("frame {} (code {}): {}", ack.seq, e.code, e.message)
+                });
+            }
+            None if window.contains(Instant::now()) => {
+                stats.acks.push((ack.seq, ack.server_latency_us));
+            }
+            None => {}
+        }
+    }
+    stats.sent_in_window = sender.await.context("the publisher task")?;
+    Ok(stats)
+}
+
+/// What a subscriber saw.
+#[derive(Debug, Default)]
+struct SubscriberStats {
+    frames: u64,
+    skipped: u64,
+    key: (u64, u64),
+    delta: (u64, u64),
+    /// Per frame read in the window: (seq, server latency, client latency), microseconds.
+    latency: Vec<(u64, u32, u32)>,
+    decoded: u64,
+    decode_errors: u64,
+    first_decode_error: Option<String>,
+}
+
+/// A subscribed stream, its topology read.
+struct Subscribed {
+    // Holds the connection for the stream's life.
+    _client: CreaseClient<Channel>,
+    sub: Subscription,
+    /// The decoder of the subscriber that checks its room's frames.
+    reader: Option<MeshReader>,
+    vertices: usize,
+}
+
+/// Connects on its own connection and subscribes to `room`'s base mesh; with `check`, reads
+/// the topology to decode the frames (the other subscribers only count bytes).
+async fn subscribe(url: String, room: String, check: bool) -> anyhow::Result<Subscribed> {
+    let mut client = connect(&url, None).await?;
+    let sub = mesh_stream::subscribe(&mut client, &room, v1::Level::Base).await?;
+    let reader = if check {
+        Some(
+            sub.reader()
+                .with_context(|| format!("room {room:?}: Topology"))?,
+        )
+    } else {
+        None
+    };
+    Ok(Subscribed {
+        _client: client,
+        vertices: sub.topology.vertex_count as usize,
+        sub,
+        reader,
+    })
+}
+
+/// Reads frames until the window ends, recording those that arrive inside it; decodes every
+/// frame when the subscriber checks them.
+async fn read_frames(mut sub: Subscribed, window: Window) -> anyhow::Result<SubscriberStats> {
+    let mut stats = SubscriberStats::default();
+    loop {
+        let f = tokio::select! {
+            f = sub.sub.next_frame() => f.context("reading mesh frames")?,
+            () = tokio::time::sleep_until(window.end) => break,
+        };
+        let Some(f) = f else {
+            break;
+        };
+        let now = Instant::now();
+        let now_us = unix_us();
+        if let Some(reader) = &mut sub.reader {
+            match reader.decode(&f.data) {
+                Ok(_) => stats.decoded += 1,
+                Err(e) => {
+                    stats.decode_errors += 1;
+                    stats
+                        .first_decode_error
+                        .get_or_insert_with(|| format!("frame {}: {e}", f.seq));
+                }
+            }
+        }
+        if !window.contains(now) {
+            continue;
+        }
+        stats.frames += 1;
+        stats.skipped += u64::from(f.skipped);
+        let client_us = (now_us - f.capture_time_us).clamp(0, i64::from(u32::MAX)) as u32;
+        stats.latency.push((f.seq, f.server_latency_us, client_us));
+        let len = f.data.len() as u64;
+        match parse_frame(&f.data).map(|(h, _)| h.kind) {
+            Ok(FrameKind::Key) => stats.key = (stats.key.0 + 1, stats.key.1 + len),
+            Ok(FrameKind::Delta) => stats.delta = (stats.delta.0 + 1, stats.delta.1 + len),
+            Err(e) => bail!("frame {}: not a codec frame: {e}", f.seq),
+        }
+    }
+    Ok(stats)
+}
+
+/// Opens the rooms, connects the subscribers, publishes for warm-up + window, and summarises.
+pub(super) async fn run_scenario(
+    target: &Target,
+    sc: &Scenario,
+    frames: &Arc<Vec<v1::ControlFrame>>,
+    args: &BenchNetArgs,
+) -> anyhow::Result<ScenarioReport> {
+    let mut admin = connect(&target.url, None).await?;
+    let tag = &random_token()[..6];
+    let mut rooms = Vec::with_capacity(sc.rooms);
+    for k in 0..sc.rooms {
+        let id = format!("bench-{tag}-{}-{k}", sc.name);
+        let open = v1::OpenRoomRequest {
+            room: id.clone(),
+            model: target.model.clone(),
+            beta: 0.0,
+            filter: None,
+        };
+        let opened = admin
+            .open_room(authorized(open, &target.admin_token)?)
+            .await
+            .with_context(|| format!("opening room {id:?} on model {:?}", target.model))?
+            .into_inner();
+        rooms.push((id, opened.publish_token));
+    }
+    let result = drive(target, sc, frames, args, &rooms).await;
+    for (id, _) in &rooms {
+        let close = v1::CloseRoomRequest { room: id.clone() };
+        // The rooms die with a spawned server anyway; a running one keeps what fails here.
+        if let Err(e) = admin
+            .close_room(authorized(close, &target.admin_token)?)
+            .await
+        {
+            eprintln!("closing room {id:?}: {}", e.message());
+        }
+    }
+    result
+}
+
+async fn drive(
+    target: &Target,
+    sc: &Scenario,
+    frames: &Arc<Vec<v1::ControlFrame>>,
+    args: &BenchNetArgs,
+    rooms: &[(String, String)],
+) -> anyhow::Result<ScenarioReport> {
+    // Every subscriber on its own connection, subscribed before the first frame.
+    let mut connecting = JoinSet::new();
+    for (r, (id, _)) in rooms.iter().enumerate() {
+        for s in 0..sc.subscribers {
+            let (url, id) = (target.url.clone(), id.clone());
+            connecting.spawn(async move { (r, s, subscribe(url, id, s == 0).await) });
+        }
+    }
+    let mut subscribed = Vec::with_capacity(rooms.len() * sc.subscribers);
+    while let Some(done) = connecting.join_next().await {
+        let (r, s, sub) = done.context("a subscriber task")?;
+        subscribed.push((
+            r,
+            s,
+            sub.with_context(|| format!("subscriber {s} of room {r}"))?,
+        ));
+    }
+    let period = Duration::from_secs_f64(1.0 / args.rate);
+    let t0 = Instant::now();
+    let start = t0 + Duration::from_secs_f64(args.warmup);
+    let window = Window {
+        start,
+        end: start + Duration::from_secs_f64(args.seconds),
+    };
+    let mut readers = JoinSet::new();
+    let mut vertices = 0;
+    for (r, s, sub) in subscribed {
+        vertices = sub.vertices;
+        readers.spawn(async move { (r, s, read_frames(sub, window).await) });
+    }
+    let mut publishers = JoinSet::new();
+    for (k, (id, token)) in rooms.iter().enumerate() {
+        // Rooms publish at evenly spread phases of the period, as independent publishers would
+        // rather than all on the same tick.
+        let first_tick = t0 + period.mul_f64(k as f64 / rooms.len() as f64);
+        let task = publisher(
+            target.url.clone(),
+            id.clone(),
+            token.clone(),
+            Arc::clone(frames),
+            period,
+            first_tick,
+            window,
+        );
+        publishers.spawn(async move { (k, task.await) });
+    }
+    // CPU of the server and of this process over the window.
+    let hz = clock_ticks();
+    let me = std::process::id();
+    let sample = |pid: Option<u32>| pid.and_then(|p| cpu_seconds(p, hz));
+    tokio::time::sleep_until(window.start).await;
+    let (server0, client0, wall0) = (sample(target.pid), sample(Some(me)), Instant::now());
+    tokio::time::sleep_until(window.end).await;
+    let (server1, client1, wall1) = (sample(target.pid), sample(Some(me)), Instant::now());
+    let seconds = (wall1 - wall0).as_secs_f64();
+
+    // Publishers by room index; subscribers with their room's.
+    let mut pubs: Vec<PublisherStats> = rooms.iter().map(|_| PublisherStats::default()).collect();
+    while let Some(done) = publishers.join_next().await {
+        let (k, stats) = done.context("a publisher task")?;
+        pubs[k] = stats.with_context(|| format!("publisher of room {k}"))?;
+    }
+    let mut subs = Vec::with_capacity(rooms.len() * sc.subscribers);
+    while let Some(done) = readers.join_next().await {
+        let (r, s, stats) = done.context("a subscriber task")?;
+        subs.push((
+            r,
+            stats.with_context(|| format!("subscriber {s} of room {r}"))?,
+        ));
+    }
+    let frames_published: u64 = pubs.iter().map(|p| p.sent_in_window).sum();
+    let cpu = |a: Option<f64>, b: Option<f64>| {
+        let used = b? - a?;
+        Some(Cpu {
+            cores: used / seconds,
+            ms_per_frame: used * 1e3 / frames_published.max(1) as f64,
+        })
+    };
+    let mut server_latency: Vec<u32> = Vec::new();
+    let mut client_latency: Vec<u32> = Vec::new();
+    let mut fan_out: Vec<u32> = Vec::new();
+    let mut outside: Vec<u32> = Vec::new();
+    for (r, sub) in &subs {
+        let acks = &pubs[*r].acks;
+        for &(seq, server, client) in &sub.latency {
+            server_latency.push(server);
+            client_latency.push(client);
+            outside.push(client.saturating_sub(server));
+            // Acks come in seq order.
+            if let Ok(k) = acks.binary_search_by_key(&seq, |a| a.0) {
+                fan_out.push(server.saturating_sub(acks[k].1));
+            }
+        }
+    }
+    let mut ack_latency: Vec<u32> = pubs
+        .iter()
+        .flat_map(|p| p.acks.iter().map(|a| a.1))
+        .collect();
+    let (key, delta) = subs.iter().fold(((0, 0), (0, 0)), |(k, d), (_, s)| {
+        (
+            (k.0 + s.key.0, k.1 + s.key.1),
+            (d.0 + s.delta.0, d.1 + s.delta.1),
+        )
+    });
+    let frames_received = key.0 + delta.0;
+    Ok(ScenarioReport {
+        name: sc.name.clone(),
+        rooms: sc.rooms,
+        subscribers_per_room: sc.subscribers,
+        rate_hz: args.rate,
+        seconds,
+        frames_published,
+        published_per_room: Spread::of(pubs.iter().map(|p| p.sent_in_window)),
+        frames_refused: pubs.iter().map(|p| p.refused).sum(),
+        first_refusal: pubs.iter().find_map(|p| p.first_refusal.clone()),
+        frames_received,
+        received_per_subscriber: Spread::of(subs.iter().map(|(_, s)| s.frames)),
+        frames_skipped: subs.iter().map(|(_, s)| s.skipped).sum(),
+        server_latency_us: Percentiles::of(&mut server_latency),
+        client_latency_us: Percentiles::of(&mut client_latency),
+        ack_latency_us: Percentiles::of(&mut ack_latency),
+        fan_out_us: Percentiles::of(&mut fan_out),
+        outside_server_us: Percentiles::of(&mut outside),
+        server_cpu: cpu(server0, server1),
+        client_cpu: cpu(client0, client1),
+        all_frames: FrameBytes::new(frames_received, key.1 + delta.1, vertices),
+        keyframes: FrameBytes::new(key.0, key.1, vertices),
+        deltas: FrameBytes::new(delta.0, delta.1, vertices),
+        bytes_per_second: (key.1 + delta.1) as f64 / seconds,
+        decoded_frames: subs.iter().map(|(_, s)| s.decoded).sum(),
+        decode_errors: subs.iter().map(|(_, s)| s.decode_errors).sum(),
+        first_decode_error: subs.iter().find_map(|(_, s)| s.first_decode_error.clone()),
+    })
+}

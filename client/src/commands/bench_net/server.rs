@@ -1,0 +1,233 @@
+//! The server under test: a `crease-server` child process spawned on free loopback ports (its
+//! scratch folder, log and clean-up), or a running one; and the CPU time of a process, read from
+//! `/proc/PID/stat`, so the server's CPU is measured apart from the clients'.
+
+use std::collections::hash_map::RandomState;
+use std::fs::File;
+use std::hash::BuildHasher;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use crease_proto::v1;
+use tokio::time::Instant;
+
+use super::super::common::connect;
+use super::BenchNetArgs;
+
+/// How long the spawned server may take to load its model and listen: the horse loads in
+/// about a second; a debug build on a busy machine takes much longer.
+const SERVER_START: Duration = Duration::from_secs(60);
+/// A `crease-server` child process and its scratch folder (model link, log); killed and
+/// removed when dropped.
+#[derive(Debug)]
+pub(super) struct SpawnedServer {
+    pub(super) child: Child,
+    dir: PathBuf,
+}
+
+impl SpawnedServer {
+    /// The last lines of its log, for error messages.
+    pub(super) fn log_tail(&self) -> String {
+        let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();
+        let lines: Vec<&str> = log.lines().collect();
+        lines[lines.len().saturating_sub(20)..].join("\n")
+    }
+}
+
+impl Drop for SpawnedServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The server under test.
+#[derive(Debug)]
+pub(super) struct Target {
+    /// Its gRPC URL.
+    pub(super) url: String,
+    /// Its admin token (opens and closes the rooms).
+    pub(super) admin_token: String,
+    /// The model's name there.
+    pub(super) model: String,
+    /// Its process, to measure its CPU.
+    pub(super) pid: Option<u32>,
+    /// For the report.
+    pub(super) description: String,
+    /// The child process, when spawned here.
+    pub(super) spawned: Option<SpawnedServer>,
+}
+
+/// 128 random bits, hex (std's per-map random SipHash keys: no extra dependency).
+pub(super) fn random_token() -> String {
+    (0..2)
+        .map(|_| format!("{:016x}", RandomState::new().hash_one(0u8)))
+        .collect()
+}
+
+/// A loopback address with a port that was free a moment ago.
+fn free_address(held: &mut Vec<std::net::TcpListener>) -> anyhow::Result<std::net::SocketAddr> {
+    let listener =
+        std::net::TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;
+    let addr = listener.local_addr()?;
+    // Held until both ports are chosen, so they differ; dropped before the server binds.
+    held.push(listener);
+    Ok(addr)
+}
+
+/// Spawns `crease-server` on the model and waits until it answers.
+pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> {
+    let bin = match &args.server_bin {
+        Some(bin) => bin.clone(),
+        None => std::env::current_exe()
+            .context("locating the crease executable")?
+            .with_file_name(format!("crease-server{}", std::env::consts::EXE_SUFFIX)),
+    };
+    if !bin.is_file() {
+        bail!(
+            "{}: no crease-server binary (build it with `cargo build --release -p crease-server`, or pass --server-bin PATH or --server URL)",
+            bin.display()
+        );
+    }
+    let model = args
+        .model
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .context("--model: the file name is not valid UTF-8")?
+        .to_owned();
+    let dir = std::env::temp_dir().join(format!(
+        "crease-bench-net-{}-{}",
+        std::process::id(),
+        &random_token()[..8]
+    ));
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).with_context(|| format!("creating {}", models.display()))?;
+    let link = models.join(format!("{model}.crease"));
+    let source =
+        std::fs::canonicalize(&args.model).with_context(|| format!("{}", args.model.display()))?;
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&source, &link)
+        .with_context(|| format!("linking {}", link.display()))?;
+    #[cfg(not(unix))]
+    std::fs::copy(&source, &link).with_context(|| format!("copying to {}", link.display()))?;
+    let log = File::create(dir.join("server.log")).context("creating the server log")?;
+    let mut held = Vec::new();
+    let grpc = free_address(&mut held)?;
+    let http = free_address(&mut held)?;
+    drop(held);
+    let admin_token = random_token();
+    let child = Command::new(&bin)
+        .arg("--models")
+        .arg(&models)
+        .args(["--grpc", &grpc.to_string(), "--http", &http.to_string()])
+        .env("CREASE_ADMIN_TOKEN", &admin_token)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .with_context(|| format!("starting {}", bin.display()))?;
+    let mut server = SpawnedServer { child, dir };
+    let url = format!("http://{grpc}");
+    let deadline = Instant::now() + SERVER_START;
+    loop {
+        if let Some(status) = server.child.try_wait()? {
+            bail!(
+                "{} exited ({status}) before answering:\n{}",
+                bin.display(),
+                server.log_tail()
+            );
+        }
+        if let Ok(mut client) = connect(&url, None).await
+            && client.list_models(v1::ListModelsRequest {}).await.is_ok()
+        {
+            break;
+        }
+        if Instant::now() > deadline {
+            bail!(
+                "{} did not answer on {url} within {SERVER_START:?}:\n{}",
+                bin.display(),
+                server.log_tail()
+            );
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    Ok(Target {
+        description: format!("{} (spawned, pid {})", bin.display(), server.child.id()),
+        pid: Some(server.child.id()),
+        url,
+        admin_token,
+        model,
+        spawned: Some(server),
+    })
+}
+
+/// `USER_HZ`, the unit of `/proc/PID/stat`'s times: `getconf CLK_TCK`, else Linux's 100.
+pub(super) fn clock_ticks() -> f64 {
+    Command::new("getconf")
+        .arg("CLK_TCK")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.trim().parse::<f64>().ok())
+        .filter(|&hz| hz > 0.0)
+        .unwrap_or(100.0)
+}
+
+/// CPU seconds (user + system, every thread, living or ended) of process `pid` so far, from
+/// `/proc/PID/stat`; `None` off Linux.
+pub(super) fn cpu_seconds(pid: u32, hz: f64) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    Some(stat_ticks(&stat)? as f64 / hz)
+}
+
+/// utime + stime, in clock ticks, of a `/proc/PID/stat` line.
+fn stat_ticks(stat: &str) -> Option<u64> {
+    // Field 2 (the command name, in parentheses) may hold spaces and parentheses: count from
+    // after its last `)`.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // `rest` starts at field 3; utime and stime are fields 14 and 15 (proc(5)).
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some(utime + stime)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn proc_stat_with_spaces_and_parentheses_in_the_name() {
+        // The kernel's format: pid (comm) state ppid ... utime stime ...
+        let stat = "42 (a (b) c) S 1 42 42 0 -1 4194560 100 0 0 0 250 50 0 0 20 0 3 0\n";
+        assert_eq!(stat_ticks(stat), Some(300));
+        assert_eq!(stat_ticks("42 (x) S 1 2"), None);
+        assert_eq!(stat_ticks("no parenthesis"), None);
+    }
+
+    #[test]
+    fn cpu_of_this_process_is_measured_on_linux() {
+        let hz = clock_ticks();
+        assert!(hz > 0.0);
+        if cfg!(target_os = "linux") {
+            let a = cpu_seconds(std::process::id(), hz).unwrap();
+            let mut x = 0u64;
+            let t = std::time::Instant::now();
+            while t.elapsed() < Duration::from_millis(50) {
+                x = x.wrapping_add(std::hint::black_box(1));
+            }
+            let b = cpu_seconds(std::process::id(), hz).unwrap();
+            assert!(b >= a && x > 0);
+        }
+    }
+
+    #[test]
+    fn random_tokens_differ() {
+        let (a, b) = (random_token(), random_token());
+        assert_eq!(a.len(), 32);
+        assert_ne!(a, b);
+    }
+}
