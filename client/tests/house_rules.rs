@@ -252,13 +252,14 @@ fn dev_dependencies_do_not_loop_back() {
     let (ours, edges) = workspace_edges(&meta);
     let mut bad = Vec::new();
     for e in &edges {
-        if e.kind.as_deref() == Some("dev") && ours.contains(&e.to) {
-            if reachable(&meta, &e.to).contains(&e.from) {
-                bad.push(format!(
-                    "{} dev-depends on {}, which depends on {}",
-                    e.from, e.to, e.from
-                ));
-            }
+        if e.kind.as_deref() == Some("dev")
+            && ours.contains(&e.to)
+            && reachable(&meta, &e.to).contains(&e.from)
+        {
+            bad.push(format!(
+                "{} dev-depends on {}, which depends on {}",
+                e.from, e.to, e.from
+            ));
         }
     }
     assert!(bad.is_empty(), "{}", bad.join("\n"));

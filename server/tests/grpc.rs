@@ -12,7 +12,7 @@ use crease_core::codec::FrameDecoder;
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
-use crease_core::runtime::predictor::Predictor;
+use crease_core::predictor::Predictor;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::registry::ModelRegistry;

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::examples::ExampleSet;
-use crease_core::runtime::predictor::Predictor;
+use crease_core::predictor::Predictor;
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use crease_train::regress::{Method, RegressOptions};

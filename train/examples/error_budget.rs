@@ -17,8 +17,8 @@ use std::sync::Arc;
 
 use crease_core::glam::{Mat3, Quat, Vec3, Vec4};
 use crease_core::mesh::examples::ExampleSet;
+use crease_core::predictor::Predictor;
 use crease_core::runtime::edge_skin::EdgeSkin;
-use crease_core::runtime::predictor::Predictor;
 use crease_train::eval::{oracle_transforms, rms_normalized};
 use crease_train::pipeline::{self, TrainInput, TrainOptions};
 use crease_train::regress::{Method, RegressOptions};

@@ -41,7 +41,7 @@ use std::time::Instant;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
-use crease_core::runtime::predictor::Predictor;
+use crease_core::predictor::Predictor;
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
 
 use crease_core::model::DetailLayer;

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use crease_core::glam::Vec3;
 use crease_core::mesh::examples::ExampleSet;
 use crease_core::model::TrainedModel;
-use crease_core::runtime::predictor::Predictor;
+use crease_core::predictor::Predictor;
 use crease_train::bones::FitOptions;
 use crease_train::eval::{self, EvalOptions, HeldOut};
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};

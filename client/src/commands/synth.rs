@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crease_core::mesh::Mesh;
 use crease_core::model::{TrainedModel, gltf_export};
-use crease_core::runtime::predictor::Predictor;
+use crease_core::predictor::Predictor;
 
 use super::control_file::read_control_frames;
 

@@ -8,8 +8,6 @@
 //! - [`kernel`]: the kernels of the regression (Gaussian, inhomogeneous polynomial) and the
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
-//! - [`predictor`]: the per-frame pipeline (controls -> transforms -> skinned mesh) and its
-//!   reusable frame context.
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 //! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
@@ -22,7 +20,6 @@ pub mod edge_skin;
 pub mod filter;
 pub mod kernel;
 pub mod predict;
-pub mod predictor;
 pub mod skin;
 pub mod translations;
 

@@ -24,12 +24,12 @@ use std::sync::{Arc, OnceLock};
 
 use glam::{Quat, Vec3};
 
-use super::detail::{DetailError, DetailSynth};
-use super::displacement::{DetailInput, DetailRegressor, rotations_input};
-use super::predict::RotationScratch;
-use super::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
-use super::translations::{TranslationError, TranslationScratch, TranslationSolver};
 use crate::model::TrainedModel;
+use crate::runtime::detail::{DetailError, DetailSynth};
+use crate::runtime::displacement::{DetailInput, DetailRegressor, rotations_input};
+use crate::runtime::predict::RotationScratch;
+use crate::runtime::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
+use crate::runtime::translations::{TranslationError, TranslationScratch, TranslationSolver};
 
 /// What a frame got wrong.
 #[derive(Debug, thiserror::Error)]
