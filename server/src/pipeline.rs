@@ -552,3 +552,51 @@ impl Pipeline {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fanout::LocalFanout;
+
+    #[test]
+    fn the_pool_allocates_nothing_after_warm_up_while_a_subscriber_holds_an_old_frame() {
+        let qbox = QuantBox::from_min_step(Vec3::ZERO, Vec3::ONE, 16).unwrap();
+        let fanout = LocalFanout::default();
+        let mut slow = fanout.subscribe(Level::Base);
+        let mut fast = fanout.subscribe(Level::Base);
+        let mut pool = FramePool::default();
+        // Frame `i`: its bytes are `i` repeated (a size that varies), its lanes `i` too.
+        let encoded = |i: u64| vec![i as u8; 200 + (i as usize * 37) % 100];
+        let lanes = |i: u64| vec![[i as u16, 1, 2, 0]; 64];
+        let mut publish = |pool: &mut FramePool, i: u64| {
+            let u = pool.fill(qbox, &encoded(i), &lanes(i), |u| u.seq = i);
+            fanout.publish(Level::Base, u);
+        };
+        for i in 0..4 {
+            publish(&mut pool, i);
+        }
+        // The slow subscriber takes frame 3 and holds it (and its bytes, as a message in
+        // flight would) from here on.
+        let old = slow.rx.borrow_and_update().clone().unwrap();
+        let old_bytes = old.frame_for(Some(old.codec_seq())).unwrap();
+        for i in 4..8 {
+            publish(&mut pool, i);
+        }
+        let warm = pool.fresh();
+        assert!(warm > 0, "the pool allocated its first frames");
+        for i in 8..200 {
+            publish(&mut pool, i);
+            // A fast subscriber reads every frame and lets it go.
+            let f = fast.rx.borrow_and_update().clone().unwrap();
+            assert_eq!(f.seq, i);
+            assert_eq!(f.frame_for(Some(f.codec_seq())).unwrap(), encoded(i));
+            assert_eq!(f.lanes, lanes(i));
+        }
+        assert_eq!(pool.fresh(), warm, "allocations after warm-up");
+        // The held frame was never overwritten.
+        assert_eq!(old.seq, 3);
+        assert_eq!(old_bytes, encoded(3));
+        assert_eq!(old.lanes, lanes(3));
+        assert!(pool.slots.len() <= 4, "{} slots", pool.slots.len());
+    }
+}
