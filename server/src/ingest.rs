@@ -198,7 +198,7 @@ mod tests {
             tonic::Code::Internal,
         ];
         for ((e, code), grpc) in all().iter().zip(codes).zip(grpc) {
-            let a = ack(4, &Err(PublishError::from(clone(e))));
+            let a = ack(4, &Err(clone(e)));
             let fe = a.error.unwrap();
             assert_eq!((a.seq, fe.code, fe.frame), (4, code, None), "{e}");
             assert_eq!(fe.message, e.to_string());

@@ -568,7 +568,7 @@ mod tests {
         // Frame `i`: its bytes are `i` repeated (a size that varies), its lanes `i` too.
         let encoded = |i: u64| vec![i as u8; 200 + (i as usize * 37) % 100];
         let lanes = |i: u64| vec![[i as u16, 1, 2, 0]; 64];
-        let mut publish = |pool: &mut FramePool, i: u64| {
+        let publish = |pool: &mut FramePool, i: u64| {
             let u = pool.fill(qbox, &encoded(i), &lanes(i), |u| u.seq = i);
             fanout.publish(Level::Base, u);
         };
