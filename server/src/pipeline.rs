@@ -6,7 +6,7 @@
 //! executor.
 //!
 //! Frames are handed to the fan-out as [`MeshUpdate`]s taken from a small pool per level
-//! ([`FramePool`]): after warm-up a frame allocates nothing, even while a slow subscriber still
+//! (`FramePool`): after warm-up a frame allocates nothing, even while a slow subscriber still
 //! holds an older frame (it simply holds another slot). Each update keeps the quantised lanes
 //! the encoder made for it, from which a keyframe of that same frame is encoded on demand for a
 //! subscriber that lacks the delta's base ([`MeshUpdate::frame_for`]).
