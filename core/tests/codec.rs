@@ -12,8 +12,8 @@ use std::path::Path;
 
 use crease_core::codec::{
     CodecError, FrameDecoder, FrameEncoder, FrameHeader, FrameKind, HEADER_LEN, OCT_MAX_ERROR_DEG,
-    QuantBox, decode_indices, decode_keyframe, encode_indices, encode_keyframe, oct_decode,
-    oct_encode, parse_frame,
+    QuantBox, decode_indices, decode_keyframe, encode_indices, encode_keyframe,
+    encode_keyframe_from_lanes, oct_decode, oct_encode, parse_frame,
 };
 use crease_core::glam::{DVec3, Vec3};
 use crease_core::mesh::{ExampleSet, Mesh, compute_vertex_normals};
@@ -280,6 +280,31 @@ fn keyframe_schedule_follows_interval_force_and_normals() {
 }
 
 #[test]
+fn a_keyframe_from_the_encoders_lanes_is_the_keyframe_of_its_positions() {
+    // A mesh moving through the box, half the frames deltas: after each frame, the keyframe of
+    // the encoder's lanes is byte for byte the stateless keyframe of the same positions (which
+    // quantises them itself), at 12 and 16 bits.
+    let pts: Vec<Vec3> = (0..40)
+        .map(|i| Vec3::new((i as f32 * 0.37).sin(), i as f32 * 0.05, (i as f32).cos()))
+        .collect();
+    for bits in [12u8, 16] {
+        let qbox = QuantBox::from_positions(&pts, 0.25, bits).unwrap();
+        let mut enc = FrameEncoder::new(pts.len(), qbox, 0).unwrap();
+        let (mut frame, mut from_lanes, mut stateless) = (Vec::new(), Vec::new(), Vec::new());
+        for f in 0..5 {
+            let moved: Vec<Vec3> = pts
+                .iter()
+                .map(|p| *p + Vec3::X * (0.03 * f as f32))
+                .collect();
+            let h = enc.encode(&moved, None, &mut frame).unwrap();
+            encode_keyframe_from_lanes(&qbox, h.seq, enc.lanes(), false, &mut from_lanes).unwrap();
+            encode_keyframe(&qbox, h.seq, &moved, None, &mut stateless).unwrap();
+            assert_eq!(from_lanes, stateless, "{bits} bits, frame {f}");
+        }
+    }
+}
+
+#[test]
 fn a_delta_without_its_base_is_refused() {
     let pts: Vec<Vec3> = (0..50).map(|i| Vec3::new(i as f32, 0.0, 1.0)).collect();
     let qbox = QuantBox::from_positions(&pts, 0.25, 16).unwrap();
@@ -320,9 +345,9 @@ fn a_delta_without_its_base_is_refused() {
         })
     );
     assert_eq!(skipper.lanes(), &held[..]);
-    // The server's remedy: the latest frame again as a keyframe, then the shared deltas.
+    // The server's remedy: the latest frame's lanes again as a keyframe, then the shared deltas.
     let mut key = Vec::new();
-    let h = enc.encode_last_as_keyframe(&mut key).unwrap();
+    let h = encode_keyframe_from_lanes(&qbox, 3, enc.lanes(), false, &mut key).unwrap();
     assert_eq!((h.kind, h.seq), (FrameKind::Key, 3));
     let mut next = Vec::new();
     let moved: Vec<Vec3> = pts.iter().map(|p| *p + Vec3::Y * 7.0).collect();
@@ -347,12 +372,13 @@ fn a_delta_without_its_base_is_refused() {
             what: "quantisation box"
         })
     );
-    assert_eq!(
-        FrameEncoder::new(1, qbox, 1)
-            .unwrap()
-            .encode_last_as_keyframe(&mut key),
-        Err(CodecError::NoFrame)
-    );
+    // A keyframe from lanes decodes to exactly those lanes, normals flag included.
+    let lanes = [[1u16, 2, 3, 0x7f80], [65535, 0, 7, 0x0180]];
+    let h = encode_keyframe_from_lanes(&qbox, 9, &lanes, true, &mut key).unwrap();
+    assert!(h.normals && h.kind == FrameKind::Key && h.base_seq == 9);
+    let mut fresh = FrameDecoder::new(2);
+    assert_eq!(fresh.decode(&key).unwrap().seq, 9);
+    assert_eq!(fresh.lanes(), &lanes[..]);
     dec.reset();
     assert!(matches!(
         dec.decode(&next),

@@ -212,7 +212,8 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let mut demo_token = None;
     if let Some((model, animation)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
-        let mut room = Room::open(DEMO_ROOM, model, Some(DEMO_BETA), state.config.stream)?;
+        let mut room =
+            Room::open(DEMO_ROOM, model, Some(DEMO_BETA), state.config.stream, None).await?;
         if let Some(token) = &config.demo_token {
             room = room.with_token(token);
         }

@@ -3,18 +3,18 @@
 
 use std::pin::Pin;
 use std::sync::Arc;
-use std::time::Instant;
 
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
-use crease_proto::v1::{self, FrameError};
+use crease_proto::{Level, v1};
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::pipeline::BuildError;
 use crate::registry::LoadedModel;
-use crate::room::{Level, Room, RoomError, StreamSettings};
+use crate::room::{Room, RoomError, StreamSettings};
 use crate::{AddRoomError, AppState};
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
@@ -71,16 +71,6 @@ pub fn router(
 fn bearer<T>(req: &Request<T>) -> Option<String> {
     let v = req.metadata().get("authorization")?.to_str().ok()?;
     v.strip_prefix("Bearer ").map(|t| t.trim().to_owned())
-}
-
-fn level(l: i32) -> Result<Level, Status> {
-    match v1::Level::try_from(l) {
-        Ok(v1::Level::Unspecified | v1::Level::Base) => Ok(Level::Base),
-        Ok(v1::Level::Detail) => Ok(Level::Detail),
-        Err(_) => Err(Status::invalid_argument(format!(
-            "level: {l} is not a Level (0 unspecified, 1 base, 2 detail)"
-        ))),
-    }
 }
 
 impl CreaseService {
@@ -156,13 +146,9 @@ impl Crease for CreaseService {
                 f.min_cutoff_hz, f.beta, f.d_cutoff_hz
             )));
         }
-        let room = Room::open(&r.room, model, beta, self.state.config.stream)
-            .map_err(|e| match e {
-                RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
-                RoomError::Predictor(e) => Status::invalid_argument(format!("beta: {e}")),
-                RoomError::Codec(e) => Status::internal(format!("model: {e}")),
-            })?
-            .with_filter(filter);
+        let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
+            .await
+            .map_err(open_status)?;
         let room = self.state.add_room(room).map_err(|e| match e {
             AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
             AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
@@ -236,7 +222,7 @@ impl Crease for CreaseService {
         req: Request<v1::SubscribeRequest>,
     ) -> Result<Response<Self::SubscribeStream>, Status> {
         let r = req.into_inner();
-        let level = level(r.level)?;
+        let level = Level::from_wire("SubscribeRequest", r.level)?;
         let room = self.room(&r.room)?;
         check_level(&room, level)?;
         let subscription = room
@@ -257,11 +243,12 @@ impl Crease for CreaseService {
         req: Request<v1::SynthesizeRequest>,
     ) -> Result<Response<Self::SynthesizeStream>, Status> {
         let r = req.into_inner();
-        let level = level(r.level)?;
+        let level = Level::from_wire("SynthesizeRequest", r.level)?;
         let model = self.model(&r.model)?;
         let beta = (r.beta != 0.0).then_some(r.beta);
-        let room = Room::open("batch", model, beta, StreamSettings::full())
-            .map_err(|e| Status::invalid_argument(format!("beta: {e}")))?;
+        let room = Room::open("batch", model, beta, StreamSettings::full(), None)
+            .await
+            .map_err(open_status)?;
         check_level(&room, level)?;
         Ok(Response::new(Box::pin(crate::stream::batch(
             Arc::clone(&self.state),
@@ -272,55 +259,28 @@ impl Crease for CreaseService {
     }
 }
 
-/// Publishes one control frame (any transport): finds the room, checks the token, predicts off
-/// the async threads, counts it in the metrics, and answers with the ack (an error ack for a
-/// refused frame; the room is unchanged then).
+/// Publishes one control frame through [`crate::ingest::publish`] and answers with its ack
+/// (an error ack for a refused frame; the room is unchanged then): gRPC's `Publish`, and the
+/// embedded demo's animation.
 pub async fn publish_one(
     state: &Arc<AppState>,
     token: Option<&str>,
     frame: v1::ControlFrame,
 ) -> v1::PublishAck {
-    let received = Instant::now();
-    let ack = match state.room(&frame.room) {
-        None => error_ack(frame.seq, 5, format!("room: no room {:?}", frame.room)),
-        Some(room) if !room.accepts(token) => error_ack(
-            frame.seq,
-            7,
-            format!("authorization: not the publish token of room {:?}", room.id),
-        ),
-        Some(room) if !room.admit(state.config.limits.publish_hz) => error_ack(
-            frame.seq,
-            8,
-            format!(
-                "rate: room {:?} accepts at most {} frames per second",
-                room.id, state.config.limits.publish_hz
-            ),
-        ),
-        Some(room) => {
-            let seq = frame.seq;
-            let done = tokio::task::spawn_blocking(move || room.publish(&frame, received)).await;
-            match done {
-                Ok(Ok(p)) => v1::PublishAck {
-                    seq,
-                    server_latency_us: p.latency_us,
-                    held_controls: p.held,
-                    error: None,
-                    control_residual: p.control_rms,
-                },
-                Ok(Err(e)) => error_ack(seq, 3, e.to_string()),
-                Err(e) => error_ack(seq, 13, format!("internal: {e}")),
-            }
+    let seq = frame.seq;
+    crate::ingest::ack(seq, &crate::ingest::publish(state, token, frame).await)
+}
+
+/// The status of a room that could not be opened.
+fn open_status(e: RoomError) -> Status {
+    match e {
+        RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
+        RoomError::Build(BuildError::Predictor(e)) => {
+            Status::invalid_argument(format!("beta: {e}"))
         }
-    };
-    let m = &state.metrics;
-    if ack.error.is_some() {
-        m.frames_refused.inc();
-    } else {
-        m.frames_published.inc();
-        m.frame_latency
-            .observe(f64::from(ack.server_latency_us) * 1e-6);
+        RoomError::Build(BuildError::Codec(e)) => Status::internal(format!("model: {e}")),
+        RoomError::Panicked(_) => Status::internal(e.to_string()),
     }
-    ack
 }
 
 /// Detail streams need a model with a detail layer.
@@ -332,14 +292,4 @@ fn check_level(room: &Room, level: Level) -> Result<(), Status> {
         )));
     }
     Ok(())
-}
-
-fn error_ack(seq: u64, code: i32, message: String) -> v1::PublishAck {
-    v1::PublishAck {
-        seq,
-        server_latency_us: 0,
-        held_controls: 0,
-        error: Some(FrameError { code, message }),
-        control_residual: 0.0,
-    }
 }

@@ -10,6 +10,8 @@ use axum::http::{StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
+use crease_proto::json::{RoomDocument, RoomList};
+
 use crate::AppState;
 
 /// The HTTP router over shared state.
@@ -50,11 +52,12 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         .cloned()
         .collect();
     ids.sort();
-    axum::Json(serde_json::json!({ "rooms": ids }))
+    axum::Json(RoomList { rooms: ids })
 }
 
 /// `GET /api/rooms/{id}`: what a viewer needs besides the stream: the model's control points
-/// (id, name, model vertex, rest position), the room's beta, the vertex counts.
+/// (id, name, model vertex, rest position), the room's beta, the vertex counts
+/// ([`RoomDocument`]).
 async fn room_info(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
@@ -62,23 +65,12 @@ async fn room_info(
     let Some(room) = state.room(&id) else {
         return (StatusCode::NOT_FOUND, format!("room: no room {id:?}\n")).into_response();
     };
-    let info = &room.model.info;
-    let v3 = |v: Option<&crease_proto::v1::Vec3>| v.map_or([0.0; 3], |v| [v.x, v.y, v.z]);
-    axum::Json(serde_json::json!({
-        "room": room.id,
-        "model": info.name,
-        "beta": room.beta(),
-        "has_detail": room.has_detail(),
-        "base_vertices": info.base_vertices,
-        "detail_vertices": info.detail_vertices,
-        "bounds": info.bounds.as_ref().map(|b| [v3(b.min.as_ref()), v3(b.max.as_ref())]),
-        "control_points": info.control_points.iter().map(|c| serde_json::json!({
-            "id": c.id,
-            "name": c.name,
-            "vertex": c.vertex,
-            "rest": v3(c.rest.as_ref()),
-        })).collect::<Vec<_>>(),
-    }))
+    axum::Json(RoomDocument::new(
+        &room.id,
+        &room.model.info,
+        room.beta(),
+        room.has_detail(),
+    ))
     .into_response()
 }
 

@@ -1,21 +1,34 @@
 //! crease-server: hosts live rooms on loaded models and streams predicted meshes (issue 6).
 //!
+//! Layout, in the order a control frame crosses it:
+//! - [`grpc`] / [`ws`]: the transports: the `crease.v1.Crease` service (tonic, with gRPC
+//!   health and reflection) and `/ws/rooms/{id}` (subscribe and publish over WebSocket).
+//! - [`ingest`]: the one publish path of both: room lookup, token, rate, the wire frame
+//!   read, a typed [`ingest::PublishError`] mapped once per transport.
+//! - [`room`]: a live room, tying together its [`session`] (identity, token in constant
+//!   time, rate limit, counters), its [`pipeline`] (One Euro filter, predictor, encoders,
+//!   frame pools; blocking work, run on the blocking pool) and its [`fanout`] (latest-wins
+//!   delivery per level behind a trait).
+//! - [`stream`]: subscribers' mesh streams (topology, then frames; on-demand keyframes) and
+//!   batches.
 //! - [`registry`]: the models of a model directory, loaded once.
-//! - [`room`]: a live session on one model: control frames in, meshes out to every subscriber
-//!   (latest-wins), detail only while asked for.
-//! - [`grpc`]: the `crease.v1.Crease` service (tonic), with gRPC health and reflection.
-//! - [`http`]: `/healthz`, `/readyz`, `/metrics` (axum); [`metrics`]: the Prometheus metrics;
-//!   [`ws`]: `/ws/rooms/{id}`, subscribe and publish over WebSocket.
+//! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
+//!   Prometheus metrics.
 //! - [`serve`]: binds the listeners and runs until shut down.
 //!
-//! Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the embedded demo and the
-//! `crease-server` binary are in `crease-demo`.
+//! Every wire shape (protobuf conversions, the JSON of the HTTP side, error codes) is
+//! `crease-proto`'s. Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the
+//! embedded demo and the `crease-server` binary are in `crease-demo`.
 
+pub mod fanout;
 pub mod grpc;
 pub mod http;
+pub mod ingest;
 pub mod metrics;
+pub mod pipeline;
 pub mod registry;
 pub mod room;
+pub mod session;
 pub mod stream;
 pub mod ws;
 

@@ -1,14 +1,18 @@
-//! Mesh streams: the topology message, then encoded frames (`core::codec`).
+//! Mesh streams: the topology message, then encoded frames (`core::codec`), for a live
+//! subscription or a batch.
 //!
-//! A subscription's task waits on its room's `watch` channel, so it always sends the newest
+//! A subscription's task waits on its level's fan-out receiver, so it always sends the newest
 //! frame and skips what it was too slow for (`Frame.skipped` counts them). Frames are encoded
-//! once by the room; the task sends the shared delta when it has the delta's base, else the
-//! frame's shared keyframe ([`crate::room::MeshUpdate::frame_for`]). A batch runs its frames
-//! through a private room, in order, with a bounded response buffer.
+//! once by the room's pipeline; the task sends the shared delta when it has the delta's base,
+//! else the frame's shared keyframe ([`MeshUpdate::frame_for`], encoded on the blocking pool
+//! the first time a subscriber needs it). A batch runs its frames through a private room, in
+//! order, with a bounded response buffer; a refused frame ends it with a status naming the
+//! frame by index in its details (`crease_proto::errors::batch_status`).
 
 use std::sync::Arc;
 
-use crease_proto::{box3, v1};
+use crease_proto::errors::batch_status;
+use crease_proto::{Level, TopologyParts, frame_message, topology_message, v1};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
@@ -16,66 +20,44 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
 use crate::AppState;
-use crate::room::{Level, MeshUpdate, Room, Subscription};
+use crate::pipeline::PipelineError;
+use crate::room::{MeshUpdate, Room, Subscription};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
-fn level_wire(level: Level) -> v1::Level {
-    match level {
-        Level::Base => v1::Level::Base,
-        Level::Detail => v1::Level::Detail,
-    }
-}
 
 /// The first message of a mesh stream.
 fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
-    let triangles = room.triangles(level);
-    let n = room.vertex_count(level);
-    let indices = room
+    let p = room.pipeline();
+    let indices = p
         .encoded_indices(level)
-        .map_err(|e| Status::internal(format!("index buffer: {e}")))?
-        .to_vec();
-    let qbox = room.qbox(level);
-    Ok(v1::MeshFrame {
-        body: Some(v1::mesh_frame::Body::Topology(v1::Topology {
-            model: room.model.name.clone(),
-            level: level_wire(level) as i32,
-            vertex_count: n as u32,
-            triangle_count: triangles.len() as u32,
-            indices,
-            quantization: Some(box3(qbox.min(), qbox.max())),
-            vertex_order: room.vertex_order(level).to_vec(),
-            bits: u32::from(qbox.bits()),
-        })),
-    })
+        .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
+    Ok(topology_message(TopologyParts {
+        model: &room.model.name,
+        level,
+        vertex_count: p.vertex_count(level),
+        triangle_count: p.triangles(level).len(),
+        indices: &indices,
+        qbox: p.qbox(level),
+        vertex_order: p.vertex_order(level),
+    }))
 }
 
 /// The bytes of `update` for a subscriber whose last received codec frame is `last_sent`
-/// (updated): shared with the other subscribers, not copied.
-fn bytes_for(update: &MeshUpdate, last_sent: &mut Option<u32>) -> Result<Bytes, Status> {
-    let bytes = update
-        .frame_for(*last_sent)
-        .map_err(|e| Status::internal(format!("encoding: {e}")))?;
+/// (updated): shared with the other subscribers, not copied. A keyframe the subscriber needs
+/// is encoded on the blocking pool.
+async fn bytes_for(update: &Arc<MeshUpdate>, last_sent: &mut Option<u32>) -> Result<Bytes, Status> {
+    let bytes = if update.fits(*last_sent) {
+        update.frame_for(*last_sent)
+    } else {
+        let (u, last) = (Arc::clone(update), *last_sent);
+        tokio::task::spawn_blocking(move || u.frame_for(last))
+            .await
+            .map_err(|e| Status::internal(format!("encoding: {e}")))?
+    }
+    .map_err(|e| Status::internal(format!("encoding: {e}")))?;
     *last_sent = Some(update.codec_seq());
     Ok(bytes)
-}
-
-fn frame_message(
-    seq: u64,
-    capture_time_us: i64,
-    latency_us: u32,
-    skipped: u32,
-    data: Bytes,
-) -> v1::MeshFrame {
-    v1::MeshFrame {
-        body: Some(v1::mesh_frame::Body::Frame(v1::Frame {
-            seq,
-            capture_time_us,
-            server_latency_us: latency_us,
-            data,
-            skipped,
-        })),
-    }
 }
 
 /// The live stream of a room at `level` through `sub`, a subscription taken from the room
@@ -91,8 +73,8 @@ pub fn subscribe(
     let closing = state.closing();
     let gauge = state.metrics.subscribers.clone();
     let stream = async move {
-        // The whole subscription moves in (a closure would capture only `sub.rx`, and the
-        // subscriber slot would be given back at once).
+        // The whole subscription moves in (a closure would capture only `sub.frames.rx`, and
+        // the subscriber slot would be given back at once).
         let mut sub = sub;
         let metrics = &state.metrics;
         let first = topology(&room, level);
@@ -102,15 +84,16 @@ pub fn subscribe(
         }
         let mut last_seq: Option<u64> = None;
         let mut last_sent: Option<u32> = None;
+        let rx = &mut sub.frames.rx;
         // The current frame first (if any), then every change.
-        sub.rx.mark_changed();
-        while sub.rx.changed().await.is_ok() {
-            let Some(update) = sub.rx.borrow_and_update().clone() else {
+        rx.mark_changed();
+        while rx.changed().await.is_ok() {
+            let Some(update) = rx.borrow_and_update().clone() else {
                 continue;
             };
             let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
             last_seq = Some(update.seq);
-            let data = match bytes_for(&update, &mut last_sent) {
+            let data = match bytes_for(&update, &mut last_sent).await {
                 Ok(data) => data,
                 Err(e) => {
                     let _ = tx.send(Err(e)).await;
@@ -121,6 +104,8 @@ pub fn subscribe(
             metrics.bytes_out.inc_by(data.len() as u64);
             metrics.frames_out.inc();
             let msg = frame_message(update.seq, update.capture_time_us, latency, skipped, data);
+            // The frame goes back to its pool once sent, not while this task waits.
+            drop(update);
             if tx.send(Ok(msg)).await.is_err() {
                 return;
             }
@@ -142,7 +127,7 @@ pub fn subscribe(
 }
 
 /// A batch: every control frame in order through `room` (module docs). A bad frame ends the
-/// stream with `InvalidArgument` naming the frame and field.
+/// stream with `InvalidArgument` naming the frame (`FrameError.frame` in the details) and field.
 pub fn batch(
     state: Arc<AppState>,
     room: Room,
@@ -166,13 +151,21 @@ pub fn batch(
             let r = Arc::clone(&room);
             let received = std::time::Instant::now();
             let seq = frame.seq;
-            let done = tokio::task::spawn_blocking(move || r.publish(&frame, received)).await;
+            let done = tokio::task::spawn_blocking(move || r.process(&frame, received)).await;
             let latency = match done {
                 Ok(Ok(p)) => p.latency_us,
+                Ok(Err(PipelineError::Wire(e))) => {
+                    let _ = tx.send(Err(batch_status(k, &e))).await;
+                    return;
+                }
+                Ok(Err(e @ PipelineError::Predict(_))) => {
+                    let message = format!("SynthesizeRequest.frames[{k}]: {e}");
+                    let _ = tx.send(Err(Status::invalid_argument(message))).await;
+                    return;
+                }
                 Ok(Err(e)) => {
-                    let _ = tx
-                        .send(Err(Status::invalid_argument(format!("frames[{k}].{e}"))))
-                        .await;
+                    let message = format!("SynthesizeRequest.frames[{k}]: {e}");
+                    let _ = tx.send(Err(Status::internal(message))).await;
                     return;
                 }
                 Err(e) => {
@@ -180,16 +173,17 @@ pub fn batch(
                     return;
                 }
             };
-            let Some(update) = sub.rx.borrow_and_update().clone() else {
+            let Some(update) = sub.frames.rx.borrow_and_update().clone() else {
                 continue;
             };
-            let data = match bytes_for(&update, &mut last_sent) {
+            let data = match bytes_for(&update, &mut last_sent).await {
                 Ok(data) => data,
                 Err(e) => {
                     let _ = tx.send(Err(e)).await;
                     return;
                 }
             };
+            drop(update);
             state.metrics.bytes_out.inc_by(data.len() as u64);
             state.metrics.frames_out.inc();
             let msg = frame_message(seq, 0, latency, 0, data);

@@ -11,7 +11,9 @@
 //!   "error": null}` or with
 //!   `"error": {"code": 3, "message": "positions: ..."}`).
 //!
-//! A bad message is answered by an error ack and the socket stays open.
+//! A bad message is answered by an error ack and the socket stays open. Publishing goes through
+//! [`crate::ingest`] as gRPC's does; the JSON shapes are `crease_proto::json`'s, and a refusal's
+//! JSON error and close code come from [`PublishError::ws`].
 
 use std::sync::Arc;
 
@@ -19,14 +21,15 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
-use crease_proto::{encode_valid_mask, v1};
+use crease_proto::json::{JsonAck, JsonControlFrame};
+use crease_proto::{Level, WireError, v1};
 use futures_util::{SinkExt, StreamExt};
 use prost::Message as _;
 use tokio::sync::mpsc;
 
 use crate::AppState;
-use crate::grpc::publish_one;
-use crate::room::{Level, Room, Subscription};
+use crate::ingest::{self, PublishError};
+use crate::room::{Room, Subscription};
 
 /// Query parameters of `/ws/rooms/{id}`.
 #[derive(Debug, serde::Deserialize)]
@@ -39,34 +42,6 @@ pub struct Params {
     subscribe: Option<bool>,
 }
 
-/// A control frame as JSON.
-#[derive(Debug, serde::Deserialize)]
-struct JsonFrame {
-    #[serde(default)]
-    seq: u64,
-    #[serde(default)]
-    capture_time_us: i64,
-    positions: Vec<f32>,
-    #[serde(default)]
-    valid: Option<Vec<bool>>,
-}
-
-/// An ack as JSON.
-#[derive(Debug, serde::Serialize)]
-struct JsonAck {
-    seq: u64,
-    server_latency_us: u32,
-    held_controls: u32,
-    control_residual: f32,
-    error: Option<JsonError>,
-}
-
-#[derive(Debug, serde::Serialize)]
-struct JsonError {
-    code: i32,
-    message: String,
-}
-
 /// `GET /ws/rooms/{id}`: upgrades to a session on the room (module docs).
 pub async fn room_socket(
     Path(id): Path<String>,
@@ -77,23 +52,16 @@ pub async fn room_socket(
     let Some(room) = state.room(&id) else {
         return (StatusCode::NOT_FOUND, format!("room: no room {id:?}\n")).into_response();
     };
-    let level = match params.level.as_deref() {
-        None | Some("base") => Level::Base,
-        Some("detail") if room.has_detail() => Level::Detail,
-        Some("detail") => {
+    let level = match Level::from_query(params.level.as_deref()) {
+        Ok(Level::Detail) if !room.has_detail() => {
             return (
                 StatusCode::BAD_REQUEST,
                 format!("level: model {:?} has no detail layer\n", room.model.name),
             )
                 .into_response();
         }
-        Some(other) => {
-            return (
-                StatusCode::BAD_REQUEST,
-                format!("level: {other:?}, expected base or detail\n"),
-            )
-                .into_response();
-        }
+        Ok(level) => level,
+        Err(e) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
     };
     // The subscriber slot is taken before the upgrade, so a full room is an HTTP error.
     let subscription = if params.subscribe == Some(false) {
@@ -155,37 +123,46 @@ async fn session(
             m = source.next() => m,
             () = &mut closing => None,
         };
-        let frame = match message {
-            Some(Ok(Message::Binary(bytes))) => v1::ControlFrame::decode(bytes.as_ref())
-                .map_err(|e| format!("message: not a crease.v1.ControlFrame: {e}")),
-            Some(Ok(Message::Text(text))) => serde_json::from_str::<JsonFrame>(text.as_str())
-                .map_err(|e| format!("message: not a JSON control frame: {e}"))
-                .and_then(|j| json_frame(&room.id, j)),
-            Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
-            Some(Ok(_)) => continue,
-        };
-        let ack = match frame {
+        let frame =
+            match message {
+                Some(Ok(Message::Binary(bytes))) => v1::ControlFrame::decode(bytes.as_ref())
+                    .map_err(|e| {
+                        WireError::new(
+                            "WebSocket",
+                            "message",
+                            format!("not a crease.v1.ControlFrame: {e}"),
+                        )
+                    }),
+                Some(Ok(Message::Text(text))) => JsonControlFrame::parse(text.as_str())
+                    .and_then(|j| j.into_control_frame(&room.id)),
+                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                Some(Ok(_)) => continue,
+            };
+        let (seq, outcome) = match frame {
             Ok(mut f) => {
                 f.room.clone_from(&room.id);
-                publish_one(&state, token.as_deref(), f).await
+                (f.seq, ingest::publish(&state, token.as_deref(), f).await)
             }
-            Err(message) => v1::PublishAck {
-                error: Some(v1::FrameError { code: 3, message }),
-                ..Default::default()
-            },
+            Err(e) => (0, Err(PublishError::Wire(e))),
         };
-        let text = serde_json::to_string(&JsonAck {
-            seq: ack.seq,
-            server_latency_us: ack.server_latency_us,
-            held_controls: ack.held_controls,
-            control_residual: ack.control_residual,
-            error: ack.error.map(|e| JsonError {
-                code: e.code,
-                message: e.message,
-            }),
-        })
-        .unwrap_or_default();
-        if out.send(Message::Text(text.into())).await.is_err() {
+        let (ack, close) = match &outcome {
+            Ok(_) => (JsonAck::from(ingest::ack(seq, &outcome)), None),
+            Err(e) => {
+                let refusal = e.ws();
+                let mut ack = JsonAck::from(ingest::ack(seq, &outcome));
+                ack.error = Some(refusal.error);
+                (ack, refusal.close)
+            }
+        };
+        if out.send(Message::Text(ack.to_text().into())).await.is_err() {
+            break;
+        }
+        if let Some(code) = close {
+            let frame = axum::extract::ws::CloseFrame {
+                code,
+                reason: String::new().into(),
+            };
+            let _ = out.send(Message::Close(Some(frame))).await;
             break;
         }
     }
@@ -194,25 +171,4 @@ async fn session(
     }
     drop(out);
     let _ = writer.await;
-}
-
-fn json_frame(room: &str, j: JsonFrame) -> Result<v1::ControlFrame, String> {
-    let mut valid = Vec::new();
-    if let Some(v) = &j.valid {
-        if v.len() * 3 != j.positions.len() {
-            return Err(format!(
-                "valid: {} flags for {} position values (one flag per x, y, z triple)",
-                v.len(),
-                j.positions.len()
-            ));
-        }
-        encode_valid_mask(v, &mut valid);
-    }
-    Ok(v1::ControlFrame {
-        room: room.to_owned(),
-        seq: j.seq,
-        capture_time_us: j.capture_time_us,
-        positions: j.positions,
-        valid,
-    })
 }

@@ -311,7 +311,8 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
     let e = acks[1].error.as_ref().unwrap();
     assert_eq!(e.code, 3);
     assert!(
-        e.message.starts_with("positions: 5 values, expected 9"),
+        e.message
+            .starts_with("ControlFrame.positions: 5 values, expected 9"),
         "{}",
         e.message
     );
@@ -448,7 +449,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             acks[1]["error"]["message"]
                 .as_str()
                 .unwrap()
-                .starts_with("positions: 2 values"),
+                .starts_with("ControlFrame.positions: 2 values"),
             "{}",
             acks[1]
         );

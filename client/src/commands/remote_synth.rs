@@ -183,20 +183,24 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
 }
 
 /// A status from the server as an error: its message (which names the field) and code, with a
-/// batch's `frames[k]` (counted within its request) renumbered to the control file's frame.
+/// batch's refused frame (counted within its request) renumbered to the control file's frame.
 fn status_error(status: &tonic::Status, first: usize) -> anyhow::Error {
     let message = status.message();
-    match renumber(message, first) {
+    match renumber(status, first) {
         Some(m) => anyhow!("the server refused {m} ({:?})", status.code()),
         None => anyhow!("{message} ({:?})", status.code()),
     }
 }
 
-/// `frames[k]...` -> `frames[first + k]...`; `None` for any other message.
-fn renumber(message: &str, first: usize) -> Option<String> {
-    let (k, rest) = message.strip_prefix("frames[")?.split_once(']')?;
-    let k: usize = k.parse().ok()?;
-    Some(format!("frames[{}]{rest}", first + k))
+/// `frames[first + k].<field>: ...` for a batch status whose details name frame `k`
+/// (`FrameError.frame`); `None` for any other status.
+fn renumber(status: &tonic::Status, first: usize) -> Option<String> {
+    let e = crease_proto::errors::batch_frame_error(status)?;
+    Some(format!(
+        "frames[{}].{}",
+        first + e.frame? as usize,
+        e.message
+    ))
 }
 
 /// Control frames per request for a model with `count` control points: at most `max_frames`,
@@ -443,13 +447,23 @@ mod tests {
 
     #[test]
     fn batch_errors_name_the_file_frame() {
+        let refused = |k, field: &str, what: &str| {
+            let e = crease_proto::WireError::new("ControlFrame", field, what);
+            crease_proto::errors::batch_status(k, &e)
+        };
         assert_eq!(
-            renumber("frames[3].positions[1]: (1, inf, 0) is not finite", 2000).as_deref(),
+            renumber(
+                &refused(3, "positions[1]", "(1, inf, 0) is not finite"),
+                2000
+            )
+            .as_deref(),
             Some("frames[2003].positions[1]: (1, inf, 0) is not finite")
         );
-        assert_eq!(renumber("model: no model \"x\"", 5), None);
-        assert_eq!(renumber("frames[x].valid", 5), None);
-        let s = tonic::Status::invalid_argument("frames[0].valid: 3 bytes");
+        let plain = |m: &str| tonic::Status::invalid_argument(m);
+        assert_eq!(renumber(&plain("model: no model \"x\""), 5), None);
+        // The index is read from the details, never parsed out of the message.
+        assert_eq!(renumber(&plain("frames[1].valid"), 5), None);
+        let s = refused(0, "valid", "3 bytes");
         let e = status_error(&s, 7).to_string();
         assert!(
             e.contains("frames[7].valid: 3 bytes") && e.contains("InvalidArgument"),
@@ -606,9 +620,8 @@ mod tests {
         // An error status mid-stream is passed on, renumbered.
         let mut sink = Sink::new(None, "obj", 4, false, false);
         let mut msgs: Vec<Result<_, tonic::Status>> = batch(1, model).into_iter().map(Ok).collect();
-        msgs.push(Err(tonic::Status::invalid_argument(
-            "frames[1].positions: 3 values, expected 12",
-        )));
+        let e = crease_proto::WireError::new("ControlFrame", "positions", "3 values, expected 12");
+        msgs.push(Err(crease_proto::errors::batch_status(1, &e)));
         let e = block_on(sink.receive(tokio_stream::iter(msgs), 3, 3)).unwrap_err();
         let e = format!("{e:#}");
         assert!(

@@ -53,9 +53,10 @@
 //! A decoder applies a delta only to the frame it was computed from: the header carries the
 //! frame's sequence number and its base's. A decoder that joined mid-stream, skipped a frame, or
 //! failed to decode one refuses deltas ([`CodecError::MissingBase`], [`CodecError::BaseMismatch`])
-//! until it gets a keyframe. [`FrameEncoder::encode_last_as_keyframe`] encodes the latest frame
-//! again as a keyframe with the same sequence number, so a server can hand one to a joining or
-//! lagging subscriber and let it follow the shared deltas from there.
+//! until it gets a keyframe. [`encode_keyframe_from_lanes`] encodes a frame's quantised lanes
+//! ([`FrameEncoder::lanes`] right after it) again as a keyframe with the same sequence number,
+//! so a server can hand one to a joining or lagging subscriber and let it follow the shared
+//! deltas from there.
 //!
 //! # Frame layout (version 1)
 //!
@@ -120,6 +121,7 @@ pub use index::{decode_indices, encode_indices, spatial_order};
 pub use quant::{OCT_MAX_ERROR_DEG, QuantBox, oct_decode, oct_encode};
 pub use stream::{
     DEFAULT_KEYFRAME_INTERVAL, FrameDecoder, FrameEncoder, decode_keyframe, encode_keyframe,
+    encode_keyframe_from_lanes,
 };
 
 /// Everything that can go wrong encoding or decoding frames and index buffers. Parsing errors
@@ -239,9 +241,6 @@ pub enum CodecError {
     /// More vertices than a `u32` counts.
     #[error("{0} vertices: a frame holds at most 2^32 - 1")]
     TooManyVertices(usize),
-    /// [`FrameEncoder::encode_last_as_keyframe`] before any frame.
-    #[error("no frame has been encoded yet")]
-    NoFrame,
     /// A triangle names a vertex past the end.
     #[error("triangle {triangle} uses vertex {index}, but the mesh has {vertex_count} vertices")]
     IndexOutOfRange {

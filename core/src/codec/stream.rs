@@ -10,7 +10,8 @@ use super::{CodecError, meshopt_code};
 /// Default keyframe interval of [`FrameEncoder`]: half a second at 60 Hz. Keyframes cost about
 /// 1.5x a delta on the horse gallop (4.5 vs 3.0 bytes per vertex), so one in 30 frames adds 1-2%
 /// to the stream while bounding how long a client that joined without help waits for one.
-/// Servers that hand joiners [`FrameEncoder::encode_last_as_keyframe`] can raise it.
+/// Servers that hand joiners a keyframe of the current frame ([`encode_keyframe_from_lanes`])
+/// can raise it.
 pub const DEFAULT_KEYFRAME_INTERVAL: u32 = 30;
 
 /// meshopt's vertex encoder level: its default (2). On the horse gallop (16 bits, deltas)
@@ -146,6 +147,36 @@ pub fn encode_keyframe(
         payload_len: 0,
     };
     write_frame(header, &lanes, out)
+}
+
+/// Encodes a keyframe of already quantised `lanes` (`[x, y, z, w]` per vertex in `qbox`, as
+/// [`FrameEncoder::lanes`] gives them; `normals`: lane `w` holds encoded normals) with
+/// sequence number `seq`, into `out` (cleared first). A server keeps the lanes of the frame it
+/// encoded and makes the keyframe of that same frame on demand for a subscriber that lacks the
+/// delta's base: a decoder given it holds exactly those lanes and accepts the deltas that
+/// follow, without the positions being quantised a second time.
+///
+/// # Errors
+/// [`CodecError::TooManyVertices`] past `u32::MAX`.
+pub fn encode_keyframe_from_lanes(
+    qbox: &QuantBox,
+    seq: u32,
+    lanes: &[[u16; 4]],
+    normals: bool,
+    out: &mut Vec<u8>,
+) -> Result<FrameHeader, CodecError> {
+    let vertex_count =
+        u32::try_from(lanes.len()).map_err(|_| CodecError::TooManyVertices(lanes.len()))?;
+    let header = FrameHeader {
+        kind: FrameKind::Key,
+        normals,
+        qbox: *qbox,
+        vertex_count,
+        seq,
+        base_seq: seq,
+        payload_len: 0,
+    };
+    write_frame(header, lanes, out)
 }
 
 /// Decodes one keyframe of `vertex_count` vertices without a decoder's state: positions into
@@ -328,26 +359,6 @@ impl FrameEncoder {
         };
         self.force_key = false;
         Ok(header)
-    }
-
-    /// Encodes the last frame again as a keyframe with the same sequence number, into `out`
-    /// (cleared first), without changing the stream: a decoder given it accepts the deltas that
-    /// follow. For a subscriber that joins mid-stream or fell behind.
-    ///
-    /// # Errors
-    /// [`CodecError::NoFrame`] before the first [`FrameEncoder::encode`].
-    pub fn encode_last_as_keyframe(&self, out: &mut Vec<u8>) -> Result<FrameHeader, CodecError> {
-        let last = self.last.ok_or(CodecError::NoFrame)?;
-        let header = FrameHeader {
-            kind: FrameKind::Key,
-            normals: last.normals,
-            qbox: self.qbox,
-            vertex_count: self.vertex_count as u32,
-            seq: last.seq,
-            base_seq: last.seq,
-            payload_len: 0,
-        };
-        write_frame(header, &self.lanes, out)
     }
 }
 

@@ -1,0 +1,154 @@
+//! Per-frame errors on the wire: the named codes a [`v1::FrameError`] carries (the integers
+//! are google.rpc.Code's, unchanged on the wire), the acks that carry them, and a `Synthesize`
+//! batch's error status, whose details name the refused frame by index so clients never parse
+//! the status message.
+
+use prost::Message as _;
+
+use crate::{WireError, v1};
+
+/// The codes a [`v1::FrameError`] carries: the google.rpc.Code of each kind of refusal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorCode {
+    /// A field of the frame does not fit the model (or the message is not a control frame).
+    InvalidArgument,
+    /// No room of that id.
+    NotFound,
+    /// Not the room's publish token (the viewer tells this one apart: a wrong token field).
+    PermissionDenied,
+    /// Over the room's publish rate.
+    ResourceExhausted,
+    /// The server failed while predicting (a bug, not the publisher's fault).
+    Internal,
+}
+
+impl ErrorCode {
+    /// The integer on the wire (google.rpc.Code).
+    pub fn wire(self) -> i32 {
+        match self {
+            ErrorCode::InvalidArgument => 3,
+            ErrorCode::NotFound => 5,
+            ErrorCode::PermissionDenied => 7,
+            ErrorCode::ResourceExhausted => 8,
+            ErrorCode::Internal => 13,
+        }
+    }
+
+    /// The code of a wire integer, if it is one of ours.
+    pub fn from_wire(code: i32) -> Option<ErrorCode> {
+        [
+            ErrorCode::InvalidArgument,
+            ErrorCode::NotFound,
+            ErrorCode::PermissionDenied,
+            ErrorCode::ResourceExhausted,
+            ErrorCode::Internal,
+        ]
+        .into_iter()
+        .find(|c| c.wire() == code)
+    }
+
+    /// The matching gRPC status code.
+    pub fn grpc(self) -> tonic::Code {
+        tonic::Code::from_i32(self.wire())
+    }
+}
+
+/// A per-frame error with `code` and `message` (no batch frame index).
+pub fn frame_error(code: ErrorCode, message: impl Into<String>) -> v1::FrameError {
+    v1::FrameError {
+        code: code.wire(),
+        message: message.into(),
+        frame: None,
+    }
+}
+
+/// The ack of a refused frame `seq`: the room is unchanged.
+pub fn error_ack(seq: u64, error: v1::FrameError) -> v1::PublishAck {
+    v1::PublishAck {
+        seq,
+        error: Some(error),
+        ..Default::default()
+    }
+}
+
+/// The status that ends a `Synthesize` batch whose frame `index` was refused: the message says
+/// `SynthesizeRequest.frames[index].<field>: ...` for people, and the details hold the
+/// [`v1::FrameError`] with `frame: index` and the message relative to the frame
+/// (`positions: ...`) for programs ([`batch_frame_error`]).
+pub fn batch_status(index: usize, e: &WireError) -> tonic::Status {
+    let error = v1::FrameError {
+        code: ErrorCode::InvalidArgument.wire(),
+        message: format!("{}: {}", e.field, e.message),
+        frame: Some(index as u32),
+    };
+    tonic::Status::with_details(
+        ErrorCode::InvalidArgument.grpc(),
+        format!(
+            "SynthesizeRequest.frames[{index}].{}: {}",
+            e.field, e.message
+        ),
+        error.encode_to_vec().into(),
+    )
+}
+
+/// The per-frame error a batch's status carries ([`batch_status`]), if it has one.
+pub fn batch_frame_error(status: &tonic::Status) -> Option<v1::FrameError> {
+    let error = v1::FrameError::decode(status.details()).ok()?;
+    error.frame.is_some().then_some(error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_are_the_google_rpc_integers() {
+        // google/rpc/code.proto: INVALID_ARGUMENT 3, NOT_FOUND 5, PERMISSION_DENIED 7,
+        // RESOURCE_EXHAUSTED 8, INTERNAL 13.
+        let pairs = [
+            (ErrorCode::InvalidArgument, 3, tonic::Code::InvalidArgument),
+            (ErrorCode::NotFound, 5, tonic::Code::NotFound),
+            (
+                ErrorCode::PermissionDenied,
+                7,
+                tonic::Code::PermissionDenied,
+            ),
+            (
+                ErrorCode::ResourceExhausted,
+                8,
+                tonic::Code::ResourceExhausted,
+            ),
+            (ErrorCode::Internal, 13, tonic::Code::Internal),
+        ];
+        for (code, wire, grpc) in pairs {
+            assert_eq!(code.wire(), wire);
+            assert_eq!(code.grpc(), grpc);
+            assert_eq!(ErrorCode::from_wire(wire), Some(code));
+        }
+        assert_eq!(ErrorCode::from_wire(4), None);
+        let ack = error_ack(9, frame_error(ErrorCode::NotFound, "room: no room \"x\""));
+        assert_eq!(ack.seq, 9);
+        let e = ack.error.unwrap();
+        assert_eq!(
+            (e.code, e.message.as_str(), e.frame),
+            (5, "room: no room \"x\"", None)
+        );
+    }
+
+    #[test]
+    fn a_batch_status_names_its_frame_in_a_field() {
+        let e = WireError::new("ControlFrame", "positions", "3 values, expected 12");
+        let status = batch_status(4, &e);
+        assert_eq!(status.code(), tonic::Code::InvalidArgument);
+        assert_eq!(
+            status.message(),
+            "SynthesizeRequest.frames[4].positions: 3 values, expected 12"
+        );
+        let error = batch_frame_error(&status).unwrap();
+        assert_eq!(error.frame, Some(4));
+        assert_eq!(error.code, 3);
+        assert_eq!(error.message, "positions: 3 values, expected 12");
+        // A plain status has no batch error.
+        assert!(batch_frame_error(&tonic::Status::internal("x")).is_none());
+    }
+}

@@ -1,0 +1,320 @@
+//! The JSON forms of the HTTP side, one serde mapping each: control frames a WebSocket
+//! publisher sends as text ([`JsonControlFrame`]), the acks it gets back ([`JsonAck`]), and the
+//! room documents of `GET /api/rooms` ([`RoomList`]) and `GET /api/rooms/{id}`
+//! ([`RoomDocument`]), which the browser viewer reads.
+//!
+//! The shapes are frozen by the viewer (`web/viewer.js`) and the tests pinning them: the room
+//! document's keys come in alphabetical order and its floats as the `f64` widening of the `f32`
+//! (what these documents were when built through a `serde_json::Value`), an ack's floats as the
+//! shortest `f32` form.
+
+use serde::{Serialize, Serializer};
+
+use crate::{WireError, encode_valid_mask, v1};
+
+/// A control frame as JSON: `{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...],
+/// "valid": [true, ...]}`, `valid` optional (every point valid), `seq` and the time 0 when absent.
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+pub struct JsonControlFrame {
+    /// The publisher's sequence number.
+    #[serde(default)]
+    pub seq: u64,
+    /// Capture time, microseconds since the Unix epoch.
+    #[serde(default)]
+    pub capture_time_us: i64,
+    /// x, y, z of every control point.
+    pub positions: Vec<f32>,
+    /// One flag per control point.
+    #[serde(default)]
+    pub valid: Option<Vec<bool>>,
+}
+
+impl JsonControlFrame {
+    /// Parses a text message.
+    ///
+    /// # Errors
+    /// A [`WireError`] naming `message` with serde's reason.
+    pub fn parse(text: &str) -> Result<JsonControlFrame, WireError> {
+        serde_json::from_str(text).map_err(|e| {
+            WireError::new(
+                "WebSocket",
+                "message",
+                format!("not a JSON control frame: {e}"),
+            )
+        })
+    }
+
+    /// The `ControlFrame` for room `room`.
+    ///
+    /// # Errors
+    /// A [`WireError`] naming `valid` when its flags are not one per `x, y, z` triple.
+    pub fn into_control_frame(self, room: &str) -> Result<v1::ControlFrame, WireError> {
+        let mut valid = Vec::new();
+        if let Some(v) = &self.valid {
+            if v.len() * 3 != self.positions.len() {
+                return Err(WireError::new(
+                    "ControlFrame",
+                    "valid",
+                    format!(
+                        "{} flags for {} position values (one flag per x, y, z triple)",
+                        v.len(),
+                        self.positions.len()
+                    ),
+                ));
+            }
+            encode_valid_mask(v, &mut valid);
+        }
+        Ok(v1::ControlFrame {
+            room: room.to_owned(),
+            seq: self.seq,
+            capture_time_us: self.capture_time_us,
+            positions: self.positions,
+            valid,
+        })
+    }
+}
+
+/// An ack as JSON: `{"seq": 1, "server_latency_us": 120, "held_controls": 0,
+/// "control_residual": 0.002, "error": null}`, or with `"error": {"code": 3, "message": ...}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JsonAck {
+    /// The frame's sequence number.
+    pub seq: u64,
+    /// Arrival to meshes ready, microseconds.
+    pub server_latency_us: u32,
+    /// Control points held.
+    pub held_controls: u32,
+    /// RMS distance of the valid control points to the mesh, model units.
+    pub control_residual: f32,
+    /// Set when the frame was refused.
+    pub error: Option<JsonError>,
+}
+
+/// A refused frame's error as JSON.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JsonError {
+    /// google.rpc.Code ([`crate::errors::ErrorCode::wire`]).
+    pub code: i32,
+    /// What was wrong, naming the field.
+    pub message: String,
+}
+
+impl From<v1::FrameError> for JsonError {
+    fn from(e: v1::FrameError) -> Self {
+        Self {
+            code: e.code,
+            message: e.message,
+        }
+    }
+}
+
+impl From<v1::PublishAck> for JsonAck {
+    fn from(ack: v1::PublishAck) -> Self {
+        Self {
+            seq: ack.seq,
+            server_latency_us: ack.server_latency_us,
+            held_controls: ack.held_controls,
+            control_residual: ack.control_residual,
+            error: ack.error.map(JsonError::from),
+        }
+    }
+}
+
+impl JsonAck {
+    /// The ack as a text message.
+    pub fn to_text(&self) -> String {
+        // Proven infallible: plain numbers, strings and an option, no maps with non-string keys.
+        serde_json::to_string(self).expect("an ack always serialises")
+    }
+}
+
+/// `GET /api/rooms`: `{"rooms": [ids, in order]}`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoomList {
+    /// The open rooms' ids, sorted.
+    pub rooms: Vec<String>,
+}
+
+/// `f32`s as the `f64` they widen to (see the module docs).
+fn widened<S: Serializer>(v: &f32, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(f64::from(*v))
+}
+
+/// `[f32; 3]`s as `f64`s.
+fn widened3<S: Serializer>(v: &[f32; 3], s: S) -> Result<S::Ok, S::Error> {
+    v.map(f64::from).serialize(s)
+}
+
+/// A box's corners as `f64`s.
+fn widened_box<S: Serializer>(v: &Option<[[f32; 3]; 2]>, s: S) -> Result<S::Ok, S::Error> {
+    v.map(|b| b.map(|c| c.map(f64::from))).serialize(s)
+}
+
+/// `GET /api/rooms/{id}`: what a viewer needs besides the stream. Keys in alphabetical order
+/// (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoomDocument {
+    /// Vertices of the base mesh.
+    pub base_vertices: u32,
+    /// The room's translation-solve beta.
+    #[serde(serialize_with = "widened")]
+    pub beta: f32,
+    /// The rest mesh's box, `[min, max]`.
+    #[serde(serialize_with = "widened_box")]
+    pub bounds: Option<[[f32; 3]; 2]>,
+    /// The model's control points.
+    pub control_points: Vec<RoomControlPoint>,
+    /// Vertices of the detail mesh (0: none).
+    pub detail_vertices: u32,
+    /// Whether the model has a detail layer.
+    pub has_detail: bool,
+    /// The model's name.
+    pub model: String,
+    /// The room id.
+    pub room: String,
+}
+
+/// A control point in a [`RoomDocument`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoomControlPoint {
+    /// Its position in every control frame.
+    pub id: u32,
+    /// Its name.
+    pub name: String,
+    /// Its rest position.
+    #[serde(serialize_with = "widened3")]
+    pub rest: [f32; 3],
+    /// The rest-mesh vertex it sits on.
+    pub vertex: u32,
+}
+
+impl RoomDocument {
+    /// The document of room `room` on the model `info`, with the room's `beta`.
+    pub fn new(room: &str, info: &v1::ModelInfo, beta: f32, has_detail: bool) -> RoomDocument {
+        let v3 = |v: Option<&v1::Vec3>| v.map_or([0.0; 3], |v| [v.x, v.y, v.z]);
+        RoomDocument {
+            base_vertices: info.base_vertices,
+            beta,
+            bounds: info
+                .bounds
+                .as_ref()
+                .map(|b| [v3(b.min.as_ref()), v3(b.max.as_ref())]),
+            control_points: info
+                .control_points
+                .iter()
+                .map(|c| RoomControlPoint {
+                    id: c.id,
+                    name: c.name.clone(),
+                    rest: v3(c.rest.as_ref()),
+                    vertex: c.vertex,
+                })
+                .collect(),
+            detail_vertices: info.detail_vertices,
+            has_detail,
+            model: info.name.clone(),
+            room: room.to_owned(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::errors::{ErrorCode, error_ack, frame_error};
+
+    #[test]
+    fn acks_serialise_as_the_websocket_always_sent_them() {
+        let ok = v1::PublishAck {
+            seq: 1,
+            server_latency_us: 120,
+            held_controls: 2,
+            error: None,
+            control_residual: 0.002,
+        };
+        assert_eq!(
+            JsonAck::from(ok).to_text(),
+            r#"{"seq":1,"server_latency_us":120,"held_controls":2,"control_residual":0.002,"error":null}"#
+        );
+        let refused = error_ack(
+            7,
+            frame_error(
+                ErrorCode::PermissionDenied,
+                "authorization: not the publish token",
+            ),
+        );
+        assert_eq!(
+            JsonAck::from(refused).to_text(),
+            r#"{"seq":7,"server_latency_us":0,"held_controls":0,"control_residual":0.0,"error":{"code":7,"message":"authorization: not the publish token"}}"#
+        );
+    }
+
+    #[test]
+    fn room_documents_keep_their_keys_order_and_floats() {
+        let info = v1::ModelInfo {
+            name: "tube".into(),
+            base_vertices: 10,
+            detail_vertices: 0,
+            control_points: vec![v1::ControlPoint {
+                id: 0,
+                name: "tip".into(),
+                vertex: 4,
+                rest: Some(v1::Vec3 {
+                    x: 0.5,
+                    y: 0.1,
+                    z: -1.0,
+                }),
+            }],
+            bounds: Some(crate::box3(
+                crease_core::glam::Vec3::ZERO,
+                crease_core::glam::Vec3::ONE,
+            )),
+            ..Default::default()
+        };
+        let doc = RoomDocument::new("r1", &info, 0.3, false);
+        // 0.3f32 and 0.1f32 widened to f64, as a `serde_json::Value` holds them.
+        assert_eq!(
+            serde_json::to_string(&doc).unwrap(),
+            concat!(
+                r#"{"base_vertices":10,"beta":0.30000001192092896,"#,
+                r#""bounds":[[0.0,0.0,0.0],[1.0,1.0,1.0]],"#,
+                r#""control_points":[{"id":0,"name":"tip","rest":[0.5,0.10000000149011612,-1.0],"vertex":4}],"#,
+                r#""detail_vertices":0,"has_detail":false,"model":"tube","room":"r1"}"#
+            )
+        );
+        let list = RoomList {
+            rooms: vec!["a".into(), "b".into()],
+        };
+        assert_eq!(
+            serde_json::to_string(&list).unwrap(),
+            r#"{"rooms":["a","b"]}"#
+        );
+    }
+
+    #[test]
+    fn json_control_frames_parse_and_check_their_flags() {
+        let f = JsonControlFrame::parse(
+            r#"{"seq": 3, "positions": [1, 2, 3, 4, 5, 6], "valid": [true, false]}"#,
+        )
+        .unwrap()
+        .into_control_frame("r")
+        .unwrap();
+        assert_eq!((f.room.as_str(), f.seq, f.capture_time_us), ("r", 3, 0));
+        assert_eq!(f.positions, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(f.valid, [0b01]);
+        let e = JsonControlFrame::parse(r#"{"positions": [1, 2, 3], "valid": [true, true]}"#)
+            .unwrap()
+            .into_control_frame("r")
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "ControlFrame.valid: 2 flags for 3 position values (one flag per x, y, z triple)"
+        );
+        let e = JsonControlFrame::parse("{\"seq\": 1}").unwrap_err();
+        assert!(
+            e.to_string().starts_with(
+                "WebSocket.message: not a JSON control frame: missing field `positions`"
+            ),
+            "{e}"
+        );
+    }
+}

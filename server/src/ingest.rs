@@ -1,0 +1,257 @@
+//! Ingest: the one publish path of every transport. A control frame from gRPC's `Publish`, a
+//! WebSocket (binary protobuf or JSON text) or the embedded demo comes here: the room is looked
+//! up, the token checked, the rate limit applied, the wire frame read into the model's control
+//! points and run through the room's pipeline on the blocking pool. What went wrong is a typed
+//! [`PublishError`], mapped once per transport: [`PublishError::frame_error`] for gRPC's ack
+//! ([`ack`]) and [`PublishError::ws`] for the WebSocket (its JSON error and whether to close).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crease_proto::errors::{ErrorCode, error_ack, frame_error};
+use crease_proto::json::JsonError;
+use crease_proto::{WireError, v1};
+
+use crate::AppState;
+use crate::pipeline::{PipelineError, Published};
+
+/// Why a control frame was refused; the room is unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum PublishError {
+    /// No room of that id.
+    #[error("room: no room {0:?}")]
+    NoRoom(String),
+    /// Not the room's publish token (or none).
+    #[error("authorization: not the publish token of room {0:?}")]
+    Token(String),
+    /// Over the room's publish rate.
+    #[error("rate: room {room:?} accepts at most {hz} frames per second")]
+    Rate {
+        /// The room.
+        room: String,
+        /// Its limit.
+        hz: f64,
+    },
+    /// The message is not a control frame, or a field does not fit the model.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// The predictor refused the controls.
+    #[error("{0}")]
+    Predict(String),
+    /// The server failed (an encoder error, a panicked task): not the publisher's fault.
+    #[error("internal: {0}")]
+    Internal(String),
+}
+
+impl From<PipelineError> for PublishError {
+    fn from(e: PipelineError) -> Self {
+        match e {
+            PipelineError::Wire(e) => PublishError::Wire(e),
+            e @ PipelineError::Predict(_) => PublishError::Predict(e.to_string()),
+            e @ PipelineError::Codec(_) => PublishError::Internal(e.to_string()),
+        }
+    }
+}
+
+/// How the WebSocket answers a refused frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WsRefusal {
+    /// The ack's `error` member.
+    pub error: JsonError,
+    /// The close code to end the socket with, if the refusal ends it; `None` keeps it open.
+    pub close: Option<u16>,
+}
+
+impl PublishError {
+    /// The named code of this refusal.
+    pub fn code(&self) -> ErrorCode {
+        match self {
+            PublishError::NoRoom(_) => ErrorCode::NotFound,
+            PublishError::Token(_) => ErrorCode::PermissionDenied,
+            PublishError::Rate { .. } => ErrorCode::ResourceExhausted,
+            PublishError::Wire(_) | PublishError::Predict(_) => ErrorCode::InvalidArgument,
+            PublishError::Internal(_) => ErrorCode::Internal,
+        }
+    }
+
+    /// gRPC: the `FrameError` of the ack.
+    pub fn frame_error(&self) -> v1::FrameError {
+        frame_error(self.code(), self.to_string())
+    }
+
+    /// gRPC: as a status, for a call that fails as a whole.
+    pub fn status(&self) -> tonic::Status {
+        tonic::Status::new(self.code().grpc(), self.to_string())
+    }
+
+    /// WebSocket: the JSON error of the ack and the close code. Every refusal keeps the socket
+    /// open (`close: None`): a viewer whose drag was refused (a wrong token, the rate) keeps
+    /// watching, and a publisher fixes its next frame.
+    pub fn ws(&self) -> WsRefusal {
+        WsRefusal {
+            error: JsonError {
+                code: self.code().wire(),
+                message: self.to_string(),
+            },
+            close: None,
+        }
+    }
+}
+
+/// Publishes one control frame into `frame.room` with the publisher's `token` (module docs),
+/// and counts it in the metrics.
+///
+/// # Errors
+/// [`PublishError`]; the room is unchanged then.
+pub async fn publish(
+    state: &Arc<AppState>,
+    token: Option<&str>,
+    frame: v1::ControlFrame,
+) -> Result<Published, PublishError> {
+    let received = Instant::now();
+    let done = publish_inner(state, token, frame, received).await;
+    let m = &state.metrics;
+    match &done {
+        Ok(p) => {
+            m.frames_published.inc();
+            m.frame_latency.observe(f64::from(p.latency_us) * 1e-6);
+        }
+        Err(_) => {
+            m.frames_refused.inc();
+        }
+    }
+    done
+}
+
+async fn publish_inner(
+    state: &Arc<AppState>,
+    token: Option<&str>,
+    frame: v1::ControlFrame,
+    received: Instant,
+) -> Result<Published, PublishError> {
+    let room = state
+        .room(&frame.room)
+        .ok_or_else(|| PublishError::NoRoom(frame.room.clone()))?;
+    let session = room.session();
+    if !session.accepts(token) {
+        return Err(PublishError::Token(room.id.clone()));
+    }
+    let hz = state.config.limits.publish_hz;
+    if !session.admit(hz) {
+        return Err(PublishError::Rate {
+            room: room.id.clone(),
+            hz,
+        });
+    }
+    tokio::task::spawn_blocking(move || room.process(&frame, received))
+        .await
+        .map_err(|e| PublishError::Internal(e.to_string()))?
+        .map_err(PublishError::from)
+}
+
+/// The gRPC ack of frame `seq`'s outcome.
+pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAck {
+    match outcome {
+        Ok(p) => v1::PublishAck {
+            seq,
+            server_latency_us: p.latency_us,
+            held_controls: p.held,
+            error: None,
+            control_residual: p.control_rms,
+        },
+        Err(e) => error_ack(seq, e.frame_error()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn all() -> Vec<PublishError> {
+        vec![
+            PublishError::NoRoom("x".into()),
+            PublishError::Token("x".into()),
+            PublishError::Rate {
+                room: "x".into(),
+                hz: 240.0,
+            },
+            PublishError::Wire(WireError::new(
+                "ControlFrame",
+                "positions",
+                "3 values, expected 6",
+            )),
+            PublishError::Predict("prediction: bad".into()),
+            PublishError::Internal("boom".into()),
+        ]
+    }
+
+    #[test]
+    fn each_refusal_maps_once_per_transport() {
+        // google.rpc.Code integers, as the acks always carried them.
+        let codes = [5, 7, 8, 3, 3, 13];
+        let grpc = [
+            tonic::Code::NotFound,
+            tonic::Code::PermissionDenied,
+            tonic::Code::ResourceExhausted,
+            tonic::Code::InvalidArgument,
+            tonic::Code::InvalidArgument,
+            tonic::Code::Internal,
+        ];
+        for ((e, code), grpc) in all().iter().zip(codes).zip(grpc) {
+            let a = ack(4, &Err(clone(e)));
+            let fe = a.error.unwrap();
+            assert_eq!((a.seq, fe.code, fe.frame), (4, code, None), "{e}");
+            assert_eq!(fe.message, e.to_string());
+            assert_eq!(e.status().code(), grpc, "{e}");
+            assert_eq!(e.status().message(), e.to_string());
+            let ws = e.ws();
+            assert_eq!(ws.error.code, code, "{e}");
+            assert_eq!(ws.error.message, e.to_string());
+            assert_eq!(
+                ws.close, None,
+                "{e}: per-frame refusals keep the socket open"
+            );
+        }
+        assert_eq!(
+            all()[1].to_string(),
+            "authorization: not the publish token of room \"x\""
+        );
+        assert_eq!(
+            all()[3].to_string(),
+            "ControlFrame.positions: 3 values, expected 6"
+        );
+        let ok = ack(
+            2,
+            &Ok(Published {
+                held: 1,
+                latency_us: 30,
+                control_rms: 0.5,
+            }),
+        );
+        assert_eq!(
+            (
+                ok.seq,
+                ok.held_controls,
+                ok.server_latency_us,
+                ok.control_residual
+            ),
+            (2, 1, 30, 0.5)
+        );
+        assert!(ok.error.is_none());
+    }
+
+    /// The errors hold only strings and numbers: rebuilt from their parts.
+    fn clone(e: &PublishError) -> PublishError {
+        match e {
+            PublishError::NoRoom(r) => PublishError::NoRoom(r.clone()),
+            PublishError::Token(r) => PublishError::Token(r.clone()),
+            PublishError::Rate { room, hz } => PublishError::Rate {
+                room: room.clone(),
+                hz: *hz,
+            },
+            PublishError::Wire(w) => PublishError::Wire(w.clone()),
+            PublishError::Predict(m) => PublishError::Predict(m.clone()),
+            PublishError::Internal(m) => PublishError::Internal(m.clone()),
+        }
+    }
+}

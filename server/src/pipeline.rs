@@ -1,0 +1,602 @@
+//! A room's per-frame work: control points through the One Euro filter (mocap rooms), the
+//! predictor (and the detail layer while anyone subscribes to it), and one encoder per level,
+//! once per frame for every subscriber. Everything here is blocking: building a pipeline
+//! factorises the predictor's sparse system, and [`Pipeline::process`] predicts and encodes a
+//! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
+//! executor.
+//!
+//! Frames are handed to the fan-out as [`MeshUpdate`]s taken from a small pool per level
+//! (`FramePool`): after warm-up a frame allocates nothing, even while a slow subscriber still
+//! holds an older frame (it simply holds another slot). Each update keeps the quantised lanes
+//! the encoder made for it, from which a keyframe of that same frame is encoded on demand for a
+//! subscriber that lacks the delta's base ([`MeshUpdate::frame_for`]).
+
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Instant;
+
+use crease_core::codec::{
+    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_indices,
+    encode_keyframe_from_lanes,
+};
+use crease_core::glam::Vec3;
+use crease_core::model::ControlPoint;
+use crease_core::runtime::filter::{OneEuro, OneEuroParams};
+use crease_core::predictor::{FrameContext, PredictError, Predictor};
+use crease_proto::{Level, WireError, read_control_frame, v1};
+use prost::bytes::{Bytes, BytesMut};
+
+use crate::fanout::Fanout;
+use crate::registry::LoadedModel;
+
+/// Quantisation box margin around the box of the model's training poses, as a fraction of its
+/// largest side: new poses leave it a little (a position outside the box is clamped to it).
+const BOX_MARGIN: f32 = 0.25;
+
+/// Most frames a level's pool keeps. A frame is held by the fan-out (the newest) and by each
+/// subscriber task while it sends one (a stalled one holds its frame until it reads again), so
+/// a pool needs about two slots plus one per stalled subscriber; past this many, frames are
+/// allocated and dropped as before (counted in [`FramePool::fresh`]).
+const POOL_SLOTS: usize = 32;
+
+/// How a room's meshes are streamed: quantisation bits per level and the vertex order.
+///
+/// Live rooms default to 12 bits for the base mesh: its half-step error (1/8190 of the padded
+/// box, ~2e-4 of the model's size) is ~50x below the horse's prediction error (9.3e-3 RMS,
+/// BENCHMARKS.md) and invisible at any viewing distance, and it brings the gallop to ~1.5
+/// bytes per vertex per frame where 16 bits need ~3 (meshopt's vertex codec stores the low bits
+/// of every moving vertex nearly verbatim: each bit costs ~3/8 byte per vertex). The detail
+/// mesh carries wrinkles a few 1e-3 deep, so it keeps 14 bits. Batches (`Synthesize`) are for
+/// pipelines and default to the full 16.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamSettings {
+    /// Bits per coordinate of base frames, 1..=16.
+    pub base_bits: u8,
+    /// Bits per coordinate of detail frames, 1..=16.
+    pub detail_bits: u8,
+    /// Stream vertices in a spatial order (`Topology.vertex_order`): 7-10% smaller frames.
+    pub spatial_order: bool,
+    /// A keyframe every this many frames (0: only the first). Live rooms need few: a
+    /// subscriber without the base of a delta (joined late, skipped frames) gets a keyframe of
+    /// that frame on demand ([`MeshUpdate::frame_for`]), so periodic keyframes only bound how
+    /// long a client that lost its state by itself waits.
+    pub keyframe_interval: u32,
+}
+
+impl Default for StreamSettings {
+    fn default() -> Self {
+        Self {
+            base_bits: 12,
+            detail_bits: 14,
+            spatial_order: true,
+            // 10 s at 60 Hz: +0.1% bytes on the horse gallop, where every 30 frames costs +1%.
+            keyframe_interval: 600,
+        }
+    }
+}
+
+impl StreamSettings {
+    /// Full 16-bit precision at both levels (batches).
+    pub fn full() -> Self {
+        Self {
+            base_bits: 16,
+            detail_bits: 16,
+            keyframe_interval: DEFAULT_KEYFRAME_INTERVAL,
+            ..Self::default()
+        }
+    }
+}
+
+/// One predicted mesh, encoded once and shared by every subscriber of its level.
+#[derive(Debug)]
+pub struct MeshUpdate {
+    /// The publisher's sequence number.
+    pub seq: u64,
+    /// The publisher's capture time, microseconds since the Unix epoch.
+    pub capture_time_us: i64,
+    /// When the control frame arrived.
+    pub received: Instant,
+    /// The room encoder's frame: a keyframe, or a delta against codec frame `base_seq`.
+    frame: Bytes,
+    /// Where `frame` lives: the rest of the slot's buffer, reclaimed for the next frame once
+    /// nobody holds `frame` any more.
+    buffer: BytesMut,
+    /// This frame's codec sequence number.
+    codec_seq: u32,
+    /// The codec frame a delta applies to (`codec_seq` for a keyframe).
+    base_seq: u32,
+    qbox: QuantBox,
+    /// The encoder's quantised lanes of this frame, for the on-demand keyframe.
+    lanes: Vec<[u16; 4]>,
+    key: OnceLock<Result<Bytes, CodecError>>,
+}
+
+impl MeshUpdate {
+    /// An empty slot for frames in `qbox` (filled by [`FramePool::fill`]).
+    fn empty(qbox: QuantBox) -> MeshUpdate {
+        MeshUpdate {
+            seq: 0,
+            capture_time_us: 0,
+            received: Instant::now(),
+            frame: Bytes::new(),
+            buffer: BytesMut::new(),
+            codec_seq: 0,
+            base_seq: 0,
+            qbox,
+            lanes: Vec::new(),
+            key: OnceLock::new(),
+        }
+    }
+
+    /// A frame with only a sequence number (fan-out tests).
+    #[cfg(test)]
+    pub(crate) fn empty_for_test(seq: u64) -> MeshUpdate {
+        let qbox = QuantBox::from_min_step(Vec3::ZERO, Vec3::ONE, 16).expect("a valid box");
+        MeshUpdate {
+            seq,
+            ..MeshUpdate::empty(qbox)
+        }
+    }
+
+    /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).
+    pub fn codec_seq(&self) -> u32 {
+        self.codec_seq
+    }
+
+    /// Whether a subscriber whose last received codec frame is `last_sent` can take the shared
+    /// frame (a keyframe, or a delta against `last_sent`); else it needs the keyframe.
+    pub fn fits(&self, last_sent: Option<u32>) -> bool {
+        self.base_seq == self.codec_seq || last_sent == Some(self.base_seq)
+    }
+
+    /// The bytes to send a subscriber whose last received codec frame is `last_sent`: the
+    /// shared frame when it [fits](Self::fits), else a keyframe of this frame's lanes (encoded
+    /// once, on first need; blocking, so callers off the executor when it may be needed).
+    pub fn frame_for(&self, last_sent: Option<u32>) -> Result<Bytes, CodecError> {
+        if self.fits(last_sent) {
+            return Ok(self.frame.clone());
+        }
+        self.key
+            .get_or_init(|| {
+                let mut out = Vec::new();
+                encode_keyframe_from_lanes(&self.qbox, self.codec_seq, &self.lanes, false, &mut out)
+                    .map(|_| Bytes::from(out))
+            })
+            .clone()
+    }
+}
+
+/// A level's pool of frames (module docs).
+#[derive(Debug, Default)]
+pub(crate) struct FramePool {
+    slots: Vec<Arc<MeshUpdate>>,
+    /// Slot to try first: the one after the last used, so a just-published frame (held by the
+    /// fan-out) is not looked at first.
+    next: usize,
+    /// Frames, byte buffers and lane buffers allocated (or grown) so far.
+    fresh: u64,
+}
+
+impl FramePool {
+    /// Allocations so far: flat after warm-up.
+    pub(crate) fn fresh(&self) -> u64 {
+        self.fresh
+    }
+
+    /// Fills a frame nobody holds with `encoded` (the encoder's output) and `lanes` (its
+    /// quantised lanes) and returns it to publish.
+    fn fill(
+        &mut self,
+        qbox: QuantBox,
+        encoded: &[u8],
+        lanes: &[[u16; 4]],
+        fill: impl FnOnce(&mut MeshUpdate),
+    ) -> Arc<MeshUpdate> {
+        let n = self.slots.len();
+        let free = (0..n)
+            .map(|k| (self.next + k) % n.max(1))
+            .find(|&i| Arc::get_mut(&mut self.slots[i]).is_some());
+        let i = match free {
+            Some(i) => i,
+            None if n < POOL_SLOTS => {
+                self.fresh += 1;
+                self.slots.push(Arc::new(MeshUpdate::empty(qbox)));
+                n
+            }
+            None => {
+                // Every slot held: replace one (its holders keep theirs).
+                self.fresh += 1;
+                let i = self.next % n;
+                self.slots[i] = Arc::new(MeshUpdate::empty(qbox));
+                i
+            }
+        };
+        self.next = i + 1;
+        let u = Arc::get_mut(&mut self.slots[i]).expect("a free slot: checked or made above");
+        // Give back this slot's old frame, then reuse its buffer if nobody holds any of it.
+        u.frame = Bytes::new();
+        u.key.take();
+        if !u.buffer.try_reclaim(encoded.len()) {
+            self.fresh += 1;
+            // Room for a few frames of this size: the buffer is split per frame and reclaimed
+            // whole; spare room lets a slightly larger frame fit without a new buffer.
+            u.buffer = BytesMut::with_capacity(2 * encoded.len());
+        }
+        u.buffer.extend_from_slice(encoded);
+        u.frame = u.buffer.split().freeze();
+        if u.lanes.capacity() < lanes.len() {
+            self.fresh += 1;
+        }
+        u.lanes.clear();
+        u.lanes.extend_from_slice(lanes);
+        u.qbox = qbox;
+        fill(u);
+        Arc::clone(&self.slots[i])
+    }
+}
+
+/// What publishing one frame did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Published {
+    /// Control points held (invalid or occluded).
+    pub held: u32,
+    /// Microseconds from arrival to the meshes being handed to the subscribers.
+    pub latency_us: u32,
+    /// RMS distance between the frame's valid control points (as received, before any
+    /// filter) and the predicted mesh's control vertices, model units; 0 with none valid.
+    pub control_rms: f32,
+}
+
+/// Why a frame was not published (the room is unchanged but for the encoders' state).
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The control frame does not fit the model.
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// The predictor refused the controls.
+    #[error("prediction: {0}")]
+    Predict(#[from] PredictError),
+    /// A mesh could not be encoded (a server bug: the sizes are fixed at open).
+    #[error("encoding: {0}")]
+    Codec(#[from] CodecError),
+}
+
+/// Errors of building a pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// The model's meshes cannot be encoded (a degenerate box, too many vertices).
+    #[error("frame encoder: {0}")]
+    Codec(#[from] CodecError),
+    /// The predictor could not be built (e.g. beta out of range).
+    #[error(transparent)]
+    Predictor(#[from] PredictError),
+}
+
+/// What a frame changes: the predictor's context, the filters, the encoders and pools.
+struct State {
+    ctx: FrameContext,
+    controls: Vec<Vec3>,
+    valid: Vec<bool>,
+    encoders: [FrameEncoder; 2],
+    pools: [FramePool; 2],
+    /// A level's mesh in the streamed order, and its encoded bytes (reused per frame).
+    streamed: Vec<Vec3>,
+    encoded: Vec<u8>,
+    /// One filter per control point (empty when the room does not filter).
+    filters: Vec<OneEuro>,
+    /// The previous frame's capture time and arrival, for the filter's time step.
+    last_time: Option<(i64, Instant)>,
+}
+
+/// A room's filter, predictor and encoders (module docs).
+pub struct Pipeline {
+    model: Arc<LoadedModel>,
+    predictor: Predictor,
+    qboxes: [QuantBox; 2],
+    /// Whether vertices stream in the model's spatial orders.
+    spatial: bool,
+    filter: Option<OneEuroParams>,
+    state: Mutex<State>,
+    /// Each level's index buffer, meshopt-encoded once on first need.
+    indices: [OnceLock<Result<Bytes, CodecError>>; 2],
+}
+
+impl std::fmt::Debug for Pipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pipeline")
+            .field("model", &self.model.name)
+            .field("beta", &self.predictor.beta())
+            .field("filter", &self.filter)
+            .finish_non_exhaustive()
+    }
+}
+
+/// RMS over the valid control points of the distance between the received point `i`
+/// (`x, y, z` in `targets`, the frame's wire positions) and the predicted position of control
+/// vertex `i`; 0 when none is valid.
+fn control_residual(
+    controls: &[ControlPoint],
+    predicted: &[Vec3],
+    targets: &[f32],
+    valid: &[bool],
+) -> f32 {
+    let (sum, n) = controls
+        .iter()
+        .zip(targets.chunks_exact(3).zip(valid))
+        .filter(|(_, (_, ok))| **ok)
+        .fold((0.0f64, 0usize), |(s, n), (c, (t, _))| {
+            let d = predicted[c.vertex as usize].distance_squared(Vec3::new(t[0], t[1], t[2]));
+            (s + f64::from(d), n + 1)
+        });
+    if n == 0 {
+        0.0
+    } else {
+        (sum / n as f64).sqrt() as f32
+    }
+}
+
+impl Pipeline {
+    /// Builds the predictor (a sparse factorisation: blocking, run it on the blocking pool)
+    /// and the encoders for `model` with `beta` (the model's default when `None`), streaming as
+    /// `settings` says, smoothing control points with `filter` if given.
+    ///
+    /// # Errors
+    /// [`BuildError`]: the predictor's or the encoder's.
+    ///
+    /// # Panics
+    /// If `filter` is not [valid](OneEuroParams::is_valid) (callers check what users send).
+    pub fn build(
+        model: Arc<LoadedModel>,
+        beta: Option<f32>,
+        settings: StreamSettings,
+        filter: Option<OneEuroParams>,
+    ) -> Result<Pipeline, BuildError> {
+        assert!(
+            filter.is_none_or(|p| p.is_valid()),
+            "invalid filter {filter:?}"
+        );
+        let predictor = Predictor::new(Arc::clone(&model.model), beta)?;
+        let ctx = predictor.new_context();
+        let n = model.model.controls.len();
+        let (lo, hi) = model.pose_bounds;
+        let base_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.base_bits)?;
+        let detail_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.detail_bits)?;
+        let encoder =
+            |vertices, qbox| FrameEncoder::new(vertices, qbox, settings.keyframe_interval);
+        let base = encoder(model.model.rig.rest.vertex_count(), base_qbox)?;
+        let detail = encoder(model.model.detail_vertex_count().unwrap_or(0), detail_qbox)?;
+        Ok(Pipeline {
+            predictor,
+            qboxes: [base_qbox, detail_qbox],
+            spatial: settings.spatial_order,
+            filter,
+            state: Mutex::new(State {
+                ctx,
+                controls: vec![Vec3::ZERO; n],
+                valid: vec![true; n],
+                encoders: [base, detail],
+                pools: [FramePool::default(), FramePool::default()],
+                streamed: Vec::new(),
+                encoded: Vec::new(),
+                filters: filter.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]),
+                last_time: None,
+            }),
+            model,
+            indices: [OnceLock::new(), OnceLock::new()],
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Arc<LoadedModel> {
+        &self.model
+    }
+
+    /// The control-point filter.
+    pub fn filter(&self) -> Option<OneEuroParams> {
+        self.filter
+    }
+
+    /// The translation-solve beta.
+    pub fn beta(&self) -> f32 {
+        self.predictor.beta()
+    }
+
+    /// The quantisation box of `level`'s frames.
+    pub fn qbox(&self, level: Level) -> &QuantBox {
+        &self.qboxes[level as usize]
+    }
+
+    /// Whether the model has a detail layer.
+    pub fn has_detail(&self) -> bool {
+        self.model.model.detail.is_some()
+    }
+
+    /// Streamed vertex `i` of `level` is model vertex `order[i]`; empty: the model's order.
+    pub fn vertex_order(&self, level: Level) -> &[u32] {
+        match level {
+            Level::Base if self.spatial => &self.model.spatial().order,
+            Level::Detail if self.spatial => self
+                .model
+                .detail_spatial()
+                .map_or(&[], |s| s.order.as_slice()),
+            Level::Base | Level::Detail => &[],
+        }
+    }
+
+    /// Vertices of `level`'s mesh.
+    pub fn vertex_count(&self, level: Level) -> usize {
+        match level {
+            Level::Base => self.model.model.rig.rest.vertex_count(),
+            Level::Detail => self.model.model.detail_vertex_count().unwrap_or(0),
+        }
+    }
+
+    /// The triangles of `level`'s mesh, in the streamed vertex order.
+    pub fn triangles(&self, level: Level) -> &[[u32; 3]] {
+        match level {
+            Level::Base if self.spatial => &self.model.spatial().triangles,
+            Level::Base => &self.model.model.rig.rest.triangles,
+            Level::Detail => match self.model.detail_spatial() {
+                Some(s) if self.spatial => &s.triangles,
+                _ => self.predictor.detail_triangles().unwrap_or_default(),
+            },
+        }
+    }
+
+    /// `level`'s triangles through meshopt's index codec (encoded once, then shared).
+    ///
+    /// # Errors
+    /// The codec's, if a triangle indexes past the vertex count.
+    pub fn encoded_indices(&self, level: Level) -> Result<Bytes, CodecError> {
+        self.indices[level as usize]
+            .get_or_init(|| {
+                let mut out = Vec::new();
+                encode_indices(self.triangles(level), self.vertex_count(level), &mut out)
+                    .map(|()| Bytes::from(out))
+            })
+            .clone()
+    }
+
+    /// Allocations of `level`'s frame pool so far (flat after warm-up).
+    pub fn pool_allocations(&self, level: Level) -> u64 {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.pools[level as usize].fresh()
+    }
+
+    /// Filters, predicts and encodes one control frame, and hands each level's frame to
+    /// `fanout` (detail only while it has interest). Blocking: run it on the blocking pool. A
+    /// bad frame changes nothing.
+    ///
+    /// # Errors
+    /// [`PipelineError`]: the frame's [`WireError`] (count, non-finite valid point, mask
+    /// length), the predictor's, the encoder's.
+    pub fn process(
+        &self,
+        frame: &v1::ControlFrame,
+        received: Instant,
+        fanout: &dyn Fanout,
+    ) -> Result<Published, PipelineError> {
+        let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let state = &mut *guard;
+        let held = read_control_frame(frame, &mut state.controls, &mut state.valid)?;
+        if !state.filters.is_empty() {
+            // The time step: capture times when the publisher sends increasing ones, else
+            // arrival times.
+            let dt = match state.last_time {
+                Some((t, _)) if frame.capture_time_us > t => {
+                    (frame.capture_time_us - t) as f32 * 1e-6
+                }
+                Some((_, at)) => received.duration_since(at).as_secs_f32(),
+                None => 0.0,
+            };
+            state.last_time = Some((frame.capture_time_us, received));
+            for ((f, p), ok) in state
+                .filters
+                .iter_mut()
+                .zip(state.controls.iter_mut())
+                .zip(&state.valid)
+            {
+                if *ok {
+                    *p = f.filter(*p, dt);
+                } else {
+                    f.reset();
+                }
+            }
+        }
+        let predicted =
+            self.predictor
+                .predict(&mut state.ctx, &state.controls, Some(&state.valid))?;
+        let control_rms = control_residual(
+            &self.model.model.controls,
+            predicted,
+            &frame.positions,
+            &state.valid,
+        );
+        let mut send = |level: Level, mesh: &[Vec3]| -> Result<(), CodecError> {
+            let order = self.vertex_order(level);
+            state.streamed.clear();
+            if order.is_empty() {
+                state.streamed.extend_from_slice(mesh);
+            } else {
+                state
+                    .streamed
+                    .extend(order.iter().map(|&m| mesh[m as usize]));
+            }
+            let encoder = &mut state.encoders[level as usize];
+            let header = encoder.encode(&state.streamed, None, &mut state.encoded)?;
+            let qbox = *encoder.qbox();
+            let pool = &mut state.pools[level as usize];
+            let update = pool.fill(qbox, &state.encoded, encoder.lanes(), |u| {
+                u.seq = frame.seq;
+                u.capture_time_us = frame.capture_time_us;
+                u.received = received;
+                u.codec_seq = header.seq;
+                u.base_seq = match header.kind {
+                    FrameKind::Key => header.seq,
+                    FrameKind::Delta => header.base_seq,
+                };
+            });
+            fanout.publish(level, update);
+            Ok(())
+        };
+        send(Level::Base, predicted)?;
+        if fanout.interest(Level::Detail)
+            && let Ok(detail) = self.predictor.predict_detail(&mut state.ctx)
+        {
+            // `predict_detail` borrows the context the closure does not touch.
+            send(Level::Detail, detail)?;
+        }
+        Ok(Published {
+            held: held as u32,
+            latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
+            control_rms,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fanout::LocalFanout;
+
+    #[test]
+    fn the_pool_allocates_nothing_after_warm_up_while_a_subscriber_holds_an_old_frame() {
+        let qbox = QuantBox::from_min_step(Vec3::ZERO, Vec3::ONE, 16).unwrap();
+        let fanout = LocalFanout::default();
+        let mut slow = fanout.subscribe(Level::Base);
+        let mut fast = fanout.subscribe(Level::Base);
+        let mut pool = FramePool::default();
+        // Frame `i`: its bytes are `i` repeated (a size that varies), its lanes `i` too.
+        let encoded = |i: u64| vec![i as u8; 200 + (i as usize * 37) % 100];
+        let lanes = |i: u64| vec![[i as u16, 1, 2, 0]; 64];
+        let publish = |pool: &mut FramePool, i: u64| {
+            let u = pool.fill(qbox, &encoded(i), &lanes(i), |u| u.seq = i);
+            fanout.publish(Level::Base, u);
+        };
+        for i in 0..4 {
+            publish(&mut pool, i);
+        }
+        // The slow subscriber takes frame 3 and holds it (and its bytes, as a message in
+        // flight would) from here on.
+        let old = slow.rx.borrow_and_update().clone().unwrap();
+        let old_bytes = old.frame_for(Some(old.codec_seq())).unwrap();
+        for i in 4..8 {
+            publish(&mut pool, i);
+        }
+        let warm = pool.fresh();
+        assert!(warm > 0, "the pool allocated its first frames");
+        for i in 8..200 {
+            publish(&mut pool, i);
+            // A fast subscriber reads every frame and lets it go.
+            let f = fast.rx.borrow_and_update().clone().unwrap();
+            assert_eq!(f.seq, i);
+            assert_eq!(f.frame_for(Some(f.codec_seq())).unwrap(), encoded(i));
+            assert_eq!(f.lanes, lanes(i));
+        }
+        assert_eq!(pool.fresh(), warm, "allocations after warm-up");
+        // The held frame was never overwritten.
+        assert_eq!(old.seq, 3);
+        assert_eq!(old_bytes, encoded(3));
+        assert_eq!(old.lanes, lanes(3));
+        assert!(pool.slots.len() <= 4, "{} slots", pool.slots.len());
+    }
+}

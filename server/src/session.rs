@@ -1,0 +1,192 @@
+//! A room's session: who it is (id, publish token), what it allows (the publish rate's token
+//! bucket, the subscriber limit) and what it counted (published frames, live subscribers).
+//! The first thing a control frame meets after the room lookup ([`crate::ingest`]), so refused
+//! frames cost nothing further.
+
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// The room is full: its subscriber limit is reached.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("room is full: {0} subscribers, the limit")]
+pub struct RoomFull(pub usize);
+
+/// A token bucket: `tokens` frames may be published now; it refills at the rate limit, up to a
+/// quarter second's worth.
+#[derive(Debug)]
+struct Budget {
+    tokens: f64,
+    at: Instant,
+}
+
+/// A room's identity, token, limits and counters (module docs).
+#[derive(Debug)]
+pub struct Session {
+    id: String,
+    token: String,
+    budget: Mutex<Budget>,
+    published: AtomicU64,
+    /// Live subscriptions of both levels (the subscriber limit).
+    subscribers: Arc<AtomicUsize>,
+}
+
+/// Whether `id` is a valid room id.
+pub fn valid_room_id(id: &str) -> bool {
+    (1..=64).contains(&id.len())
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+}
+
+/// A random 128-bit token, hex.
+pub fn new_token() -> String {
+    let bytes: [u8; 16] = rand::random();
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Compares without an early exit, so the time taken does not tell how much of a guessed token
+/// was right.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Holds one unit of a counter while it lives.
+#[derive(Debug)]
+pub(crate) struct CountGuard(Arc<AtomicUsize>);
+
+impl CountGuard {
+    /// Counts one more on `counter` until dropped.
+    pub(crate) fn new(counter: &Arc<AtomicUsize>) -> CountGuard {
+        counter.fetch_add(1, Ordering::Relaxed);
+        CountGuard(Arc::clone(counter))
+    }
+}
+
+impl Drop for CountGuard {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+impl Session {
+    /// A session for room `id` (checked by the caller) with a fresh random token.
+    pub(crate) fn new(id: &str) -> Session {
+        Session {
+            id: id.to_owned(),
+            token: new_token(),
+            budget: Mutex::new(Budget {
+                tokens: f64::INFINITY,
+                at: Instant::now(),
+            }),
+            published: AtomicU64::new(0),
+            subscribers: Arc::new(AtomicUsize::new(0)),
+        }
+    }
+
+    /// The room id.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The publish token.
+    pub fn token(&self) -> &str {
+        &self.token
+    }
+
+    /// Replaces the publish token.
+    pub(crate) fn set_token(&mut self, token: &str) {
+        token.clone_into(&mut self.token);
+    }
+
+    /// Whether `presented` is this room's publish token (compared in constant time).
+    pub fn accepts(&self, presented: Option<&str>) -> bool {
+        presented.is_some_and(|p| constant_time_eq(p.as_bytes(), self.token.as_bytes()))
+    }
+
+    /// Whether one more frame may be published now under a limit of `rate_hz` frames per
+    /// second (bursts up to a quarter second's worth, at least one frame). Counts the frame.
+    pub fn admit(&self, rate_hz: f64) -> bool {
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return true;
+        }
+        let burst = (rate_hz / 4.0).max(1.0);
+        let mut b = self.budget.lock().unwrap_or_else(|e| e.into_inner());
+        let now = Instant::now();
+        b.tokens = (b.tokens + now.duration_since(b.at).as_secs_f64() * rate_hz).min(burst);
+        b.at = now;
+        if b.tokens >= 1.0 {
+            b.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Frames published so far (accepted ones).
+    pub fn published(&self) -> u64 {
+        self.published.load(Ordering::Relaxed)
+    }
+
+    /// Counts one accepted frame.
+    pub(crate) fn count_published(&self) {
+        self.published.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Live subscriptions (both levels).
+    pub fn subscriber_count(&self) -> usize {
+        self.subscribers.load(Ordering::Relaxed)
+    }
+
+    /// A subscriber slot, held while the guard lives, if fewer than `max` are taken.
+    ///
+    /// # Errors
+    /// [`RoomFull`] at `max` live subscriptions.
+    pub(crate) fn take_slot(&self, max: usize) -> Result<CountGuard, RoomFull> {
+        self.subscribers
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .map_err(RoomFull)?;
+        Ok(CountGuard(Arc::clone(&self.subscribers)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn room_ids_and_tokens() {
+        assert!(valid_room_id("demo"));
+        assert!(valid_room_id("a-b_C9"));
+        assert!(!valid_room_id(""));
+        assert!(!valid_room_id("a b"));
+        assert!(!valid_room_id(&"x".repeat(65)));
+        let (a, b) = (new_token(), new_token());
+        assert_eq!(a.len(), 32);
+        assert_ne!(a, b);
+        assert!(constant_time_eq(a.as_bytes(), a.as_bytes()));
+        assert!(!constant_time_eq(a.as_bytes(), b.as_bytes()));
+        assert!(!constant_time_eq(b"ab", b"abc"));
+    }
+
+    #[test]
+    fn tokens_slots_and_the_rate_bucket() {
+        let mut s = Session::new("r");
+        s.set_token("secret");
+        assert!(s.accepts(Some("secret")));
+        assert!(!s.accepts(Some("secreT")) && !s.accepts(None));
+        // Two slots: a third is refused until one is given back.
+        let a = s.take_slot(2).unwrap();
+        let _b = s.take_slot(2).unwrap();
+        assert_eq!(s.take_slot(2).unwrap_err(), RoomFull(2));
+        drop(a);
+        assert_eq!(s.subscriber_count(), 1);
+        assert!(s.take_slot(2).is_ok());
+        // 8 Hz: a burst of 2 (a quarter second), then refused; no limit admits everything.
+        assert!(s.admit(8.0) && s.admit(8.0));
+        assert!(!s.admit(8.0));
+        assert!((0..100).all(|_| s.admit(0.0)));
+    }
+}
