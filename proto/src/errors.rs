@@ -1,11 +1,46 @@
-//! Per-frame errors on the wire: the named codes a [`v1::FrameError`] carries (the integers
+//! Errors on the wire: [`WireError`], a message that does not fit the model (naming the
+//! message and the field); the named codes a [`v1::FrameError`] carries (the integers
 //! are google.rpc.Code's, unchanged on the wire), the acks that carry them, and a `Synthesize`
 //! batch's error status, whose details name the refused frame by index so clients never parse
 //! the status message.
 
 use prost::Message as _;
 
-use crate::{WireError, v1};
+use crate::v1;
+
+/// A wire message that does not fit the model: the message, the field and what is wrong with it.
+/// Shown as `ControlFrame.positions: 7 values, expected 45`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{message_type}.{field}: {message}")]
+pub struct WireError {
+    /// The protobuf message the field belongs to, e.g. `ControlFrame`.
+    pub message_type: &'static str,
+    /// The offending field, e.g. `positions[7]` or `valid`.
+    pub field: String,
+    /// What was wrong: expected vs got.
+    pub message: String,
+}
+
+impl WireError {
+    /// An error in `field` of `message_type`.
+    pub fn new(
+        message_type: &'static str,
+        field: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Self {
+            message_type,
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}
+
+impl From<WireError> for tonic::Status {
+    fn from(e: WireError) -> Self {
+        tonic::Status::invalid_argument(e.to_string())
+    }
+}
 
 /// The codes a [`v1::FrameError`] carries: the google.rpc.Code of each kind of refusal.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,23 +7,28 @@
 //! Layout:
 //! - [`v1`]: the generated messages, the `Crease` client and server, and the encoded file
 //!   descriptor set for gRPC reflection ([`v1::FILE_DESCRIPTOR_SET`]).
-//! - [`convert`]: wire <-> core: [`read_control_frame`] (into caller buffers, no allocation
-//!   per frame), [`control_frame`], the validity mask ([`encode_valid_mask`], [`valid_bit`]),
-//!   [`Level`], the stream messages ([`topology_message`], [`frame_message`]),
-//!   [`read_topology`] / [`StreamTopology`], [`model_info`].
+//! - [`control`]: the control frame a publisher sends: [`read_control_frame`] (into caller
+//!   buffers, no allocation per frame), [`control_frame`], the validity mask
+//!   ([`encode_valid_mask`], [`valid_bit`]).
+//! - [`mesh`]: the mesh stream a subscriber gets: [`topology_message`], [`frame_message`], and
+//!   [`read_topology`] / [`StreamTopology`] for clients.
+//! - [`convert`]: the small wire <-> core conversions: points, boxes, the One Euro filter,
+//!   [`Level`], [`model_info`].
 //! - [`json`]: the JSON the WebSocket and `/api/rooms` speak: control frames in, acks out,
 //!   room documents, one serde mapping each.
-//! - [`errors`]: [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
+//! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
 //!   integers), error acks, and the batch error status that names its frame in a field.
 
+pub mod control;
 pub mod convert;
 pub mod errors;
 pub mod json;
+pub mod mesh;
 
-pub use convert::{
-    Level, StreamTopology, TopologyParts, WireError, box3, control_frame, encode_valid_mask,
-    frame_message, model_info, read_control_frame, read_topology, topology_message, valid_bit,
-};
+pub use control::{control_frame, encode_valid_mask, read_control_frame, valid_bit};
+pub use convert::{Level, box3, model_info};
+pub use errors::WireError;
+pub use mesh::{StreamTopology, TopologyParts, frame_message, read_topology, topology_message};
 
 /// The generated `crease.v1` package.
 #[allow(missing_docs, clippy::all, missing_debug_implementations)]

@@ -20,8 +20,8 @@ use crease_core::codec::{
 };
 use crease_core::glam::Vec3;
 use crease_core::model::ControlPoint;
-use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_core::predictor::{FrameContext, PredictError, Predictor};
+use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_proto::{Level, WireError, read_control_frame, v1};
 use prost::bytes::{Bytes, BytesMut};
 
