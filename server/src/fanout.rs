@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use crease_proto::Level;
 use tokio::sync::watch;
 
-use crate::pipeline::MeshUpdate;
+use crate::frames::MeshUpdate;
 use crate::session::CountGuard;
 
 /// A level's frames as a subscriber sees them: the newest, or `None` before the first.

@@ -9,6 +9,8 @@
 //!   time, rate limit, counters), its [`pipeline`] (One Euro filter, predictor, encoders,
 //!   frame pools; blocking work, run on the blocking pool) and its [`fanout`] (latest-wins
 //!   delivery per level behind a trait).
+//! - [`frames`]: the encoded frame a room hands out ([`frames::MeshUpdate`], with its
+//!   on-demand keyframe from the encoder's lanes) and the pool that recycles them.
 //! - [`stream`]: subscribers' mesh streams (topology, then frames; on-demand keyframes) and
 //!   batches.
 //! - [`registry`]: the models of a model directory, loaded once.
@@ -21,6 +23,7 @@
 //! embedded demo and the `crease-server` binary are in `crease-demo`.
 
 pub mod fanout;
+pub mod frames;
 pub mod grpc;
 pub mod http;
 pub mod ingest;

@@ -6,37 +6,29 @@
 //! executor.
 //!
 //! Frames are handed to the fan-out as [`MeshUpdate`]s taken from a small pool per level
-//! (`FramePool`): after warm-up a frame allocates nothing, even while a slow subscriber still
-//! holds an older frame (it simply holds another slot). Each update keeps the quantised lanes
-//! the encoder made for it, from which a keyframe of that same frame is encoded on demand for a
-//! subscriber that lacks the delta's base ([`MeshUpdate::frame_for`]).
+//! (`crate::frames`): after warm-up a frame allocates nothing, even while a slow subscriber
+//! still holds an older frame.
 
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use crease_core::codec::{
     CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_indices,
-    encode_keyframe_from_lanes,
 };
 use crease_core::glam::Vec3;
 use crease_core::model::ControlPoint;
 use crease_core::predictor::{FrameContext, PredictError, Predictor};
 use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_proto::{Level, WireError, read_control_frame, v1};
-use prost::bytes::{Bytes, BytesMut};
+use prost::bytes::Bytes;
 
 use crate::fanout::Fanout;
+use crate::frames::FramePool;
 use crate::registry::LoadedModel;
 
 /// Quantisation box margin around the box of the model's training poses, as a fraction of its
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
 const BOX_MARGIN: f32 = 0.25;
-
-/// Most frames a level's pool keeps. A frame is held by the fan-out (the newest) and by each
-/// subscriber task while it sends one (a stalled one holds its frame until it reads again), so
-/// a pool needs about two slots plus one per stalled subscriber; past this many, frames are
-/// allocated and dropped as before (counted in [`FramePool::fresh`]).
-const POOL_SLOTS: usize = 32;
 
 /// How a room's meshes are streamed: quantisation bits per level and the vertex order.
 ///
@@ -83,154 +75,6 @@ impl StreamSettings {
             keyframe_interval: DEFAULT_KEYFRAME_INTERVAL,
             ..Self::default()
         }
-    }
-}
-
-/// One predicted mesh, encoded once and shared by every subscriber of its level.
-#[derive(Debug)]
-pub struct MeshUpdate {
-    /// The publisher's sequence number.
-    pub seq: u64,
-    /// The publisher's capture time, microseconds since the Unix epoch.
-    pub capture_time_us: i64,
-    /// When the control frame arrived.
-    pub received: Instant,
-    /// The room encoder's frame: a keyframe, or a delta against codec frame `base_seq`.
-    frame: Bytes,
-    /// Where `frame` lives: the rest of the slot's buffer, reclaimed for the next frame once
-    /// nobody holds `frame` any more.
-    buffer: BytesMut,
-    /// This frame's codec sequence number.
-    codec_seq: u32,
-    /// The codec frame a delta applies to (`codec_seq` for a keyframe).
-    base_seq: u32,
-    qbox: QuantBox,
-    /// The encoder's quantised lanes of this frame, for the on-demand keyframe.
-    lanes: Vec<[u16; 4]>,
-    key: OnceLock<Result<Bytes, CodecError>>,
-}
-
-impl MeshUpdate {
-    /// An empty slot for frames in `qbox` (filled by [`FramePool::fill`]).
-    fn empty(qbox: QuantBox) -> MeshUpdate {
-        MeshUpdate {
-            seq: 0,
-            capture_time_us: 0,
-            received: Instant::now(),
-            frame: Bytes::new(),
-            buffer: BytesMut::new(),
-            codec_seq: 0,
-            base_seq: 0,
-            qbox,
-            lanes: Vec::new(),
-            key: OnceLock::new(),
-        }
-    }
-
-    /// A frame with only a sequence number (fan-out tests).
-    #[cfg(test)]
-    pub(crate) fn empty_for_test(seq: u64) -> MeshUpdate {
-        let qbox = QuantBox::from_min_step(Vec3::ZERO, Vec3::ONE, 16).expect("a valid box");
-        MeshUpdate {
-            seq,
-            ..MeshUpdate::empty(qbox)
-        }
-    }
-
-    /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).
-    pub fn codec_seq(&self) -> u32 {
-        self.codec_seq
-    }
-
-    /// Whether a subscriber whose last received codec frame is `last_sent` can take the shared
-    /// frame (a keyframe, or a delta against `last_sent`); else it needs the keyframe.
-    pub fn fits(&self, last_sent: Option<u32>) -> bool {
-        self.base_seq == self.codec_seq || last_sent == Some(self.base_seq)
-    }
-
-    /// The bytes to send a subscriber whose last received codec frame is `last_sent`: the
-    /// shared frame when it [fits](Self::fits), else a keyframe of this frame's lanes (encoded
-    /// once, on first need; blocking, so callers off the executor when it may be needed).
-    pub fn frame_for(&self, last_sent: Option<u32>) -> Result<Bytes, CodecError> {
-        if self.fits(last_sent) {
-            return Ok(self.frame.clone());
-        }
-        self.key
-            .get_or_init(|| {
-                let mut out = Vec::new();
-                encode_keyframe_from_lanes(&self.qbox, self.codec_seq, &self.lanes, false, &mut out)
-                    .map(|_| Bytes::from(out))
-            })
-            .clone()
-    }
-}
-
-/// A level's pool of frames (module docs).
-#[derive(Debug, Default)]
-pub(crate) struct FramePool {
-    slots: Vec<Arc<MeshUpdate>>,
-    /// Slot to try first: the one after the last used, so a just-published frame (held by the
-    /// fan-out) is not looked at first.
-    next: usize,
-    /// Frames, byte buffers and lane buffers allocated (or grown) so far.
-    fresh: u64,
-}
-
-impl FramePool {
-    /// Allocations so far: flat after warm-up.
-    pub(crate) fn fresh(&self) -> u64 {
-        self.fresh
-    }
-
-    /// Fills a frame nobody holds with `encoded` (the encoder's output) and `lanes` (its
-    /// quantised lanes) and returns it to publish.
-    fn fill(
-        &mut self,
-        qbox: QuantBox,
-        encoded: &[u8],
-        lanes: &[[u16; 4]],
-        fill: impl FnOnce(&mut MeshUpdate),
-    ) -> Arc<MeshUpdate> {
-        let n = self.slots.len();
-        let free = (0..n)
-            .map(|k| (self.next + k) % n.max(1))
-            .find(|&i| Arc::get_mut(&mut self.slots[i]).is_some());
-        let i = match free {
-            Some(i) => i,
-            None if n < POOL_SLOTS => {
-                self.fresh += 1;
-                self.slots.push(Arc::new(MeshUpdate::empty(qbox)));
-                n
-            }
-            None => {
-                // Every slot held: replace one (its holders keep theirs).
-                self.fresh += 1;
-                let i = self.next % n;
-                self.slots[i] = Arc::new(MeshUpdate::empty(qbox));
-                i
-            }
-        };
-        self.next = i + 1;
-        let u = Arc::get_mut(&mut self.slots[i]).expect("a free slot: checked or made above");
-        // Give back this slot's old frame, then reuse its buffer if nobody holds any of it.
-        u.frame = Bytes::new();
-        u.key.take();
-        if !u.buffer.try_reclaim(encoded.len()) {
-            self.fresh += 1;
-            // Room for a few frames of this size: the buffer is split per frame and reclaimed
-            // whole; spare room lets a slightly larger frame fit without a new buffer.
-            u.buffer = BytesMut::with_capacity(2 * encoded.len());
-        }
-        u.buffer.extend_from_slice(encoded);
-        u.frame = u.buffer.split().freeze();
-        if u.lanes.capacity() < lanes.len() {
-            self.fresh += 1;
-        }
-        u.lanes.clear();
-        u.lanes.extend_from_slice(lanes);
-        u.qbox = qbox;
-        fill(u);
-        Arc::clone(&self.slots[i])
     }
 }
 
@@ -550,53 +394,5 @@ impl Pipeline {
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
             control_rms,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::fanout::LocalFanout;
-
-    #[test]
-    fn the_pool_allocates_nothing_after_warm_up_while_a_subscriber_holds_an_old_frame() {
-        let qbox = QuantBox::from_min_step(Vec3::ZERO, Vec3::ONE, 16).unwrap();
-        let fanout = LocalFanout::default();
-        let mut slow = fanout.subscribe(Level::Base);
-        let mut fast = fanout.subscribe(Level::Base);
-        let mut pool = FramePool::default();
-        // Frame `i`: its bytes are `i` repeated (a size that varies), its lanes `i` too.
-        let encoded = |i: u64| vec![i as u8; 200 + (i as usize * 37) % 100];
-        let lanes = |i: u64| vec![[i as u16, 1, 2, 0]; 64];
-        let publish = |pool: &mut FramePool, i: u64| {
-            let u = pool.fill(qbox, &encoded(i), &lanes(i), |u| u.seq = i);
-            fanout.publish(Level::Base, u);
-        };
-        for i in 0..4 {
-            publish(&mut pool, i);
-        }
-        // The slow subscriber takes frame 3 and holds it (and its bytes, as a message in
-        // flight would) from here on.
-        let old = slow.rx.borrow_and_update().clone().unwrap();
-        let old_bytes = old.frame_for(Some(old.codec_seq())).unwrap();
-        for i in 4..8 {
-            publish(&mut pool, i);
-        }
-        let warm = pool.fresh();
-        assert!(warm > 0, "the pool allocated its first frames");
-        for i in 8..200 {
-            publish(&mut pool, i);
-            // A fast subscriber reads every frame and lets it go.
-            let f = fast.rx.borrow_and_update().clone().unwrap();
-            assert_eq!(f.seq, i);
-            assert_eq!(f.frame_for(Some(f.codec_seq())).unwrap(), encoded(i));
-            assert_eq!(f.lanes, lanes(i));
-        }
-        assert_eq!(pool.fresh(), warm, "allocations after warm-up");
-        // The held frame was never overwritten.
-        assert_eq!(old.seq, 3);
-        assert_eq!(old_bytes, encoded(3));
-        assert_eq!(old.lanes, lanes(3));
-        assert!(pool.slots.len() <= 4, "{} slots", pool.slots.len());
     }
 }

@@ -9,7 +9,8 @@ use std::time::Instant;
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 
-pub use crate::pipeline::{BuildError, MeshUpdate, Published, StreamSettings};
+pub use crate::frames::MeshUpdate;
+pub use crate::pipeline::{BuildError, Published, StreamSettings};
 pub use crate::session::{RoomFull, new_token, valid_room_id};
 pub use crease_proto::Level;
 
