@@ -5,26 +5,21 @@
 //! neighbours and opposite vertices found from the shape's own construction), never by calling
 //! the code under test; normals are recomputed here in f64.
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use crease_core::glam::{DVec3, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError, subdivided_vertex_count};
-use crease_core::runtime::detail::{DetailSynth, NormalsMethod, VertexFans};
+use crease_core::runtime::detail::{DetailSynth, VertexFans};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-/// Unique undirected edges `(a, b)`, `a < b`, sorted.
-fn sorted_edges(triangles: &[[u32; 3]]) -> Vec<(u32, u32)> {
-    let mut set = BTreeSet::new();
-    for t in triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            set.insert((a.min(b), a.max(b)));
-        }
-    }
-    set.into_iter().collect()
-}
+use common::mesh_checks::{
+    METHODS, assert_close, assert_closed_oriented_manifold, euler, reference_normals, sorted_edges,
+    subdivided,
+};
 
 /// Index of the new vertex of each edge after one level, in the documented order: `V` plus the
 /// rank of the edge's first appearance walking the triangles, each along `ab`, `bc`, `ca`.
@@ -43,17 +38,6 @@ fn edge_vertices(v: usize, triangles: &[[u32; 3]]) -> HashMap<(u32, u32), usize>
 /// The new vertex of edge `(a, b)`.
 fn edge_vertex(map: &HashMap<(u32, u32), usize>, a: u32, b: u32) -> usize {
     map[&(a.min(b), a.max(b))]
-}
-
-fn subdivided(mesh: &Mesh, levels: u32) -> (LoopSubdivision, Vec<Vec3>) {
-    let s = LoopSubdivision::new(mesh, levels).expect("manifold input");
-    let p = s.mesh(&mesh.positions).expect("sizes match").positions;
-    (s, p)
-}
-
-fn assert_close(got: Vec3, want: DVec3, tol: f64, what: &str) {
-    let d = (got.as_dvec3() - want).length();
-    assert!(d < tol, "{what}: got {got}, expected {want} (|d| = {d:e})");
 }
 
 /// An irregular tetrahedron (so the weights, not symmetry, decide the result).
@@ -155,30 +139,6 @@ fn uv_sphere(r: f32, rings: u32, segments: u32) -> Mesh {
         }
     }
     m
-}
-
-/// Every directed edge exactly once and its reverse exactly once: closed, edge-manifold and
-/// consistently oriented.
-fn assert_closed_oriented_manifold(triangles: &[[u32; 3]]) {
-    let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
-    for t in triangles {
-        assert!(t[0] != t[1] && t[1] != t[2] && t[2] != t[0], "{t:?}");
-        for k in 0..3 {
-            *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
-        }
-    }
-    for (&(a, b), &c) in &directed {
-        assert_eq!(c, 1, "directed edge ({a}, {b}) used {c} times");
-        assert_eq!(
-            directed.get(&(b, a)),
-            Some(&1),
-            "edge ({a}, {b}) has no twin"
-        );
-    }
-}
-
-fn euler(vertices: usize, triangles: &[[u32; 3]]) -> i64 {
-    vertices as i64 - sorted_edges(triangles).len() as i64 + triangles.len() as i64
 }
 
 #[test]
@@ -490,25 +450,6 @@ fn non_manifold_vertices_are_named() {
     let e = LoopSubdivision::new(&m, 1).unwrap_err();
     assert_eq!(e, SubdivisionError::SeveralFans { vertex: 0, fans: 2 });
 }
-
-/// Area-weighted unit normals in f64, by a plain loop over the triangles.
-fn reference_normals(p: &[Vec3], triangles: &[[u32; 3]]) -> Vec<DVec3> {
-    let mut n = vec![DVec3::ZERO; p.len()];
-    for t in triangles {
-        let [a, b, c] = t.map(|i| p[i as usize].as_dvec3());
-        let fnorm = (b - a).cross(c - a);
-        for &i in t {
-            n[i as usize] += fnorm;
-        }
-    }
-    n.into_iter().map(|x| x.normalize_or_zero()).collect()
-}
-
-const METHODS: [NormalsMethod; 3] = [
-    NormalsMethod::Auto,
-    NormalsMethod::Scatter,
-    NormalsMethod::Gather,
-];
 
 #[test]
 fn constant_displacement_moves_sphere_vertices_along_their_normals() {

@@ -19,6 +19,7 @@
 //! `RAYON_NUM_THREADS=1`, or `--no-default-features`. After criterion's groups it prints one
 //! summary line per function with medians (and minima) of its own timing loop.
 
+#[path = "../../core/benches/common/mod.rs"]
 mod common;
 use common::timings;
 use std::hint::black_box;

@@ -15,6 +15,7 @@
 //! `RAYON_NUM_THREADS=1 cargo bench -p crease-hand --bench sweep -- --quick`. After criterion's
 //! groups it prints one summary line per case with medians and minima of its own timing loop.
 
+#[path = "../../core/benches/common/mod.rs"]
 mod common;
 use common::timings;
 use std::hint::black_box;

@@ -5,6 +5,7 @@
 //!
 //! Needs `../shared/data/hand`; every test skips with a note when it is absent.
 
+#[path = "../../core/tests/common/mod.rs"]
 mod common;
 
 use std::path::PathBuf;

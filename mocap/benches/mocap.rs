@@ -13,6 +13,7 @@
 //! without it.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
+#[path = "../../core/benches/common/mod.rs"]
 mod common;
 use common::timings;
 use std::hint::black_box;

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use crease_core::glam::Vec3;
 use crease_mocap::{MocapError, Recording, c3d};
 
+#[path = "../../core/tests/common/mod.rs"]
 mod common;
 
 fn data(file: &str) -> Option<PathBuf> {

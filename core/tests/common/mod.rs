@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub(crate) mod mesh_checks;
+
 use std::path::{Path, PathBuf};
 
 /// `rel` below the shared data folder (`../shared/data` beside the checkout), or `None` with a
