@@ -4,7 +4,7 @@
 //! from the quantised lanes the encoder kept with it ([`MeshUpdate::frame_for`]), so it is
 //! bit-identical to what the deltas' decoders hold.
 //!
-//! A level's [`FramePool`] recycles a frame's encoded bytes and lanes once nobody holds it:
+//! A level's `FramePool` recycles a frame's encoded bytes and lanes once nobody holds it:
 //! after warm-up a frame allocates nothing, even while a slow subscriber still holds an older
 //! frame (it simply holds another slot).
 

@@ -5,7 +5,7 @@
 //! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
 //! executor.
 //!
-//! Frames are handed to the fan-out as [`MeshUpdate`]s taken from a small pool per level
+//! Frames are handed to the fan-out as [`MeshUpdate`](crate::frames::MeshUpdate)s taken from a small pool per level
 //! (`crate::frames`): after warm-up a frame allocates nothing, even while a slow subscriber
 //! still holds an older frame.
 
@@ -49,7 +49,7 @@ pub struct StreamSettings {
     pub spatial_order: bool,
     /// A keyframe every this many frames (0: only the first). Live rooms need few: a
     /// subscriber without the base of a delta (joined late, skipped frames) gets a keyframe of
-    /// that frame on demand ([`MeshUpdate::frame_for`]), so periodic keyframes only bound how
+    /// that frame on demand ([`MeshUpdate::frame_for`](crate::frames::MeshUpdate::frame_for)), so periodic keyframes only bound how
     /// long a client that lost its state by itself waits.
     pub keyframe_interval: u32,
 }
