@@ -106,23 +106,42 @@ pub fn error_ack(seq: u64, error: v1::FrameError) -> v1::PublishAck {
     }
 }
 
-/// The status that ends a `Synthesize` batch whose frame `index` was refused: the message says
-/// `SynthesizeRequest.frames[index].<field>: ...` for people, and the details hold the
-/// [`v1::FrameError`] with `frame: index` and the message relative to the frame
-/// (`positions: ...`) for programs ([`batch_frame_error`]).
-pub fn batch_status(index: usize, e: &WireError) -> tonic::Status {
+/// The status that ends a `Synthesize` batch whose frame `index` was refused with `code`: the
+/// message says `SynthesizeRequest.frames[index].<field>: ...` (or `frames[index]: ...` when
+/// no field is at fault) for people, and the details hold the [`v1::FrameError`] with
+/// `frame: index` and the message relative to the frame (`positions: ...`) for programs
+/// ([`batch_frame_error`]). Every per-frame refusal of a batch ends this way, whatever its code.
+pub fn batch_error_status(
+    index: usize,
+    code: ErrorCode,
+    field: Option<&str>,
+    message: &str,
+) -> tonic::Status {
+    let (relative, shown) = match field {
+        Some(field) => (
+            format!("{field}: {message}"),
+            format!("SynthesizeRequest.frames[{index}].{field}: {message}"),
+        ),
+        None => (
+            message.to_owned(),
+            format!("SynthesizeRequest.frames[{index}]: {message}"),
+        ),
+    };
     let error = v1::FrameError {
-        code: ErrorCode::InvalidArgument.wire(),
-        message: format!("{}: {}", e.field, e.message),
+        code: code.wire(),
+        message: relative,
         frame: Some(index as u32),
     };
-    tonic::Status::with_details(
-        ErrorCode::InvalidArgument.grpc(),
-        format!(
-            "SynthesizeRequest.frames[{index}].{}: {}",
-            e.field, e.message
-        ),
-        error.encode_to_vec().into(),
+    tonic::Status::with_details(code.grpc(), shown, error.encode_to_vec().into())
+}
+
+/// [`batch_error_status`] for a frame with a field that does not fit the model.
+pub fn batch_status(index: usize, e: &WireError) -> tonic::Status {
+    batch_error_status(
+        index,
+        ErrorCode::InvalidArgument,
+        Some(&e.field),
+        &e.message,
     )
 }
 
@@ -183,6 +202,18 @@ mod tests {
         assert_eq!(error.frame, Some(4));
         assert_eq!(error.code, 3);
         assert_eq!(error.message, "positions: 3 values, expected 12");
+        // A refusal with no field at fault names the frame the same way.
+        let status = batch_error_status(2, ErrorCode::Internal, None, "internal: boom");
+        assert_eq!(status.code(), tonic::Code::Internal);
+        assert_eq!(
+            status.message(),
+            "SynthesizeRequest.frames[2]: internal: boom"
+        );
+        let error = batch_frame_error(&status).unwrap();
+        assert_eq!(
+            (error.frame, error.code, error.message.as_str()),
+            (Some(2), 13, "internal: boom")
+        );
         // A plain status has no batch error.
         assert!(batch_frame_error(&tonic::Status::internal("x")).is_none());
     }

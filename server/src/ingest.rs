@@ -8,12 +8,13 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use crease_proto::errors::{ErrorCode, error_ack, frame_error};
+use crease_proto::errors::{ErrorCode, batch_error_status, batch_status, error_ack, frame_error};
 use crease_proto::json::JsonError;
 use crease_proto::{WireError, v1};
 
 use crate::AppState;
 use crate::pipeline::{PipelineError, Published};
+use crate::room::Room;
 
 /// Why a control frame was refused; the room is unchanged.
 #[derive(Debug, thiserror::Error)]
@@ -77,6 +78,15 @@ impl PublishError {
     /// gRPC: the `FrameError` of the ack.
     pub fn frame_error(&self) -> v1::FrameError {
         frame_error(self.code(), self.to_string())
+    }
+
+    /// gRPC: the status that ends a `Synthesize` batch at its frame `index`, the frame index in
+    /// its details ([`batch_error_status`]).
+    pub fn batch_status(&self, index: usize) -> tonic::Status {
+        match self {
+            PublishError::Wire(e) => batch_status(index, e),
+            e => batch_error_status(index, e.code(), None, &e.to_string()),
+        }
     }
 
     /// gRPC: as a status, for a call that fails as a whole.
@@ -143,6 +153,16 @@ async fn publish_inner(
             hz,
         });
     }
+    process(room, frame, received).await
+}
+
+/// Runs `frame` through `room`'s pipeline on the blocking pool (the hand-off every publish
+/// path and the batches share), its failure as a [`PublishError`].
+pub(crate) async fn process(
+    room: Arc<Room>,
+    frame: v1::ControlFrame,
+    received: Instant,
+) -> Result<Published, PublishError> {
     tokio::task::spawn_blocking(move || room.process(&frame, received))
         .await
         .map_err(|e| PublishError::Internal(e.to_string()))?
@@ -204,6 +224,12 @@ mod tests {
             assert_eq!(fe.message, e.to_string());
             assert_eq!(e.status().code(), grpc, "{e}");
             assert_eq!(e.status().message(), e.to_string());
+            // A batch names the refused frame in the details, whatever the refusal.
+            let batch = e.batch_status(7);
+            assert_eq!(batch.code(), grpc, "{e}");
+            let be = crease_proto::errors::batch_frame_error(&batch).unwrap();
+            assert_eq!((be.frame, be.code), (Some(7), code), "{e}");
+            assert!(batch.message().starts_with("SynthesizeRequest.frames[7]"), "{e}");
             let ws = e.ws();
             assert_eq!(ws.error.code, code, "{e}");
             assert_eq!(ws.error.message, e.to_string());

@@ -7,11 +7,11 @@
 //! else the frame's shared keyframe ([`MeshUpdate::frame_for`], encoded on the blocking pool
 //! the first time a subscriber needs it). A batch runs its frames through a private room, in
 //! order, with a bounded response buffer; a refused frame ends it with a status naming the
-//! frame by index in its details (`crease_proto::errors::batch_status`).
+//! frame by index in its details (`PublishError::batch_status`, whatever the refusal).
 
 use std::sync::Arc;
+use std::time::Instant;
 
-use crease_proto::errors::batch_status;
 use crease_proto::{Level, TopologyParts, frame_message, topology_message, v1};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
@@ -20,7 +20,7 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
 use crate::AppState;
-use crate::pipeline::PipelineError;
+use crate::ingest;
 use crate::room::{MeshUpdate, Room, Subscription};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
@@ -148,28 +148,12 @@ pub fn batch(
         };
         let mut last_sent: Option<u32> = None;
         for (k, frame) in frames.into_iter().enumerate() {
-            let r = Arc::clone(&room);
-            let received = std::time::Instant::now();
             let seq = frame.seq;
-            let done = tokio::task::spawn_blocking(move || r.process(&frame, received)).await;
-            let latency = match done {
-                Ok(Ok(p)) => p.latency_us,
-                Ok(Err(PipelineError::Wire(e))) => {
-                    let _ = tx.send(Err(batch_status(k, &e))).await;
-                    return;
-                }
-                Ok(Err(e @ PipelineError::Predict(_))) => {
-                    let message = format!("SynthesizeRequest.frames[{k}]: {e}");
-                    let _ = tx.send(Err(Status::invalid_argument(message))).await;
-                    return;
-                }
-                Ok(Err(e)) => {
-                    let message = format!("SynthesizeRequest.frames[{k}]: {e}");
-                    let _ = tx.send(Err(Status::internal(message))).await;
-                    return;
-                }
+            let outcome = ingest::process(Arc::clone(&room), frame, Instant::now()).await;
+            let latency = match outcome {
+                Ok(p) => p.latency_us,
                 Err(e) => {
-                    let _ = tx.send(Err(Status::internal(e.to_string()))).await;
+                    let _ = tx.send(Err(e.batch_status(k))).await;
                     return;
                 }
             };
