@@ -2,7 +2,7 @@
 //! named poses (hold, then an eased blend of the joint angles to the next pose), sampled once at
 //! start and interpolated between samples at play time; and [`drive`], which publishes it into a
 //! room at a fixed rate through the same path as a gRPC publisher
-//! ([`crease_server::grpc::publish_one`]), until the server shuts down.
+//! ([`crease_server::ingest::publish`]), until the server shuts down.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -98,7 +98,7 @@ impl DemoAnimation {
 const YIELD_S: f64 = 3.0;
 
 /// Publishes `animation` into `room` at `rate_hz` until the server shuts down: the frames go
-/// through [`crease_server::grpc::publish_one`] with the room's token, as a remote publisher's would
+/// through [`crease_server::ingest::publish`] with the room's token, as a remote publisher's would
 /// (metrics, acks, latency), one at a time; a tick missed while a frame was still being
 /// predicted is skipped, not queued. When another publisher's frames arrive, the animation
 /// pauses until none came for `YIELD_S` seconds, and resumes where it left off.
@@ -142,10 +142,10 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
             positions: std::mem::take(&mut positions),
             valid: Vec::new(),
         };
-        let ack = crease_server::grpc::publish_one(&state, Some(&token), frame).await;
+        let outcome = crease_server::ingest::publish(&state, Some(&token), frame).await;
         ours = room.published();
-        if let Some(e) = ack.error {
-            tracing::warn!(code = e.code, message = %e.message, "demo frame refused");
+        if let Err(e) = outcome {
+            tracing::warn!(code = e.code().wire(), message = %e, "demo frame refused");
         }
     }
 }

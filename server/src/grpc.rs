@@ -12,6 +12,7 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::ingest;
 use crate::pipeline::BuildError;
 use crate::registry::LoadedModel;
 use crate::room::{Room, RoomError, StreamSettings};
@@ -206,7 +207,8 @@ impl Crease for CreaseService {
         let (tx, rx) = mpsc::channel(STREAM_BUFFER);
         tokio::spawn(async move {
             while let Ok(Some(frame)) = frames.message().await {
-                let ack = publish_one(&state, token.as_deref(), frame).await;
+                let seq = frame.seq;
+                let ack = ingest::ack(seq, &ingest::publish(&state, token.as_deref(), frame).await);
                 if tx.send(Ok(ack)).await.is_err() {
                     break;
                 }
@@ -257,18 +259,6 @@ impl Crease for CreaseService {
             r.frames,
         ))))
     }
-}
-
-/// Publishes one control frame through [`crate::ingest::publish`] and answers with its ack
-/// (an error ack for a refused frame; the room is unchanged then): gRPC's `Publish`, and the
-/// embedded demo's animation.
-pub async fn publish_one(
-    state: &Arc<AppState>,
-    token: Option<&str>,
-    frame: v1::ControlFrame,
-) -> v1::PublishAck {
-    let seq = frame.seq;
-    crate::ingest::ack(seq, &crate::ingest::publish(state, token, frame).await)
 }
 
 /// The status of a room that could not be opened.

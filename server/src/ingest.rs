@@ -229,7 +229,10 @@ mod tests {
             assert_eq!(batch.code(), grpc, "{e}");
             let be = crease_proto::errors::batch_frame_error(&batch).unwrap();
             assert_eq!((be.frame, be.code), (Some(7), code), "{e}");
-            assert!(batch.message().starts_with("SynthesizeRequest.frames[7]"), "{e}");
+            assert!(
+                batch.message().starts_with("SynthesizeRequest.frames[7]"),
+                "{e}"
+            );
             let ws = e.ws();
             assert_eq!(ws.error.code, code, "{e}");
             assert_eq!(ws.error.message, e.to_string());
