@@ -2,14 +2,14 @@
 //! WebSocket (binary protobuf or JSON text) or the embedded demo comes here: the room is looked
 //! up, the token checked, the rate limit applied, the wire frame read into the model's control
 //! points and run through the room's pipeline on the blocking pool. What went wrong is a typed
-//! [`PublishError`], mapped once per transport: [`PublishError::frame_error`] for gRPC's ack
-//! ([`ack`]) and [`PublishError::ws`] for the WebSocket (its JSON error and whether to close).
+//! [`PublishError`], mapped once per transport: [`PublishError::frame_error`] for the ack
+//! ([`ack`]; the WebSocket sends the same ack as JSON) and [`PublishError::ws_close`] for
+//! whether a WebSocket closes.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use crease_proto::errors::{ErrorCode, batch_error_status, batch_status, error_ack, frame_error};
-use crease_proto::json::JsonError;
 use crease_proto::{WireError, v1};
 
 use crate::AppState;
@@ -54,15 +54,6 @@ impl From<PipelineError> for PublishError {
     }
 }
 
-/// How the WebSocket answers a refused frame.
-#[derive(Clone, Debug, PartialEq)]
-pub struct WsRefusal {
-    /// The ack's `error` member.
-    pub error: JsonError,
-    /// The close code to end the socket with, if the refusal ends it; `None` keeps it open.
-    pub close: Option<u16>,
-}
-
 impl PublishError {
     /// The named code of this refusal.
     pub fn code(&self) -> ErrorCode {
@@ -94,17 +85,12 @@ impl PublishError {
         tonic::Status::new(self.code().grpc(), self.to_string())
     }
 
-    /// WebSocket: the JSON error of the ack and the close code. Every refusal keeps the socket
-    /// open (`close: None`): a viewer whose drag was refused (a wrong token, the rate) keeps
-    /// watching, and a publisher fixes its next frame.
-    pub fn ws(&self) -> WsRefusal {
-        WsRefusal {
-            error: JsonError {
-                code: self.code().wire(),
-                message: self.to_string(),
-            },
-            close: None,
-        }
+    /// WebSocket: the close code this refusal ends the socket with, if any. The socket's ack
+    /// carries the same error as gRPC's ([`ack`], as JSON through `JsonAck`). Every refusal
+    /// keeps the socket open (`None`): a viewer whose drag was refused (a wrong token, the
+    /// rate) keeps watching, and a publisher fixes its next frame.
+    pub fn ws_close(&self) -> Option<u16> {
+        None
     }
 }
 
@@ -219,7 +205,7 @@ mod tests {
         ];
         for ((e, code), grpc) in all().iter().zip(codes).zip(grpc) {
             let a = ack(4, &Err(clone(e)));
-            let fe = a.error.unwrap();
+            let fe = a.error.clone().unwrap();
             assert_eq!((a.seq, fe.code, fe.frame), (4, code, None), "{e}");
             assert_eq!(fe.message, e.to_string());
             assert_eq!(e.status().code(), grpc, "{e}");
@@ -233,11 +219,12 @@ mod tests {
                 batch.message().starts_with("SynthesizeRequest.frames[7]"),
                 "{e}"
             );
-            let ws = e.ws();
-            assert_eq!(ws.error.code, code, "{e}");
-            assert_eq!(ws.error.message, e.to_string());
+            let ws = crease_proto::json::JsonAck::from(a.clone()).error.unwrap();
+            assert_eq!(ws.code, code, "{e}");
+            assert_eq!(ws.message, e.to_string());
             assert_eq!(
-                ws.close, None,
+                e.ws_close(),
+                None,
                 "{e}: per-frame refusals keep the socket open"
             );
         }

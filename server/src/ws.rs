@@ -12,8 +12,8 @@
 //!   `"error": {"code": 3, "message": "positions: ..."}`).
 //!
 //! A bad message is answered by an error ack and the socket stays open. Publishing goes through
-//! [`crate::ingest`] as gRPC's does; the JSON shapes are `crease_proto::json`'s, and a refusal's
-//! JSON error and close code come from [`PublishError::ws`].
+//! [`crate::ingest`] as gRPC's does, and the ack is gRPC's as JSON (`crease_proto::json`); a
+//! refusal's close code, if any, comes from [`PublishError::ws_close`].
 
 use std::sync::Arc;
 
@@ -145,15 +145,8 @@ async fn session(
             }
             Err(e) => (0, Err(PublishError::Wire(e))),
         };
-        let (ack, close) = match &outcome {
-            Ok(_) => (JsonAck::from(ingest::ack(seq, &outcome)), None),
-            Err(e) => {
-                let refusal = e.ws();
-                let mut ack = JsonAck::from(ingest::ack(seq, &outcome));
-                ack.error = Some(refusal.error);
-                (ack, refusal.close)
-            }
-        };
+        let ack = JsonAck::from(ingest::ack(seq, &outcome));
+        let close = outcome.as_ref().err().and_then(PublishError::ws_close);
         if out.send(Message::Text(ack.to_text().into())).await.is_err() {
             break;
         }
