@@ -31,9 +31,9 @@ pub struct Receiver {
 
 /// Publishes a room's frames to its subscribers, per level (module docs).
 pub trait Fanout: Send + Sync + std::fmt::Debug {
-    /// Hands `frame` to `level`'s subscribers in place of the previous one, and returns the
-    /// previous one (so its buffers can go back to the pipeline's pool once nobody holds it).
-    fn publish(&self, level: Level, frame: Arc<MeshUpdate>) -> Latest;
+    /// Hands `frame` to `level`'s subscribers in place of the previous one (which goes back to
+    /// the pipeline's pool once nobody holds it: the pool keeps its own handle).
+    fn publish(&self, level: Level, frame: Arc<MeshUpdate>);
 
     /// A subscription to `level`: the current frame (if any), then every newer one.
     fn subscribe(&self, level: Level) -> Receiver;
@@ -60,8 +60,8 @@ impl Default for LocalFanout {
 }
 
 impl Fanout for LocalFanout {
-    fn publish(&self, level: Level, frame: Arc<MeshUpdate>) -> Latest {
-        self.channels[level as usize].send_replace(Some(frame))
+    fn publish(&self, level: Level, frame: Arc<MeshUpdate>) {
+        self.channels[level as usize].send_replace(Some(frame));
     }
 
     fn subscribe(&self, level: Level) -> Receiver {
@@ -92,8 +92,11 @@ mod tests {
         // Only the newest is there to read: the subscriber skipped 0 and 1.
         let latest = sub.rx.borrow_and_update().clone().unwrap();
         assert_eq!(latest.seq, 2);
-        let old = f.publish(Level::Detail, Arc::new(MeshUpdate::empty_for_test(3)));
-        assert_eq!(old.unwrap().seq, 2);
+        // A new subscriber starts at the newest frame too.
+        f.publish(Level::Detail, Arc::new(MeshUpdate::empty_for_test(3)));
+        let late = f.subscribe(Level::Detail);
+        assert_eq!(late.rx.borrow().as_ref().unwrap().seq, 3);
+        drop(late);
         drop(sub);
         assert!(!f.interest(Level::Detail));
     }

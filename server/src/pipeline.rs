@@ -229,11 +229,6 @@ impl Pipeline {
         })
     }
 
-    /// The model.
-    pub fn model(&self) -> &Arc<LoadedModel> {
-        &self.model
-    }
-
     /// The control-point filter.
     pub fn filter(&self) -> Option<OneEuroParams> {
         self.filter
@@ -298,12 +293,6 @@ impl Pipeline {
                     .map(|()| Bytes::from(out))
             })
             .clone()
-    }
-
-    /// Allocations of `level`'s frame pool so far (flat after warm-up).
-    pub fn pool_allocations(&self, level: Level) -> u64 {
-        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        state.pools[level as usize].fresh()
     }
 
     /// Filters, predicts and encodes one control frame, and hands each level's frame to

@@ -1,5 +1,5 @@
 //! A room: a live session on one model, the small struct that ties its three parts together:
-//! the [`Session`] (identity, token, limits, counters), the [`Pipeline`] (filter, predictor,
+//! the [`Session`] (token, limits, counters), the [`Pipeline`] (filter, predictor,
 //! encoders, frame pools) and the [`Fanout`] (latest-wins delivery per level). Control frames
 //! reach it through [`crate::ingest`]; subscribers leave it through [`crate::stream`].
 
@@ -86,13 +86,7 @@ impl Room {
     }
 
     /// [`Room::open`] on the calling thread (blocking: a sparse factorisation).
-    ///
-    /// # Errors
-    /// As [`Room::open`].
-    ///
-    /// # Panics
-    /// As [`Room::open`].
-    pub fn open_blocking(
+    fn open_blocking(
         id: &str,
         model: Arc<LoadedModel>,
         beta: Option<f32>,
@@ -106,7 +100,7 @@ impl Room {
         Ok(Room {
             id: id.to_owned(),
             model,
-            session: Session::new(id),
+            session: Session::new(),
             pipeline,
             fanout: Box::new(LocalFanout::default()),
         })

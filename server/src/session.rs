@@ -1,4 +1,4 @@
-//! A room's session: who it is (id, publish token), what it allows (the publish rate's token
+//! A room's session: who may publish (the token), what it allows (the publish rate's token
 //! bucket, the subscriber limit) and what it counted (published frames, live subscribers).
 //! The first thing a control frame meets after the room lookup ([`crate::ingest`]), so refused
 //! frames cost nothing further.
@@ -20,10 +20,9 @@ struct Budget {
     at: Instant,
 }
 
-/// A room's identity, token, limits and counters (module docs).
+/// A room's token, limits and counters (module docs).
 #[derive(Debug)]
 pub struct Session {
-    id: String,
     token: String,
     budget: Mutex<Budget>,
     published: AtomicU64,
@@ -70,10 +69,9 @@ impl Drop for CountGuard {
 }
 
 impl Session {
-    /// A session for room `id` (checked by the caller) with a fresh random token.
-    pub(crate) fn new(id: &str) -> Session {
+    /// A session with a fresh random token.
+    pub(crate) fn new() -> Session {
         Session {
-            id: id.to_owned(),
             token: new_token(),
             budget: Mutex::new(Budget {
                 tokens: f64::INFINITY,
@@ -82,11 +80,6 @@ impl Session {
             published: AtomicU64::new(0),
             subscribers: Arc::new(AtomicUsize::new(0)),
         }
-    }
-
-    /// The room id.
-    pub fn id(&self) -> &str {
-        &self.id
     }
 
     /// The publish token.
@@ -173,7 +166,7 @@ mod tests {
 
     #[test]
     fn tokens_slots_and_the_rate_bucket() {
-        let mut s = Session::new("r");
+        let mut s = Session::new();
         s.set_token("secret");
         assert!(s.accepts(Some("secret")));
         assert!(!s.accepts(Some("secreT")) && !s.accepts(None));
