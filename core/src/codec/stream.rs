@@ -132,21 +132,10 @@ pub fn encode_keyframe(
     normals: Option<&[Vec3]>,
     out: &mut Vec<u8>,
 ) -> Result<FrameHeader, CodecError> {
-    let vertex_count =
-        u32::try_from(positions.len()).map_err(|_| CodecError::TooManyVertices(positions.len()))?;
     check_inputs(positions.len(), positions, normals)?;
     let mut lanes = Vec::with_capacity(positions.len());
     quantise_lanes(qbox, positions, normals, &mut lanes);
-    let header = FrameHeader {
-        kind: FrameKind::Key,
-        normals: normals.is_some(),
-        qbox: *qbox,
-        vertex_count,
-        seq,
-        base_seq: seq,
-        payload_len: 0,
-    };
-    write_frame(header, &lanes, out)
+    encode_keyframe_from_lanes(qbox, seq, &lanes, normals.is_some(), out)
 }
 
 /// Encodes a keyframe of already quantised `lanes` (`[x, y, z, w]` per vertex in `qbox`, as
