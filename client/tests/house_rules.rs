@@ -11,6 +11,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use serde_json::Value;
 
@@ -83,9 +84,15 @@ fn host_triple() -> String {
         .to_owned()
 }
 
-/// `cargo metadata` of the workspace, for this host's platform (the rules are about what
+/// `cargo metadata` of the workspace, for this host's platform, read once for all the tests (the rules are about what
 /// builds here; other platforms' packages need not be downloaded).
-fn metadata() -> Value {
+fn metadata() -> &'static Value {
+    static META: OnceLock<Value> = OnceLock::new();
+    META.get_or_init(read_metadata)
+}
+
+/// Runs `cargo metadata` (once per test binary: [`metadata`] keeps it).
+fn read_metadata() -> Value {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = std::process::Command::new(cargo)
         .args(["metadata", "--format-version", "1", "--locked"])
@@ -210,7 +217,7 @@ fn table_violations(
 fn crates_depend_only_on_what_architecture_md_allows() {
     let table = allowed_from_table(&architecture());
     let meta = metadata();
-    let (ours, edges) = workspace_edges(&meta);
+    let (ours, edges) = workspace_edges(meta);
     for name in &ours {
         assert!(
             table.contains_key(name),
@@ -231,7 +238,7 @@ fn the_checker_catches_a_forbidden_edge() {
     // library on the trainer (ARCHITECTURE.md: the demo crate wires training in instead).
     let table = allowed_from_table(&architecture());
     let meta = metadata();
-    let (ours, mut edges) = workspace_edges(&meta);
+    let (ours, mut edges) = workspace_edges(meta);
     assert!(table_violations(&table, &ours, &edges).is_empty());
     edges.push(Edge {
         from: "crease-server".into(),
@@ -249,12 +256,12 @@ fn the_checker_catches_a_forbidden_edge() {
 #[test]
 fn dev_dependencies_do_not_loop_back() {
     let meta = metadata();
-    let (ours, edges) = workspace_edges(&meta);
+    let (ours, edges) = workspace_edges(meta);
     let mut bad = Vec::new();
     for e in &edges {
         if e.kind.as_deref() == Some("dev")
             && ours.contains(&e.to)
-            && reachable(&meta, &e.to).contains(&e.from)
+            && reachable(meta, &e.to).contains(&e.from)
         {
             bad.push(format!(
                 "{} dev-depends on {}, which depends on {}",
@@ -268,7 +275,7 @@ fn dev_dependencies_do_not_loop_back() {
 #[test]
 fn core_stays_free_of_async_and_the_wire() {
     let meta = metadata();
-    let reached = reachable(&meta, "crease-core");
+    let reached = reachable(meta, "crease-core");
     let bad: Vec<&str> = CORE_NEVER
         .iter()
         .copied()
@@ -279,7 +286,7 @@ fn core_stays_free_of_async_and_the_wire() {
         "crease-core reaches {bad:?} through its dependencies (ARCHITECTURE.md forbids it)"
     );
     // The check can see: the server does reach all four.
-    let server = reachable(&meta, "crease-server");
+    let server = reachable(meta, "crease-server");
     assert!(CORE_NEVER.iter().all(|c| server.contains(*c)), "{server:?}");
 }
 
