@@ -1,10 +1,10 @@
-//! Compiles `crease/v1/crease.proto` without a system `protoc`: protox parses it into a
+//! Compiles `crease/v1/crease.proto` (and the replicas' `cluster.proto`) without a system `protoc`: protox parses it into a
 //! descriptor set, tonic-prost-build generates the messages and the service from that, and the
 //! encoded set is kept in `OUT_DIR` for gRPC server reflection.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed=crease");
-    let fds = protox::compile(["crease/v1/crease.proto"], ["."])?;
+    let fds = protox::compile(["crease/v1/crease.proto", "crease/v1/cluster.proto"], ["."])?;
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
     std::fs::write(
         out.join("crease_descriptor.bin"),

@@ -108,7 +108,7 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let closing = state.closing();
     tokio::pin!(closing);
-    let token = room.token().to_owned();
+    let token = room.token().unwrap_or_default().to_owned();
     let mut positions = Vec::new();
     // Animation time (it stands still while others publish), and what the room had counted
     // after our last frame.

@@ -33,6 +33,8 @@ pub struct Config {
     pub demo_rate: f64,
     /// How long in-flight calls may finish after shutdown starts.
     pub drain: Duration,
+    /// Join this cluster (`--nats`); the demo room, if any, stays local to this replica.
+    pub cluster: Option<crease_server::cluster::ClusterOptions>,
 }
 
 impl Default for Config {
@@ -47,6 +49,7 @@ impl Default for Config {
             demo_rate: 60.0,
             // Long enough for an ack in flight, short enough for a container's grace period.
             drain: Duration::from_secs(5),
+            cluster: None,
         }
     }
 }
@@ -92,6 +95,9 @@ pub enum LaunchError {
     /// The demo's training task panicked.
     #[error("the demo model's training task: {0}")]
     Join(#[from] tokio::task::JoinError),
+    /// The cluster could not be joined.
+    #[error("joining the cluster: {0}")]
+    Cluster(#[from] crease_server::cluster::ClusterError),
 }
 
 /// A started server.
@@ -170,10 +176,11 @@ pub fn crease_command() -> String {
 /// # Errors
 /// [`LaunchError`]: the model folder, the demo, or binding.
 pub async fn start(config: Config, progress: Progress) -> Result<Started, LaunchError> {
-    let mut models = match &config.models {
+    let models = match &config.models {
         Some(dir) => {
             let models = ModelRegistry::load_dir(dir)?;
-            if models.is_empty() && !config.demo {
+            // A cluster replica may start with none: it fetches its rooms' models.
+            if models.is_empty() && !config.demo && config.cluster.is_none() {
                 return Err(LaunchError::NoModels(dir.clone()));
             }
             models
@@ -194,7 +201,7 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     } else {
         None
     };
-    for m in models.iter() {
+    for m in models.list() {
         tracing::info!(model = %m.name, vertices = m.info.base_vertices, detail = m.info.detail_vertices, "loaded");
     }
     if let Some(dir) = &config.server.web
@@ -209,6 +216,9 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     }
     let tls = config.server.tls.is_some();
     let state = AppState::new(models, config.server);
+    if let Some(options) = config.cluster {
+        crease_server::cluster::join(&state, options).await?;
+    }
     let mut demo_token = None;
     if let Some((model, animation)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
@@ -218,7 +228,7 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
             room = room.with_token(token);
         }
         let room = state.add_room(room)?;
-        demo_token = Some(room.token().to_owned());
+        demo_token = Some(room.token().unwrap_or_default().to_owned());
         tokio::spawn(drive(Arc::clone(&state), room, animation, config.demo_rate));
     }
     let running = crease_server::serve(state).await?;

@@ -67,6 +67,17 @@ struct Args {
     /// Largest gRPC or WebSocket message accepted, bytes.
     #[arg(long, default_value_t = Limits::default().message_bytes)]
     max_message_bytes: usize,
+    /// Join a cluster through this NATS server (JetStream on, e.g. `nats-server -js`): every
+    /// replica serves every room of the cluster; a dead replica's rooms are adopted. With it,
+    /// --models may be empty (models are fetched from the cluster).
+    #[arg(long, value_name = "URL", env = "CREASE_NATS")]
+    nats: Option<String>,
+    /// This replica's id in the cluster (unique). Default: the host name and a random suffix.
+    #[arg(long, value_name = "ID", requires = "nats", env = "CREASE_REPLICA_ID")]
+    replica_id: Option<String>,
+    /// The owner's lease in milliseconds: a replica silent this long loses its rooms to others.
+    #[arg(long, value_name = "MS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_LEASE.as_millis() as u64)]
+    lease_ms: u64,
 }
 
 impl From<Args> for Config {
@@ -94,6 +105,10 @@ impl From<Args> for Config {
             cache: args.cache,
             demo_token: args.demo_token,
             demo_rate: args.demo_rate,
+            cluster: args.nats.map(|url| crease_server::cluster::ClusterOptions {
+                lease: std::time::Duration::from_millis(args.lease_ms.max(100)),
+                ..crease_server::cluster::ClusterOptions::new(&url, args.replica_id)
+            }),
             ..Config::default()
         }
     }

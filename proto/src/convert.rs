@@ -122,6 +122,14 @@ impl Level {
         }
     }
 
+    /// The level's name, as `?level=` spells it: `base` or `detail`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::Base => "base",
+            Level::Detail => "detail",
+        }
+    }
+
     /// The level of a WebSocket's `?level=` query (`base` when absent).
     ///
     /// # Errors

@@ -55,6 +55,9 @@ pub enum ErrorCode {
     ResourceExhausted,
     /// The server failed while predicting (a bug, not the publisher's fault).
     Internal,
+    /// In a cluster: the room's owner cannot be reached now (it died and its room is not
+    /// adopted yet, or this replica lost the cluster); the publisher retries.
+    Unavailable,
 }
 
 impl ErrorCode {
@@ -66,6 +69,7 @@ impl ErrorCode {
             ErrorCode::PermissionDenied => 7,
             ErrorCode::ResourceExhausted => 8,
             ErrorCode::Internal => 13,
+            ErrorCode::Unavailable => 14,
         }
     }
 
@@ -77,6 +81,7 @@ impl ErrorCode {
             ErrorCode::PermissionDenied,
             ErrorCode::ResourceExhausted,
             ErrorCode::Internal,
+            ErrorCode::Unavailable,
         ]
         .into_iter()
         .find(|c| c.wire() == code)
@@ -173,6 +178,7 @@ mod tests {
                 tonic::Code::ResourceExhausted,
             ),
             (ErrorCode::Internal, 13, tonic::Code::Internal),
+            (ErrorCode::Unavailable, 14, tonic::Code::Unavailable),
         ];
         for (code, wire, grpc) in pairs {
             assert_eq!(code.wire(), wire);

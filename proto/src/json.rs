@@ -128,11 +128,29 @@ impl JsonAck {
     }
 }
 
-/// `GET /api/rooms`: `{"rooms": [ids, in order]}`.
+/// `GET /api/rooms`: `{"rooms": [ids, in order]}`; in a cluster also
+/// `"cluster": [{"room", "model", "owner"}, ...]` and `"replica"` (the one that answered).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RoomList {
     /// The open rooms' ids, sorted.
     pub rooms: Vec<String>,
+    /// In a cluster: each room's model and owner replica, in the same order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cluster: Vec<RoomOwner>,
+    /// In a cluster: the replica that answered.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replica: Option<String>,
+}
+
+/// A cluster room in [`RoomList`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoomOwner {
+    /// The room id.
+    pub room: String,
+    /// Its model.
+    pub model: String,
+    /// The replica that predicts its frames.
+    pub owner: String,
 }
 
 /// `f32`s as the `f64` they widen to (see the module docs).
@@ -283,6 +301,8 @@ mod tests {
         );
         let list = RoomList {
             rooms: vec!["a".into(), "b".into()],
+            cluster: Vec::new(),
+            replica: None,
         };
         assert_eq!(
             serde_json::to_string(&list).unwrap(),

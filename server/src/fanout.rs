@@ -5,8 +5,9 @@
 //!
 //! [`Fanout`] is the interface, [`LocalFanout`] the in-process implementation (a
 //! `tokio::sync::watch` per level). The interface is object-safe so that a room can hold a
-//! `Box<dyn Fanout>` and a networked implementation (e.g. NATS, a next issue) can stand behind
-//! it: it hands out the same [`Receiver`] by bridging its messages into a local channel.
+//! `dyn Fanout` and a networked implementation can stand behind it: a cluster's room
+//! (`crate::cluster::RoomLink`) wraps a [`LocalFanout`] and also sends each frame to the
+//! replicas that relay it, and hands out the same [`Receiver`].
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -41,6 +42,13 @@ pub trait Fanout: Send + Sync + std::fmt::Debug {
     /// Whether anyone subscribes to `level`: the pipeline synthesises the detail layer only
     /// while someone does.
     fn interest(&self, level: Level) -> bool;
+
+    /// Whether `level`'s next frame should be a keyframe (asked once, then cleared): a
+    /// networked fan-out whose far end lost a frame asks for one. The local fan-out never
+    /// does (its subscribers get on-demand keyframes, `crate::frames`).
+    fn wants_keyframe(&self, _level: Level) -> bool {
+        false
+    }
 }
 
 /// The in-process fan-out: one `watch` channel and one subscriber count per level.

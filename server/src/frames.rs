@@ -76,6 +76,11 @@ impl MeshUpdate {
         }
     }
 
+    /// The room encoder's frame as it was encoded (a keyframe or a delta), shared.
+    pub(crate) fn encoded(&self) -> Bytes {
+        self.frame.clone()
+    }
+
     /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).
     pub fn codec_seq(&self) -> u32 {
         self.codec_seq

@@ -94,14 +94,11 @@ impl CreaseService {
         self.state
             .models
             .get(name)
-            .cloned()
             .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
     }
 
-    fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
-        self.state
-            .room(id)
-            .ok_or_else(|| Status::not_found(format!("room: no room {id:?}")))
+    async fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
+        self.state.find_room(id).await.map_err(|e| e.status())
     }
 }
 
@@ -114,7 +111,13 @@ impl Crease for CreaseService {
         _req: Request<v1::ListModelsRequest>,
     ) -> Result<Response<v1::ListModelsResponse>, Status> {
         Ok(Response::new(v1::ListModelsResponse {
-            models: self.state.models.iter().map(|m| m.info.clone()).collect(),
+            models: self
+                .state
+                .models
+                .list()
+                .iter()
+                .map(|m| m.info.clone())
+                .collect(),
         }))
     }
 
@@ -147,16 +150,25 @@ impl Crease for CreaseService {
                 f.min_cutoff_hz, f.beta, f.d_cutoff_hz
             )));
         }
-        let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
-            .await
-            .map_err(open_status)?;
-        let room = self.state.add_room(room).map_err(|e| match e {
-            AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
-            AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
-        })?;
+        let room = match self.state.cluster() {
+            Some(cluster) => {
+                Arc::clone(cluster)
+                    .open_room(&self.state, &r.room, model, beta, filter)
+                    .await?
+            }
+            None => {
+                let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
+                    .await
+                    .map_err(open_status)?;
+                self.state.add_room(room).map_err(|e| match e {
+                    AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
+                    AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
+                })?
+            }
+        };
         let response = v1::OpenRoomResponse {
             room: room.id.clone(),
-            publish_token: room.token().to_owned(),
+            publish_token: room.token().unwrap_or_default().to_owned(),
             model: Some(room.model.info.clone()),
         };
         Ok(Response::new(response))
@@ -166,7 +178,11 @@ impl Crease for CreaseService {
         &self,
         req: Request<v1::GetRoomRequest>,
     ) -> Result<Response<v1::RoomInfo>, Status> {
-        let room = self.room(&req.get_ref().room)?;
+        let room = self.room(&req.get_ref().room).await?;
+        let (owner, replica) = match (self.state.cluster(), room.link()) {
+            (Some(cluster), Some(link)) => (link.entry().0.owner, cluster.replica.clone()),
+            _ => (String::new(), String::new()),
+        };
         Ok(Response::new(v1::RoomInfo {
             room: room.id.clone(),
             model: Some(room.model.info.clone()),
@@ -174,6 +190,8 @@ impl Crease for CreaseService {
             filter: room.filter().map(v1::MarkerFilter::from),
             subscribers: room.subscriber_count() as u32,
             published: room.published(),
+            owner,
+            replica,
         }))
     }
 
@@ -183,6 +201,10 @@ impl Crease for CreaseService {
     ) -> Result<Response<v1::CloseRoomResponse>, Status> {
         self.require_admin(&req)?;
         let id = &req.get_ref().room;
+        if let Some(cluster) = self.state.cluster() {
+            cluster.close_room(&self.state, id).await?;
+            return Ok(Response::new(v1::CloseRoomResponse {}));
+        }
         let removed = {
             let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
             let removed = rooms.remove(id);
@@ -225,7 +247,7 @@ impl Crease for CreaseService {
     ) -> Result<Response<Self::SubscribeStream>, Status> {
         let r = req.into_inner();
         let level = Level::from_wire("SubscribeRequest", r.level)?;
-        let room = self.room(&r.room)?;
+        let room = self.room(&r.room).await?;
         check_level(&room, level)?;
         let subscription = room
             .subscribe(level, self.state.config.limits.subscribers_per_room)
@@ -262,7 +284,7 @@ impl Crease for CreaseService {
 }
 
 /// The status of a room that could not be opened.
-fn open_status(e: RoomError) -> Status {
+pub(crate) fn open_status(e: RoomError) -> Status {
     match e {
         RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
         RoomError::Build(BuildError::Predictor(e)) => {

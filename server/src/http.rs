@@ -10,7 +10,7 @@ use axum::http::{StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
-use crease_proto::json::{RoomDocument, RoomList};
+use crease_proto::json::{RoomDocument, RoomList, RoomOwner};
 
 use crate::AppState;
 
@@ -32,18 +32,44 @@ pub fn router(state: Arc<AppState>) -> Router {
     }
 }
 
+/// The HTTP status of a room lookup's refusal.
+pub(crate) fn http_status(e: &crate::ingest::PublishError) -> StatusCode {
+    match e.code() {
+        crease_proto::errors::ErrorCode::NotFound => StatusCode::NOT_FOUND,
+        _ => StatusCode::SERVICE_UNAVAILABLE,
+    }
+}
+
 async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     if state.is_closing() {
         (StatusCode::SERVICE_UNAVAILABLE, "shutting down\n")
-    } else if state.models.is_empty() {
+    } else if state.cluster().is_some_and(|c| !c.is_connected()) {
+        (StatusCode::SERVICE_UNAVAILABLE, "NATS disconnected\n")
+    } else if state.models.is_empty() && state.cluster().is_none() {
         (StatusCode::SERVICE_UNAVAILABLE, "no models loaded\n")
     } else {
         (StatusCode::OK, "ready\n")
     }
 }
 
-/// `GET /api/rooms`: the open rooms' ids, in order.
+/// `GET /api/rooms`: the open rooms' ids, in order; in a cluster every room of the cluster,
+/// with its model and owner.
 async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    if let Some(cluster) = state.cluster() {
+        let rooms = cluster.rooms();
+        return axum::Json(RoomList {
+            rooms: rooms.keys().cloned().collect(),
+            cluster: rooms
+                .iter()
+                .map(|(id, k)| RoomOwner {
+                    room: id.clone(),
+                    model: k.entry.model.clone(),
+                    owner: k.entry.owner.clone(),
+                })
+                .collect(),
+            replica: Some(cluster.replica.clone()),
+        });
+    }
     let mut ids: Vec<String> = state
         .rooms
         .read()
@@ -52,7 +78,11 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         .cloned()
         .collect();
     ids.sort();
-    axum::Json(RoomList { rooms: ids })
+    axum::Json(RoomList {
+        rooms: ids,
+        cluster: Vec::new(),
+        replica: None,
+    })
 }
 
 /// `GET /api/rooms/{id}`: what a viewer needs besides the stream: the model's control points
@@ -62,8 +92,9 @@ async fn room_info(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    let Some(room) = state.room(&id) else {
-        return (StatusCode::NOT_FOUND, format!("room: no room {id:?}\n")).into_response();
+    let room = match state.find_room(&id).await {
+        Ok(room) => room,
+        Err(e) => return (http_status(&e), format!("{e}\n")).into_response(),
     };
     axum::Json(RoomDocument::new(
         &room.id,

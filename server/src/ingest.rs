@@ -42,6 +42,13 @@ pub enum PublishError {
     /// The server failed (an encoder error, a panicked task): not the publisher's fault.
     #[error("internal: {0}")]
     Internal(String),
+    /// In a cluster: the room's owner does not answer now, or its model cannot be had here.
+    #[error("unavailable: {0}")]
+    Unavailable(String),
+    /// In a cluster: the owner refused the frame this replica forwarded (its code and message,
+    /// as the owner's ack carried them).
+    #[error("{}", .0.message)]
+    Forwarded(v1::FrameError),
 }
 
 impl From<PipelineError> for PublishError {
@@ -63,12 +70,19 @@ impl PublishError {
             PublishError::Rate { .. } => ErrorCode::ResourceExhausted,
             PublishError::Wire(_) | PublishError::Predict(_) => ErrorCode::InvalidArgument,
             PublishError::Internal(_) => ErrorCode::Internal,
+            PublishError::Unavailable(_) => ErrorCode::Unavailable,
+            PublishError::Forwarded(e) => {
+                ErrorCode::from_wire(e.code).unwrap_or(ErrorCode::Internal)
+            }
         }
     }
 
     /// gRPC: the `FrameError` of the ack.
     pub fn frame_error(&self) -> v1::FrameError {
-        frame_error(self.code(), self.to_string())
+        match self {
+            PublishError::Forwarded(e) => e.clone(),
+            e => frame_error(e.code(), e.to_string()),
+        }
     }
 
     /// gRPC: the status that ends a `Synthesize` batch at its frame `index`, the frame index in
@@ -106,17 +120,24 @@ pub async fn publish(
 ) -> Result<Published, PublishError> {
     let received = Instant::now();
     let done = publish_inner(state, token, frame, received).await;
+    count(state, &done);
+    done
+}
+
+fn count(state: &AppState, done: &Result<Published, PublishError>) {
     let m = &state.metrics;
-    match &done {
+    match done {
         Ok(p) => {
             m.frames_published.inc();
+            if p.detail {
+                m.detail_frames.inc();
+            }
             m.frame_latency.observe(f64::from(p.latency_us) * 1e-6);
         }
         Err(_) => {
             m.frames_refused.inc();
         }
     }
-    done
 }
 
 async fn publish_inner(
@@ -125,13 +146,46 @@ async fn publish_inner(
     frame: v1::ControlFrame,
     received: Instant,
 ) -> Result<Published, PublishError> {
-    let room = state
-        .room(&frame.room)
-        .ok_or_else(|| PublishError::NoRoom(frame.room.clone()))?;
+    let room = state.find_room(&frame.room).await?;
     let session = room.session();
     if !session.accepts(token) {
         return Err(PublishError::Token(room.id.clone()));
     }
+    // In a cluster, a relay forwards the frame to the owner, which applies the rate.
+    if let Some(link) = room.link()
+        && !link.is_owner()
+        && let Some(cluster) = state.cluster()
+    {
+        return crate::cluster::control::forward(cluster, &room.id, frame, received).await;
+    }
+    admit_and_process(state, room, frame, received).await
+}
+
+/// Owner: a frame a relay forwarded (its token checked there): the rate limit, then the
+/// pipeline, as a local frame; counted in the metrics like one.
+///
+/// # Errors
+/// [`PublishError`]; the room is unchanged then.
+pub(crate) async fn publish_forwarded(
+    state: &Arc<AppState>,
+    frame: v1::ControlFrame,
+) -> Result<Published, PublishError> {
+    let received = Instant::now();
+    let done = match state.room(&frame.room) {
+        Some(room) => admit_and_process(state, room, frame, received).await,
+        None => Err(PublishError::NoRoom(frame.room.clone())),
+    };
+    count(state, &done);
+    done
+}
+
+async fn admit_and_process(
+    state: &Arc<AppState>,
+    room: Arc<Room>,
+    frame: v1::ControlFrame,
+    received: Instant,
+) -> Result<Published, PublishError> {
+    let session = room.session();
     let hz = state.config.limits.publish_hz;
     if !session.admit(hz) {
         return Err(PublishError::Rate {
@@ -242,6 +296,7 @@ mod tests {
                 held: 1,
                 latency_us: 30,
                 control_rms: 0.5,
+                detail: false,
             }),
         );
         assert_eq!(
@@ -268,6 +323,8 @@ mod tests {
             PublishError::Wire(w) => PublishError::Wire(w.clone()),
             PublishError::Predict(m) => PublishError::Predict(m.clone()),
             PublishError::Internal(m) => PublishError::Internal(m.clone()),
+            PublishError::Unavailable(m) => PublishError::Unavailable(m.clone()),
+            PublishError::Forwarded(e) => PublishError::Forwarded(e.clone()),
         }
     }
 }

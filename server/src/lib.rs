@@ -13,7 +13,10 @@
 //!   on-demand keyframe from the encoder's lanes) and the pool that recycles them.
 //! - [`stream`]: subscribers' mesh streams (topology, then frames; on-demand keyframes) and
 //!   batches.
-//! - [`registry`]: the models of a model directory, loaded once.
+//! - [`registry`]: the models of a model directory, loaded once (and, in a cluster, the
+//!   models fetched from it).
+//! - [`cluster`]: rooms across replicas over NATS (`--nats`): the room registry, relayed
+//!   frames, forwarded controls, leases and failover, models in the cluster's store.
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
 //!   Prometheus metrics.
 //! - [`serve`]: binds the listeners and runs until shut down.
@@ -22,6 +25,7 @@
 //! `crease-proto`'s. Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the
 //! embedded demo and the `crease-server` binary are in `crease-demo`.
 
+pub mod cluster;
 pub mod fanout;
 pub mod frames;
 pub mod grpc;
@@ -38,7 +42,7 @@ pub mod ws;
 use std::collections::HashMap;
 use std::future::IntoFuture;
 use std::net::SocketAddr;
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, OnceLock, RwLock};
 
 use registry::ModelRegistry;
 use room::Room;
@@ -162,6 +166,8 @@ pub struct AppState {
     closing: tokio::sync::watch::Sender<bool>,
     /// Prometheus metrics.
     pub metrics: metrics::Metrics,
+    /// The cluster this server joined (`cluster::join`), if any.
+    cluster: OnceLock<Arc<cluster::Cluster>>,
 }
 
 impl AppState {
@@ -173,7 +179,29 @@ impl AppState {
             config,
             closing: tokio::sync::watch::channel(false).0,
             metrics: metrics::Metrics::default(),
+            cluster: OnceLock::new(),
         })
+    }
+
+    /// The cluster this server joined, if any.
+    pub fn cluster(&self) -> Option<&Arc<cluster::Cluster>> {
+        self.cluster.get()
+    }
+
+    /// Room `id`: the local one, or in a cluster a relay of the cluster's room of that id,
+    /// opened here now (`cluster::Cluster::local_room`).
+    ///
+    /// # Errors
+    /// [`ingest::PublishError::NoRoom`], or in a cluster
+    /// [`ingest::PublishError::Unavailable`] when the room's model cannot be had here.
+    pub async fn find_room(self: &Arc<Self>, id: &str) -> Result<Arc<Room>, ingest::PublishError> {
+        if let Some(room) = self.room(id) {
+            return Ok(room);
+        }
+        match self.cluster() {
+            Some(cluster) => Arc::clone(cluster).local_room(self, id).await,
+            None => Err(ingest::PublishError::NoRoom(id.to_owned())),
+        }
     }
 
     /// Whether the server is shutting down.

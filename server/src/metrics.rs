@@ -15,6 +15,8 @@ pub struct Metrics {
     pub frames_published: Counter,
     /// Control frames refused (bad field, unknown room, wrong token).
     pub frames_refused: Counter,
+    /// Frames whose detail layer was synthesised (only while someone watches it).
+    pub detail_frames: Counter,
     /// Seconds from a control frame's arrival to its meshes being ready.
     pub frame_latency: Histogram,
     /// Encoded mesh bytes sent to subscribers and batch clients.
@@ -25,6 +27,8 @@ pub struct Metrics {
     pub rooms: Gauge,
     /// Live mesh subscriptions.
     pub subscribers: Gauge,
+    /// The cluster's (zero on a single server).
+    pub cluster: crate::cluster::ClusterMetrics,
 }
 
 impl Default for Metrics {
@@ -33,14 +37,17 @@ impl Default for Metrics {
         let m = Metrics {
             frames_published: Counter::default(),
             frames_refused: Counter::default(),
+            detail_frames: Counter::default(),
             // 25 µs to ~51 ms.
             frame_latency: Histogram::new(exponential_buckets(25e-6, 2.0, 12)),
             bytes_out: Counter::default(),
             frames_out: Counter::default(),
             rooms: Gauge::default(),
             subscribers: Gauge::default(),
+            cluster: crate::cluster::ClusterMetrics::default(),
             registry: Registry::default(),
         };
+        m.cluster.register(&mut registry);
         registry.register(
             "frames_published",
             "Control frames predicted and handed to the subscribers",
@@ -50,6 +57,11 @@ impl Default for Metrics {
             "frames_refused",
             "Control frames refused (bad field, unknown room, wrong token)",
             m.frames_refused.clone(),
+        );
+        registry.register(
+            "detail_frames",
+            "Frames whose detail layer was synthesised",
+            m.detail_frames.clone(),
         );
         registry.register(
             "frame_latency_seconds",

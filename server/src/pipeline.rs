@@ -88,6 +88,9 @@ pub struct Published {
     /// RMS distance between the frame's valid control points (as received, before any
     /// filter) and the predicted mesh's control vertices, model units; 0 with none valid.
     pub control_rms: f32,
+    /// Whether the detail layer was synthesised (someone, here or on another replica,
+    /// watches it).
+    pub detail: bool,
 }
 
 /// Why a frame was not published (the room is unchanged but for the encoders' state).
@@ -355,6 +358,9 @@ impl Pipeline {
                     .extend(order.iter().map(|&m| mesh[m as usize]));
             }
             let encoder = &mut state.encoders[level as usize];
+            if fanout.wants_keyframe(level) {
+                encoder.force_keyframe();
+            }
             let header = encoder.encode(&state.streamed, None, &mut state.encoded)?;
             let qbox = *encoder.qbox();
             let pool = &mut state.pools[level as usize];
@@ -372,16 +378,19 @@ impl Pipeline {
             Ok(())
         };
         send(Level::Base, predicted)?;
+        let mut detail = false;
         if fanout.interest(Level::Detail)
-            && let Ok(detail) = self.predictor.predict_detail(&mut state.ctx)
+            && let Ok(mesh) = self.predictor.predict_detail(&mut state.ctx)
         {
             // `predict_detail` borrows the context the closure does not touch.
-            send(Level::Detail, detail)?;
+            send(Level::Detail, mesh)?;
+            detail = true;
         }
         Ok(Published {
             held: held as u32,
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
             control_rms,
+            detail,
         })
     }
 }

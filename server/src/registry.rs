@@ -1,9 +1,11 @@
 //! The models a server hosts: every `*.crease` file of a model directory, loaded and validated
-//! once at start; rooms hold an `Arc` of theirs.
+//! once at start, and (in a cluster) models fetched from the cluster's store later; rooms hold
+//! an `Arc` of theirs. Each model carries the SHA-256 of its serialised form, which names it
+//! across replicas (`crate::cluster`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, OnceLock, RwLock};
 
 use crease_core::codec::spatial_order;
 use crease_core::glam::Vec3;
@@ -21,6 +23,9 @@ pub struct LoadedModel {
     pub model: Arc<TrainedModel>,
     /// Its public description (`GetModel`).
     pub info: v1::ModelInfo,
+    /// SHA-256 of the model's serialised form (`TrainedModel::to_bytes`), hex: the same model
+    /// has the same digest on every replica, whatever file it was read from.
+    pub sha256: String,
     /// The box around the rest pose and every training pose (skinned by the rig): where the
     /// model's meshes live, the basis of the streams' quantisation box.
     pub pose_bounds: (Vec3, Vec3),
@@ -124,10 +129,21 @@ pub enum RegistryError {
     },
 }
 
-/// The hosted models, by name.
+/// The hosted models, by name. Models can be added while the server runs (a cluster replica
+/// fetches the models of rooms it relays or adopts), so the map sits behind a lock; lookups
+/// hand out `Arc`s.
 #[derive(Debug, Default)]
 pub struct ModelRegistry {
-    models: BTreeMap<String, Arc<LoadedModel>>,
+    models: RwLock<BTreeMap<String, Arc<LoadedModel>>>,
+}
+
+/// SHA-256 of `bytes`, lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 impl ModelRegistry {
@@ -143,7 +159,7 @@ impl ModelRegistry {
             .filter(|p| p.extension().is_some_and(|e| e == "crease") && p.is_file())
             .collect();
         paths.sort();
-        let mut registry = Self::default();
+        let registry = Self::default();
         for path in paths {
             let model = TrainedModel::load(&path).map_err(|source| RegistryError::Model {
                 path: path.clone(),
@@ -158,37 +174,58 @@ impl ModelRegistry {
         Ok(registry)
     }
 
-    /// Adds (or replaces) a model under `name`.
-    pub fn insert(&mut self, name: &str, model: TrainedModel) -> Arc<LoadedModel> {
+    /// Adds (or replaces) a model under `name` (serialises it once for its digest).
+    pub fn insert(&self, name: &str, model: TrainedModel) -> Arc<LoadedModel> {
+        let sha256 = model.to_bytes().map(|b| sha256_hex(&b)).unwrap_or_default();
+        self.insert_with_sha256(name, model, sha256)
+    }
+
+    /// [`ModelRegistry::insert`] of a model whose digest is known (it was read from the bytes
+    /// it was loaded from, which are its serialised form).
+    pub fn insert_with_sha256(
+        &self,
+        name: &str,
+        model: TrainedModel,
+        sha256: String,
+    ) -> Arc<LoadedModel> {
         let loaded = Arc::new(LoadedModel {
             name: name.to_owned(),
             info: model_info(name, &model),
             pose_bounds: pose_bounds(&model),
+            sha256,
             spatial: OnceLock::new(),
             detail_spatial: OnceLock::new(),
             model: Arc::new(model),
         });
-        self.models.insert(name.to_owned(), Arc::clone(&loaded));
+        self.write().insert(name.to_owned(), Arc::clone(&loaded));
         loaded
     }
 
+    fn write(&self) -> std::sync::RwLockWriteGuard<'_, BTreeMap<String, Arc<LoadedModel>>> {
+        self.models.write().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn read(&self) -> std::sync::RwLockReadGuard<'_, BTreeMap<String, Arc<LoadedModel>>> {
+        self.models.read().unwrap_or_else(|e| e.into_inner())
+    }
+
     /// The model named `name`.
-    pub fn get(&self, name: &str) -> Option<&Arc<LoadedModel>> {
-        self.models.get(name)
+    pub fn get(&self, name: &str) -> Option<Arc<LoadedModel>> {
+        self.read().get(name).cloned()
     }
 
     /// Every model, in name order.
-    pub fn iter(&self) -> impl Iterator<Item = &Arc<LoadedModel>> {
-        self.models.values()
+    pub fn list(&self) -> Vec<Arc<LoadedModel>> {
+        self.read().values().cloned().collect()
     }
 
     /// Number of models.
     pub fn len(&self) -> usize {
-        self.models.len()
+        self.read().len()
     }
 
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
-        self.models.is_empty()
+        self.read().is_empty()
     }
 }

@@ -14,6 +14,7 @@ pub use crate::pipeline::{BuildError, Published, StreamSettings};
 pub use crate::session::{RoomFull, new_token, valid_room_id};
 pub use crease_proto::Level;
 
+use crate::cluster::RoomLink;
 use crate::fanout::{self, Fanout, LocalFanout};
 use crate::pipeline::{Pipeline, PipelineError};
 use crate::registry::LoadedModel;
@@ -41,7 +42,9 @@ pub struct Room {
     pub model: Arc<LoadedModel>,
     session: Session,
     pipeline: Pipeline,
-    fanout: Box<dyn Fanout>,
+    fanout: Arc<dyn Fanout>,
+    /// In a cluster: the room's cluster side (owner or relay; it is also the fan-out).
+    link: Option<Arc<RoomLink>>,
 }
 
 impl std::fmt::Debug for Room {
@@ -79,31 +82,50 @@ impl Room {
         settings: StreamSettings,
         filter: Option<OneEuroParams>,
     ) -> Result<Room, RoomError> {
-        let id = id.to_owned();
-        tokio::task::spawn_blocking(move || Room::open_blocking(&id, model, beta, settings, filter))
-            .await
-            .map_err(|e| RoomError::Panicked(e.to_string()))?
+        Room::open_with(id, model, beta, settings, filter, None).await
     }
 
-    /// [`Room::open`] on the calling thread (blocking: a sparse factorisation).
-    fn open_blocking(
+    /// [`Room::open`] with its cluster side, `link` (which is then the room's fan-out).
+    pub(crate) async fn open_with(
         id: &str,
         model: Arc<LoadedModel>,
         beta: Option<f32>,
         settings: StreamSettings,
         filter: Option<OneEuroParams>,
+        link: Option<Arc<RoomLink>>,
     ) -> Result<Room, RoomError> {
         if !valid_room_id(id) {
             return Err(RoomError::BadId(id.to_owned()));
         }
-        let pipeline = Pipeline::build(Arc::clone(&model), beta, settings, filter)?;
-        Ok(Room {
-            id: id.to_owned(),
-            model,
-            session: Session::new(),
-            pipeline,
-            fanout: Box::new(LocalFanout::default()),
+        let id = id.to_owned();
+        tokio::task::spawn_blocking(move || {
+            let pipeline = Pipeline::build(Arc::clone(&model), beta, settings, filter)?;
+            let fanout: Arc<dyn Fanout> = match &link {
+                Some(link) => Arc::clone(link) as Arc<dyn Fanout>,
+                None => Arc::new(LocalFanout::default()),
+            };
+            Ok(Room {
+                id,
+                model,
+                session: Session::new(),
+                pipeline,
+                fanout,
+                link,
+            })
         })
+        .await
+        .map_err(|e| RoomError::Panicked(e.to_string()))?
+    }
+
+    /// In a cluster: the room's cluster side.
+    pub fn link(&self) -> Option<&Arc<RoomLink>> {
+        self.link.as_ref()
+    }
+
+    /// Replaces the publish token by its digest (a room opened on another replica).
+    pub(crate) fn with_token_sha256(mut self, digest: [u8; 32]) -> Self {
+        self.session.set_token_sha256(digest);
+        self
     }
 
     /// Replaces the publish token (an operator's fixed token, e.g. `--demo-token`).
@@ -122,8 +144,9 @@ impl Room {
         &self.pipeline
     }
 
-    /// The publish token.
-    pub fn token(&self) -> &str {
+    /// The publish token, where the room was opened on this replica (elsewhere in a cluster
+    /// only its digest is known).
+    pub fn token(&self) -> Option<&str> {
         self.session.token()
     }
 

@@ -20,10 +20,13 @@ struct Budget {
     at: Instant,
 }
 
-/// A room's token, limits and counters (module docs).
+/// A room's token, limits and counters (module docs). The session keeps the SHA-256 of the
+/// publish token and compares digests; the token itself only where the room was opened (a
+/// cluster's other replicas know the digest alone, `crate::cluster`).
 #[derive(Debug)]
 pub struct Session {
-    token: String,
+    token: Option<String>,
+    token_sha256: [u8; 32],
     budget: Mutex<Budget>,
     published: AtomicU64,
     /// Live subscriptions of both levels (the subscriber limit).
@@ -42,6 +45,12 @@ pub fn valid_room_id(id: &str) -> bool {
 pub fn new_token() -> String {
     let bytes: [u8; 16] = rand::random();
     bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// SHA-256 of a publish token.
+pub fn token_sha256(token: &str) -> [u8; 32] {
+    use sha2::Digest;
+    sha2::Sha256::digest(token.as_bytes()).into()
 }
 
 /// Compares without an early exit, so the time taken does not tell how much of a guessed token
@@ -71,8 +80,10 @@ impl Drop for CountGuard {
 impl Session {
     /// A session with a fresh random token.
     pub(crate) fn new() -> Session {
+        let token = new_token();
         Session {
-            token: new_token(),
+            token_sha256: token_sha256(&token),
+            token: Some(token),
             budget: Mutex::new(Budget {
                 tokens: f64::INFINITY,
                 at: Instant::now(),
@@ -82,19 +93,32 @@ impl Session {
         }
     }
 
-    /// The publish token.
-    pub fn token(&self) -> &str {
-        &self.token
+    /// The publish token, where the room was opened on this replica.
+    pub fn token(&self) -> Option<&str> {
+        self.token.as_deref()
+    }
+
+    /// The publish token's SHA-256.
+    pub fn token_sha256(&self) -> &[u8; 32] {
+        &self.token_sha256
     }
 
     /// Replaces the publish token.
     pub(crate) fn set_token(&mut self, token: &str) {
-        token.clone_into(&mut self.token);
+        self.token_sha256 = token_sha256(token);
+        self.token = Some(token.to_owned());
     }
 
-    /// Whether `presented` is this room's publish token (compared in constant time).
+    /// Replaces the publish token by its digest alone (a room opened on another replica).
+    pub(crate) fn set_token_sha256(&mut self, digest: [u8; 32]) {
+        self.token = None;
+        self.token_sha256 = digest;
+    }
+
+    /// Whether `presented` is this room's publish token: its digest is compared with the
+    /// token's, in constant time.
     pub fn accepts(&self, presented: Option<&str>) -> bool {
-        presented.is_some_and(|p| constant_time_eq(p.as_bytes(), self.token.as_bytes()))
+        presented.is_some_and(|p| constant_time_eq(&token_sha256(p), &self.token_sha256))
     }
 
     /// Whether one more frame may be published now under a limit of `rate_hz` frames per
@@ -170,6 +194,12 @@ mod tests {
         s.set_token("secret");
         assert!(s.accepts(Some("secret")));
         assert!(!s.accepts(Some("secreT")) && !s.accepts(None));
+        // Knowing only the digest accepts the same tokens.
+        let digest = *s.token_sha256();
+        let mut relay = Session::new();
+        relay.set_token_sha256(digest);
+        assert_eq!(relay.token(), None);
+        assert!(relay.accepts(Some("secret")) && !relay.accepts(Some("secret ")));
         // Two slots: a third is refused until one is given back.
         let a = s.take_slot(2).unwrap();
         let _b = s.take_slot(2).unwrap();

@@ -49,8 +49,9 @@ pub async fn room_socket(
     State(state): State<Arc<AppState>>,
     ws: WebSocketUpgrade,
 ) -> Response {
-    let Some(room) = state.room(&id) else {
-        return (StatusCode::NOT_FOUND, format!("room: no room {id:?}\n")).into_response();
+    let room = match state.find_room(&id).await {
+        Ok(room) => room,
+        Err(e) => return (crate::http::http_status(&e), format!("{e}\n")).into_response(),
     };
     let level = match Level::from_query(params.level.as_deref()) {
         Ok(Level::Detail) if !room.has_detail() => {

@@ -9,178 +9,21 @@
 use std::sync::Arc;
 
 use crease_core::codec::FrameDecoder;
-use crease_core::glam::{Quat, Vec3};
-use crease_core::mesh::Mesh;
+use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_core::predictor::Predictor;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::registry::ModelRegistry;
 use crease_server::{AppState, Config, Limits};
-use crease_train::bones::FitOptions;
-use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
-use tonic::Request;
 
 const ADMIN: &str = "admin-secret";
-const RINGS: usize = 8;
-const AROUND: usize = 6;
-
-fn tube() -> Mesh {
-    let mut positions = Vec::new();
-    for r in 0..RINGS {
-        for a in 0..AROUND {
-            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
-            positions.push(Vec3::new(phi.cos(), phi.sin(), r as f32));
-        }
-    }
-    let mut triangles = Vec::new();
-    for r in 0..RINGS - 1 {
-        for a in 0..AROUND {
-            let i0 = (r * AROUND + a) as u32;
-            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
-            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
-            triangles.push([i0, i1, j1]);
-            triangles.push([i0, j1, j0]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
-
-fn bent(rest: &Mesh, angle: f32) -> Vec<Vec3> {
-    let q = Quat::from_rotation_x(angle);
-    let pivot = Vec3::new(0.0, 0.0, 3.5);
-    rest.positions
-        .iter()
-        .map(|&p| {
-            if p.z > pivot.z {
-                pivot + q * (p - pivot)
-            } else {
-                p
-            }
-        })
-        .collect()
-}
-
-fn model() -> TrainedModel {
-    let rest = tube();
-    let frames: Vec<Vec<Vec3>> = (0..6).map(|k| bent(&rest, 0.25 * k as f32)).collect();
-    let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
-    let names: Vec<String> = (0..frames.len()).map(|k| format!("f{k}")).collect();
-    let options = TrainOptions {
-        fit: FitOptions {
-            bones: 4,
-            max_influences: 2,
-            ..FitOptions::default()
-        },
-        controls: ControlSpec::Vertices(vec![0, 45, 42]),
-        ..TrainOptions::default()
-    };
-    pipeline::train(
-        TrainInput {
-            rest: &rest,
-            frames: &refs,
-            names: &names,
-        },
-        &options,
-        &mut |_| {},
-    )
-    .unwrap()
-    .0
-}
-
-/// A plain HTTP/1.1 GET: status code and body.
-async fn http_get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    s.write_all(
-        format!("GET {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n\r\n").as_bytes(),
-    )
-    .await
-    .unwrap();
-    let mut text = String::new();
-    s.read_to_string(&mut text).await.unwrap();
-    let status = text[9..12].parse().unwrap();
-    let body = text
-        .split_once("\r\n\r\n")
-        .map_or("", |(_, b)| b)
-        .to_owned();
-    (status, body)
-}
-
-/// The value of a metric line `name value` in a Prometheus exposition.
-fn metric(text: &str, name: &str) -> f64 {
-    text.lines()
-        .find_map(|l| l.strip_prefix(name).and_then(|r| r.strip_prefix(' ')))
-        .unwrap_or_else(|| panic!("{name} missing from:\n{text}"))
-        .trim()
-        .parse()
-        .unwrap()
-}
-
-/// The in-process prediction of `frame` on a fresh context.
-fn predicted(model: &TrainedModel, frame: &v1::ControlFrame) -> Vec<Vec3> {
-    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
-    let mut ctx = predictor.new_context();
-    let c: Vec<Vec3> = frame
-        .positions
-        .chunks(3)
-        .map(|p| Vec3::new(p[0], p[1], p[2]))
-        .collect();
-    predictor.predict(&mut ctx, &c, None).unwrap().to_vec()
-}
-
-/// Decodes `data` with `decoder` and checks it, put back in model order through `topology`,
-/// against `want` within the frame's quantisation bound. Returns the frame's bits.
-fn check_decoded(
-    decoder: &mut FrameDecoder,
-    topology: &crease_proto::StreamTopology,
-    data: &[u8],
-    want: &[Vec3],
-) -> u8 {
-    let header = decoder.decode(data).unwrap();
-    let (mut streamed, mut got) = (Vec::new(), Vec::new());
-    decoder.positions(&mut streamed);
-    topology.to_model_order(&streamed, &mut got);
-    let bound = header.qbox.error_bound();
-    assert_eq!(got.len(), want.len());
-    for (i, (g, w)) in got.iter().zip(want).enumerate() {
-        let d = (*g - *w).abs();
-        assert!(
-            d.cmple(bound * 1.001 + 1e-6).all(),
-            "vertex {i}: {g} vs {w} (bound {bound})"
-        );
-    }
-    header.qbox.bits()
-}
-
-fn authed<T>(msg: T, token: &str) -> Request<T> {
-    let mut r = Request::new(msg);
-    r.metadata_mut()
-        .insert("authorization", format!("Bearer {token}").parse().unwrap());
-    r
-}
-
-fn control_frame(model: &TrainedModel, room: &str, seq: u64, angle: f32) -> v1::ControlFrame {
-    let p = bent(&model.rig.rest, angle);
-    v1::ControlFrame {
-        room: room.into(),
-        seq,
-        capture_time_us: 0,
-        positions: model
-            .controls
-            .iter()
-            .flat_map(|c| p[c.vertex as usize].to_array())
-            .collect(),
-        valid: Vec::new(),
-    }
-}
+mod common;
+use common::*;
 
 /// A server on free loopback ports hosting `model` as `tube`, with the admin token and `limits`.
 async fn serve_tube(model: &TrainedModel, limits: Limits) -> crease_server::Running {
-    let mut registry = ModelRegistry::default();
+    let registry = ModelRegistry::default();
     registry.insert("tube", model.clone());
     let state = AppState::new(
         registry,

@@ -132,7 +132,7 @@ pub(crate) async fn serve_model(
     admin: Option<&str>,
     limits: crease_server::Limits,
 ) -> std::net::SocketAddr {
-    let mut registry = crease_server::registry::ModelRegistry::default();
+    let registry = crease_server::registry::ModelRegistry::default();
     registry.insert(name, model);
     let state = crease_server::AppState::new(
         registry,

@@ -1,0 +1,635 @@
+//! Rooms across replicas, end to end (issue 17): a real `nats-server` with JetStream on a free
+//! loopback port and a temporary store, and three `crease-server` processes A, B, C joined to
+//! it (A and B hold the tube model; C starts with an empty model folder and fetches it). A room
+//! opened on A is listed on B and C; viewers on A (gRPC), B (gRPC) and C (WebSocket) decode the
+//! same frames, which match the in-process prediction within the quantisation bound; a
+//! publisher on C drives the room, with acks; detail interest from C alone makes A synthesise
+//! detail, and it stops when C's detail viewer leaves; `kill -9` of A: B or C adopts the room
+//! (the time is printed), C's viewer gets frames again and the publisher goes on; a NATS
+//! restart: the replicas reconnect and the room goes on; a room whose model's cluster copy is
+//! corrupt, or absent, is never adopted by a replica that lacks it.
+//!
+//! Skips, saying why, when `nats-server` is not installed (`.ci/run` installs it).
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
+
+#[path = "../../server/tests/common/mod.rs"]
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use common::{
+    authed, check_decoded, control_frame, http_get, metric, model_with_detail, predicted,
+};
+use crease_core::codec::FrameDecoder;
+use crease_core::model::TrainedModel;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use futures_util::StreamExt;
+use prost::Message;
+
+const ADMIN: &str = "cluster-admin";
+
+/// A port that was free a moment ago.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn nats_binary() -> Option<PathBuf> {
+    [
+        "/usr/sbin/nats-server",
+        "/usr/bin/nats-server",
+        "/usr/local/bin/nats-server",
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .find(|p| p.is_file())
+    .or_else(|| {
+        let out = Command::new("sh")
+            .args(["-c", "command -v nats-server"])
+            .output()
+            .ok()?;
+        let path = String::from_utf8(out.stdout).ok()?.trim().to_owned();
+        (!path.is_empty()).then(|| PathBuf::from(path))
+    })
+}
+
+/// A `nats-server` child with JetStream, on a fixed port and store (so it can be restarted).
+struct Nats {
+    bin: PathBuf,
+    port: u16,
+    store: PathBuf,
+    child: Child,
+}
+
+impl Nats {
+    fn start(bin: &Path, port: u16, store: &Path) -> Nats {
+        let child = Command::new(bin)
+            .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
+            .arg(store)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "nats-server did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Nats {
+            bin: bin.to_owned(),
+            port,
+            store: store.to_owned(),
+            child,
+        }
+    }
+
+    fn url(&self) -> String {
+        format!("nats://127.0.0.1:{}", self.port)
+    }
+
+    fn restart(&mut self) {
+        self.child.kill().unwrap();
+        self.child.wait().unwrap();
+        *self = Nats::start(&self.bin.clone(), self.port, &self.store.clone());
+    }
+}
+
+impl Drop for Nats {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A `crease-server` replica.
+struct Replica {
+    id: String,
+    child: Child,
+    grpc: String,
+    http: std::net::SocketAddr,
+    log: PathBuf,
+}
+
+impl Replica {
+    fn start(id: &str, models: &Path, nats: &str, dir: &Path) -> Replica {
+        let (grpc, http) = (free_port(), free_port());
+        let log = dir.join(format!("{id}.log"));
+        let child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
+            .arg("--models")
+            .arg(models)
+            .args(["--nats", nats, "--replica-id", id])
+            .args(["--grpc", &format!("127.0.0.1:{grpc}")])
+            .args(["--http", &format!("127.0.0.1:{http}")])
+            .env("CREASE_ADMIN_TOKEN", ADMIN)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap();
+        Replica {
+            id: id.to_owned(),
+            child,
+            grpc: format!("http://127.0.0.1:{grpc}"),
+            http: format!("127.0.0.1:{http}").parse().unwrap(),
+            log,
+        }
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    async fn ready(&mut self) {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                panic!("replica {} exited ({status}):\n{}", self.id, self.log());
+            }
+            if std::net::TcpStream::connect(self.http).is_ok()
+                && http_get(self.http, "/readyz").await.0 == 200
+            {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "replica {} not ready:\n{}",
+                self.id,
+                self.log()
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    async fn client(&self) -> CreaseClient<tonic::transport::Channel> {
+        CreaseClient::connect(self.grpc.clone()).await.unwrap()
+    }
+
+    /// `/api/rooms` as JSON.
+    async fn rooms(&self) -> serde_json::Value {
+        let (status, body) = http_get(self.http, "/api/rooms").await;
+        assert_eq!(status, 200, "{body}");
+        serde_json::from_str(&body).unwrap()
+    }
+
+    /// The owner of `room` as this replica's `/api/rooms` says.
+    async fn owner_of(&self, room: &str) -> Option<String> {
+        let rooms = self.rooms().await;
+        rooms["cluster"].as_array()?.iter().find_map(|r| {
+            (r["room"] == room).then(|| r["owner"].as_str().unwrap_or_default().to_owned())
+        })
+    }
+
+    async fn metric(&self, name: &str) -> f64 {
+        let (_, body) = http_get(self.http, "/metrics").await;
+        metric(&body, name)
+    }
+
+    fn kill9(&mut self) {
+        self.child.kill().unwrap();
+        self.child.wait().unwrap();
+    }
+}
+
+impl Drop for Replica {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// What a viewer decoded: per publisher seq, whether the frame matched the prediction.
+#[derive(Default)]
+struct Seen {
+    frames: BTreeMap<u64, usize>,
+    decode_errors: usize,
+    topology: Option<crease_proto::StreamTopology>,
+}
+
+type Shared = Arc<Mutex<Seen>>;
+
+/// The expected mesh of a frame of the test's publisher: seq k bends the tube by angle(k).
+fn angle(seq: u64) -> f32 {
+    0.1 + 0.05 * (seq % 20) as f32
+}
+
+/// Decodes every message of a mesh stream into `seen`, checking each frame (base level)
+/// against the in-process prediction of its control frame.
+fn watch(
+    model: Arc<TrainedModel>,
+    room: &'static str,
+    check: bool,
+    seen: Shared,
+    mut messages: impl futures_util::Stream<Item = v1::MeshFrame> + Unpin + Send + 'static,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let mut decoder = None::<FrameDecoder>;
+        while let Some(msg) = messages.next().await {
+            match msg.body {
+                Some(v1::mesh_frame::Body::Topology(t)) => {
+                    let t = crease_proto::read_topology(&t).unwrap();
+                    decoder = Some(FrameDecoder::new(t.vertex_count));
+                    seen.lock().unwrap().topology = Some(t);
+                }
+                Some(v1::mesh_frame::Body::Frame(f)) => {
+                    let mut s = seen.lock().unwrap();
+                    let (Some(d), Some(t)) = (decoder.as_mut(), s.topology.clone()) else {
+                        panic!("a frame before the topology");
+                    };
+                    if check {
+                        let want =
+                            predicted(&model, &control_frame(&model, room, f.seq, angle(f.seq)));
+                        check_decoded(d, &t, &f.data, &want);
+                    } else if d.decode(&f.data).is_err() {
+                        s.decode_errors += 1;
+                        continue;
+                    }
+                    *s.frames.entry(f.seq).or_default() += 1;
+                }
+                None => {}
+            }
+        }
+    })
+}
+
+/// A gRPC viewer of `room` at `level` on `replica`.
+async fn grpc_viewer(
+    replica: &Replica,
+    model: &Arc<TrainedModel>,
+    room: &'static str,
+    level: v1::Level,
+) -> (Shared, tokio::task::JoinHandle<()>) {
+    let stream = replica
+        .client()
+        .await
+        .subscribe(v1::SubscribeRequest {
+            room: room.into(),
+            level: level as i32,
+        })
+        .await
+        .unwrap()
+        .into_inner()
+        .filter_map(|m| async move { m.ok() });
+    let seen = Shared::default();
+    let task = watch(
+        Arc::clone(model),
+        room,
+        level == v1::Level::Base,
+        Arc::clone(&seen),
+        Box::pin(stream),
+    );
+    (seen, task)
+}
+
+/// A WebSocket viewer of `room` at `level` on `replica`.
+async fn ws_viewer(
+    replica: &Replica,
+    model: &Arc<TrainedModel>,
+    room: &'static str,
+    level: &str,
+) -> (Shared, tokio::task::JoinHandle<()>) {
+    let url = format!("ws://{}/ws/rooms/{room}?level={level}", replica.http);
+    let (socket, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let stream = socket.filter_map(|m| async move {
+        match m.ok()? {
+            tokio_tungstenite::tungstenite::Message::Binary(b) => {
+                v1::MeshFrame::decode(b.as_ref()).ok()
+            }
+            _ => None,
+        }
+    });
+    let seen = Shared::default();
+    let task = watch(
+        Arc::clone(model),
+        room,
+        level == "base",
+        Arc::clone(&seen),
+        Box::pin(stream),
+    );
+    (seen, task)
+}
+
+/// A publisher of `room` on a replica: frames with seq from `first`, at ~50 Hz, each ack
+/// awaited; returns the acks' errors (code, message) by seq.
+struct Publisher {
+    tx: tokio::sync::mpsc::Sender<v1::ControlFrame>,
+    acks: tokio::task::JoinHandle<Vec<v1::PublishAck>>,
+    model: Arc<TrainedModel>,
+    room: &'static str,
+    seq: u64,
+}
+
+impl Publisher {
+    async fn new(
+        replica: &Replica,
+        model: &Arc<TrainedModel>,
+        room: &'static str,
+        token: &str,
+    ) -> Publisher {
+        let (tx, rx) = tokio::sync::mpsc::channel(16);
+        let mut acks = replica
+            .client()
+            .await
+            .publish(authed(
+                tokio_stream::wrappers::ReceiverStream::new(rx),
+                token,
+            ))
+            .await
+            .unwrap()
+            .into_inner();
+        let acks = tokio::spawn(async move {
+            let mut all = Vec::new();
+            while let Ok(Some(ack)) = acks.message().await {
+                all.push(ack);
+            }
+            all
+        });
+        Publisher {
+            tx,
+            acks,
+            model: Arc::clone(model),
+            room,
+            seq: 0,
+        }
+    }
+
+    /// Sends `n` frames at ~50 Hz.
+    async fn send(&mut self, n: u64) {
+        for _ in 0..n {
+            self.seq += 1;
+            let f = control_frame(&self.model, self.room, self.seq, angle(self.seq));
+            self.tx.send(f).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
+    async fn finish(self) -> Vec<v1::PublishAck> {
+        drop(self.tx);
+        self.acks.await.unwrap()
+    }
+}
+
+/// Polls `f` until it is true, up to `limit`; the time it took.
+async fn until<F: std::future::Future<Output = bool>>(
+    limit: Duration,
+    what: &str,
+    mut f: impl FnMut() -> F,
+) -> Duration {
+    let start = Instant::now();
+    while !f().await {
+        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    start.elapsed()
+}
+
+fn frames(seen: &Shared) -> usize {
+    seen.lock().unwrap().frames.len()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_restart() {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
+    let model = Arc::new(model_with_detail());
+    let (models_ab, models_c) = (dir.path().join("models-ab"), dir.path().join("models-c"));
+    std::fs::create_dir_all(&models_ab).unwrap();
+    std::fs::create_dir_all(&models_c).unwrap();
+    model.save(models_ab.join("tube.crease")).unwrap();
+    // A second and third model only A and B have: their rooms test refused adoptions.
+    model.save(models_ab.join("tube2.crease")).unwrap();
+    model.save(models_ab.join("tube3.crease")).unwrap();
+    let mut a = Replica::start("A", &models_ab, &nats.url(), dir.path());
+    let mut b = Replica::start("B", &models_ab, &nats.url(), dir.path());
+    let mut c = Replica::start("C", &models_c, &nats.url(), dir.path());
+    for r in [&mut a, &mut b, &mut c] {
+        r.ready().await;
+    }
+
+    // A room opened on A is listed, with its owner, on B and C.
+    let open = v1::OpenRoomRequest {
+        room: "r".into(),
+        model: "tube".into(),
+        beta: 0.0,
+        filter: None,
+    };
+    let token = a
+        .client()
+        .await
+        .open_room(authed(open.clone(), ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    for r in [&b, &c] {
+        until(
+            Duration::from_secs(5),
+            "the room listed on every replica",
+            || async { r.owner_of("r").await.as_deref() == Some("A") },
+        )
+        .await;
+    }
+    let again = b
+        .client()
+        .await
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap_err();
+    assert_eq!(again.code(), tonic::Code::AlreadyExists, "{again:?}");
+
+    // Viewers on A (gRPC), B (gRPC) and C (WebSocket; C fetches the model from the cluster).
+    let (on_a, _ta) = grpc_viewer(&a, &model, "r", v1::Level::Base).await;
+    let (on_b, _tb) = grpc_viewer(&b, &model, "r", v1::Level::Base).await;
+    let (on_c, _tc) = ws_viewer(&c, &model, "r", "base").await;
+    // Relays announce their interest within a second.
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let mut publisher = Publisher::new(&c, &model, "r", &token).await;
+    publisher.send(60).await;
+    for (name, seen) in [("A", &on_a), ("B", &on_b), ("C", &on_c)] {
+        until(
+            Duration::from_secs(5),
+            &format!("frames on {name}"),
+            || async { frames(seen) >= 40 },
+        )
+        .await;
+    }
+    let detail_before = a.metric("crease_detail_frames_total").await;
+    publisher.send(20).await;
+    assert_eq!(
+        a.metric("crease_detail_frames_total").await,
+        detail_before,
+        "A synthesised detail while nobody watched it"
+    );
+    // Detail interest from C alone.
+    let (detail_c, detail_task) = ws_viewer(&c, &model, "r", "detail").await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    publisher.send(30).await;
+    until(Duration::from_secs(5), "detail frames on C", || async {
+        frames(&detail_c) >= 10
+    })
+    .await;
+    assert_eq!(detail_c.lock().unwrap().decode_errors, 0);
+    assert!(a.metric("crease_detail_frames_total").await > detail_before + 10.0);
+    detail_task.abort();
+    drop(detail_task);
+    // The interest lapses (3 s) and C stops relaying (2 s after its last viewer).
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    let idle = a.metric("crease_detail_frames_total").await;
+    publisher.send(20).await;
+    assert_eq!(
+        a.metric("crease_detail_frames_total").await,
+        idle,
+        "detail after C's viewer left"
+    );
+    assert!(c.metric("crease_cluster_forwarded_controls_total").await >= 100.0);
+
+    // kill -9 of A: B or C adopts the room.
+    let killed = Instant::now();
+    a.kill9();
+    // The publisher goes on through the failover: refused as unavailable until the adoption.
+    publisher.send(25).await;
+    let adopted = until(Duration::from_secs(10), "adoption", || async {
+        b.owner_of("r").await.is_some_and(|o| o != "A")
+    })
+    .await;
+    let new_owner = b.owner_of("r").await.unwrap();
+    eprintln!(
+        "room \"r\" adopted by {new_owner} {} ms after kill -9 of its owner",
+        killed.elapsed().as_millis()
+    );
+    assert!(killed.elapsed() < Duration::from_secs(10));
+    let _ = adopted;
+    let before = frames(&on_c);
+    publisher.send(40).await;
+    until(
+        Duration::from_secs(5),
+        "C's viewer after the adoption",
+        || async { frames(&on_c) >= before + 20 },
+    )
+    .await;
+
+    // A NATS restart: the replicas reconnect, the room goes on under the same owner.
+    nats.restart();
+    for r in [&b, &c] {
+        until(Duration::from_secs(15), "reconnected", || async {
+            http_get(r.http, "/readyz").await.0 == 200
+        })
+        .await;
+    }
+    let before = (frames(&on_b), frames(&on_c));
+    publisher.send(60).await;
+    until(
+        Duration::from_secs(10),
+        "frames after the NATS restart",
+        || async { frames(&on_b) >= before.0 + 20 && frames(&on_c) >= before.1 + 20 },
+    )
+    .await;
+    assert_eq!(
+        b.owner_of("r").await.as_deref(),
+        Some(new_owner.as_str()),
+        "ownership moved on a NATS restart"
+    );
+    let publisher_sent = publisher.seq;
+    let acks = publisher.finish().await;
+    let ok = acks.iter().filter(|a| a.error.is_none()).count();
+    let unavailable = acks
+        .iter()
+        .filter(|a| a.error.as_ref().is_some_and(|e| e.code == 14))
+        .count();
+    eprintln!(
+        "publisher on C: {} acks, {ok} accepted, {unavailable} unavailable during failover",
+        acks.len()
+    );
+    assert_eq!(acks.len() as u64, publisher_sent, "an ack per frame");
+    assert_eq!(
+        ok + unavailable,
+        acks.len(),
+        "other refusals: {:?}",
+        acks.iter()
+            .filter_map(|a| a.error.as_ref())
+            .find(|e| e.code != 14)
+    );
+    assert!(
+        unavailable > 0,
+        "frames sent while the owner was dead were accepted"
+    );
+    assert!(ok >= 200, "{ok} accepted");
+
+    // Rooms on tube2 and tube3 owned by B; C lacks both models. tube2's cluster copy is
+    // corrupted and tube3's removed: when B dies, C never adopts either.
+    let mut bc = b.client().await;
+    for (room, model_name) in [("q2", "tube2"), ("q3", "tube3")] {
+        bc.open_room(authed(
+            v1::OpenRoomRequest {
+                room: room.into(),
+                model: model_name.into(),
+                beta: 0.0,
+                filter: None,
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap();
+    }
+    let store = async_nats::jetstream::new(async_nats::connect(nats.url()).await.unwrap())
+        .get_object_store("crease-models")
+        .await
+        .unwrap();
+    let info = store.info("tube2").await.unwrap();
+    let mut bytes = model.to_bytes().unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    store
+        .put(
+            async_nats::jetstream::object_store::ObjectMetadata {
+                name: "tube2".into(),
+                metadata: info.metadata.clone(),
+                ..Default::default()
+            },
+            &mut bytes.as_slice(),
+        )
+        .await
+        .unwrap();
+    store.delete("tube3").await.unwrap();
+    for room in ["q2", "q3"] {
+        until(Duration::from_secs(5), "listed on C", || async {
+            c.owner_of(room).await.as_deref() == Some("B")
+        })
+        .await;
+    }
+    b.kill9();
+    if new_owner == "B" {
+        // C adopts "r" (it holds tube, fetched earlier).
+        until(Duration::from_secs(10), "C adopts r", || async {
+            c.owner_of("r").await.as_deref() == Some("C")
+        })
+        .await;
+    }
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    for room in ["q2", "q3"] {
+        assert_eq!(
+            c.owner_of(room).await.as_deref(),
+            Some("B"),
+            "C adopted {room} without its model"
+        );
+        let (status, body) = http_get(c.http, &format!("/api/rooms/{room}")).await;
+        assert_eq!(status, 503, "{body}");
+        eprintln!("C on {room}: {}", body.trim());
+    }
+    let (_, body) = http_get(c.http, "/api/rooms/q2").await;
+    assert!(body.contains("SHA-256"), "{body}");
+}

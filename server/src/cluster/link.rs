@@ -1,0 +1,442 @@
+//! A room's cluster side on one replica: [`RoomLink`], which is also the room's fan-out. On the
+//! owner it hands each level's frame to the local subscribers and, while another replica is
+//! interested, to NATS (`crease.frames.<room>.<level>`, one copy per frame however many relay
+//! it); it takes relays' interest and keyframe requests. On a relay it subscribes to the frames
+//! of the levels its local subscribers watch, decodes them (so that it holds the lanes a late
+//! viewer's keyframe is made from, `crate::frames`) and fans them out through the same local,
+//! latest-wins channel; it announces its interest so that the owner synthesises detail only
+//! while someone watches it.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use crease_core::codec::{CodecError, FrameDecoder, FrameKind};
+use crease_proto::{Level, frame_message, v1};
+use futures_util::StreamExt;
+use prost::Message as _;
+use tokio::sync::{Notify, mpsc};
+use tokio::task::JoinHandle;
+
+use super::{Cluster, subject};
+use crate::fanout::{Fanout, LocalFanout, Receiver};
+use crate::frames::{FramePool, MeshUpdate};
+
+/// How long an interest announcement holds; relays repeat theirs every [`ANNOUNCE`].
+pub(crate) const INTEREST_TTL: Duration = Duration::from_secs(3);
+/// How often a relay with subscribers repeats its interest.
+const ANNOUNCE: Duration = Duration::from_secs(1);
+/// A relay stops relaying a level this long after its last local subscriber of it left.
+const RELAY_LINGER: Duration = Duration::from_secs(2);
+/// Frames queued for NATS per room before the newest are dropped (the relays' decoders then
+/// ask for a keyframe).
+const OUT_QUEUE: usize = 8;
+/// A relay asks the owner for a keyframe at most this often per level.
+const KEY_REQUEST_EVERY: Duration = Duration::from_millis(200);
+
+/// What a relay keeps per level: the decoder of the owner's stream and the pool its frames are
+/// republished from.
+#[derive(Debug)]
+struct RelayLevel {
+    decoder: FrameDecoder,
+    pool: FramePool,
+}
+
+/// A room's cluster side (module docs).
+#[derive(Debug)]
+pub struct RoomLink {
+    room: String,
+    cluster: Arc<Cluster>,
+    local: LocalFanout,
+    /// This replica predicts the room's frames.
+    owner: AtomicBool,
+    /// The owner's lease is confirmed since the last (re)connection to NATS: only then may it
+    /// publish frames into the cluster (fencing: a replica back from a partition renews, or
+    /// learns it was replaced, before it sends anything).
+    confirmed: AtomicBool,
+    /// The registry revision this replica last wrote or saw for the room (compare-and-set).
+    revision: AtomicU64,
+    /// The registry entry, as this replica last wrote or read it.
+    entry: Mutex<v1::RoomEntry>,
+    /// Other replicas' interest per level: replica -> until when.
+    remote: Mutex<[HashMap<String, Instant>; 2]>,
+    key_wanted: [AtomicBool; 2],
+    out: mpsc::Sender<(Level, Arc<MeshUpdate>)>,
+    relay: [Mutex<RelayLevel>; 2],
+    wake: Notify,
+    /// The tasks of the room's cluster side: the frame sender and the relay loop (always), the
+    /// owner's services (while it owns the room), a relay's subscriptions.
+    tasks: Mutex<Vec<JoinHandle<()>>>,
+    owner_tasks: Mutex<Vec<JoinHandle<()>>>,
+}
+
+/// Why a relayed frame was not fanned out.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum RelayError {
+    /// Not a `MeshFrame` with a frame.
+    #[error("relayed message: {0}")]
+    Message(String),
+    /// The frame does not decode against what this relay holds (a frame was lost, or the
+    /// relay joined mid-stream): it needs a keyframe.
+    #[error("relayed frame: {0}")]
+    Codec(#[from] CodecError),
+}
+
+impl RoomLink {
+    /// The cluster side of room `room`, with `vertices` per level (base, detail), as `owner`
+    /// or relay, at registry `revision`; its background tasks start with [`RoomLink::start`].
+    pub(crate) fn new(
+        cluster: &Arc<Cluster>,
+        room: &str,
+        vertices: [usize; 2],
+        entry: v1::RoomEntry,
+        owner: bool,
+        revision: u64,
+    ) -> (Arc<RoomLink>, mpsc::Receiver<(Level, Arc<MeshUpdate>)>) {
+        let (out, rx) = mpsc::channel(OUT_QUEUE);
+        let relay = vertices.map(|n| {
+            Mutex::new(RelayLevel {
+                decoder: FrameDecoder::new(n),
+                pool: FramePool::default(),
+            })
+        });
+        let link = Arc::new(RoomLink {
+            room: room.to_owned(),
+            cluster: Arc::clone(cluster),
+            local: LocalFanout::default(),
+            owner: AtomicBool::new(owner),
+            confirmed: AtomicBool::new(owner),
+            revision: AtomicU64::new(revision),
+            entry: Mutex::new(entry),
+            remote: Mutex::new([HashMap::new(), HashMap::new()]),
+            key_wanted: [AtomicBool::new(false), AtomicBool::new(false)],
+            out,
+            relay,
+            wake: Notify::new(),
+            tasks: Mutex::new(Vec::new()),
+            owner_tasks: Mutex::new(Vec::new()),
+        });
+        (link, rx)
+    }
+
+    /// Starts the frame sender (frames from `rx` to NATS) and the relay loop; and the owner's
+    /// services if this replica owns the room.
+    pub(crate) fn start(
+        self: &Arc<Self>,
+        state: &Arc<crate::AppState>,
+        rx: mpsc::Receiver<(Level, Arc<MeshUpdate>)>,
+    ) {
+        let sender = tokio::spawn(Arc::clone(self).send_frames(rx));
+        let relay = tokio::spawn(Arc::clone(self).relay_loop());
+        lock(&self.tasks).extend([sender, relay]);
+        if self.is_owner() {
+            self.start_owner(state);
+        }
+    }
+
+    /// The room id.
+    pub fn room(&self) -> &str {
+        &self.room
+    }
+
+    /// Whether this replica predicts the room's frames.
+    pub fn is_owner(&self) -> bool {
+        self.owner.load(Ordering::Acquire)
+    }
+
+    /// The registry entry as this replica last wrote or read it, and its revision.
+    pub fn entry(&self) -> (v1::RoomEntry, u64) {
+        (
+            lock(&self.entry).clone(),
+            self.revision.load(Ordering::Acquire),
+        )
+    }
+
+    /// Records the registry's `entry` at `revision` (a renewal, or what the watch saw).
+    pub(crate) fn set_entry(&self, entry: v1::RoomEntry, revision: u64) {
+        *lock(&self.entry) = entry;
+        self.revision.store(revision, Ordering::Release);
+    }
+
+    /// Whether the owner's lease is confirmed since the last reconnection.
+    pub(crate) fn is_confirmed(&self) -> bool {
+        self.confirmed.load(Ordering::Acquire)
+    }
+
+    /// The lease is confirmed (a renewal succeeded) or unconfirmed (NATS reconnected).
+    pub(crate) fn set_confirmed(&self, confirmed: bool) {
+        self.confirmed.store(confirmed, Ordering::Release);
+    }
+
+    /// This replica now owns the room, at registry `revision`: it predicts, publishes into the
+    /// cluster, serves forwarded controls; the next frame of each level is a keyframe (the
+    /// relays' decoders hold the previous owner's frames).
+    pub(crate) fn become_owner(
+        self: &Arc<Self>,
+        state: &Arc<crate::AppState>,
+        entry: v1::RoomEntry,
+        revision: u64,
+    ) {
+        self.set_entry(entry, revision);
+        for w in &self.key_wanted {
+            w.store(true, Ordering::Release);
+        }
+        self.confirmed.store(true, Ordering::Release);
+        if !self.owner.swap(true, Ordering::AcqRel) {
+            self.start_owner(state);
+        }
+        self.wake.notify_one();
+    }
+
+    /// This replica no longer owns the room (another adopted it): it stops publishing into the
+    /// cluster and relays the new owner's frames to its local subscribers.
+    pub(crate) fn yield_ownership(&self) {
+        if self.owner.swap(false, Ordering::AcqRel) {
+            self.confirmed.store(false, Ordering::Release);
+            for t in lock(&self.owner_tasks).drain(..) {
+                t.abort();
+            }
+            tracing::warn!(room = %self.room, replica = %self.cluster.replica, "room adopted by another replica: relaying it");
+        }
+        self.wake.notify_one();
+    }
+
+    /// Stops every task of the room's cluster side (the room was closed).
+    pub(crate) fn shutdown(&self) {
+        for t in lock(&self.owner_tasks)
+            .drain(..)
+            .chain(lock(&self.tasks).drain(..))
+        {
+            t.abort();
+        }
+    }
+
+    fn remote_interest(&self, level: Level) -> bool {
+        let now = Instant::now();
+        let mut remote = lock(&self.remote);
+        let map = &mut remote[level as usize];
+        map.retain(|_, until| *until > now);
+        !map.is_empty()
+    }
+
+    /// Owner: the services of an owned room: other replicas' interest, their keyframe requests
+    /// and their forwarded control frames.
+    fn start_owner(self: &Arc<Self>, state: &Arc<crate::AppState>) {
+        let interest = tokio::spawn(Arc::clone(self).take_interest());
+        let keyframes = tokio::spawn(Arc::clone(self).take_keyframe_requests());
+        let controls = tokio::spawn(super::control::serve(
+            Arc::clone(state),
+            Arc::clone(&self.cluster),
+            self.room.clone(),
+        ));
+        lock(&self.owner_tasks).extend([interest, keyframes, controls]);
+    }
+
+    async fn take_interest(self: Arc<Self>) {
+        let client = &self.cluster.client;
+        let Ok(mut sub) = client.subscribe(subject::interest(&self.room)).await else {
+            return;
+        };
+        while let Some(msg) = sub.next().await {
+            let Ok(i) = v1::Interest::decode(msg.payload.as_ref()) else {
+                continue;
+            };
+            let Ok(level) = Level::from_wire("Interest", i.level) else {
+                continue;
+            };
+            let ttl = Duration::from_millis(u64::from(i.ttl_ms)).min(INTEREST_TTL * 2);
+            lock(&self.remote)[level as usize].insert(i.replica, Instant::now() + ttl);
+        }
+    }
+
+    async fn take_keyframe_requests(self: Arc<Self>) {
+        let client = &self.cluster.client;
+        let Ok(mut sub) = client.subscribe(subject::keyframe(&self.room, "*")).await else {
+            return;
+        };
+        while let Some(msg) = sub.next().await {
+            let level = if msg.subject.ends_with(".detail") {
+                Level::Detail
+            } else {
+                Level::Base
+            };
+            self.key_wanted[level as usize].store(true, Ordering::Release);
+        }
+    }
+
+    /// Owner: sends each frame handed over by [`Fanout::publish`] to NATS.
+    async fn send_frames(self: Arc<Self>, mut rx: mpsc::Receiver<(Level, Arc<MeshUpdate>)>) {
+        let subjects = Level::ALL.map(|l| subject::frames(&self.room, l));
+        let metrics = &self.cluster.metrics;
+        while let Some((level, update)) = rx.recv().await {
+            let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
+            let msg = frame_message(
+                update.seq,
+                update.capture_time_us,
+                latency,
+                0,
+                update.encoded(),
+            );
+            drop(update);
+            let payload = msg.encode_to_vec();
+            metrics.nats_frames_out.inc();
+            metrics.nats_bytes_out.inc_by(payload.len() as u64);
+            if self
+                .cluster
+                .client
+                .publish(subjects[level as usize].clone(), payload.into())
+                .await
+                .is_err()
+            {
+                tracing::debug!(room = %self.room, "frame not sent: NATS unavailable");
+            }
+        }
+    }
+
+    /// Relay: keeps a subscription to each level its local subscribers watch (ending it a
+    /// little after the last leaves), and announces that interest to the owner.
+    async fn relay_loop(self: Arc<Self>) {
+        let mut relays: [Option<JoinHandle<()>>; 2] = [None, None];
+        let mut announced = [None::<Instant>; 2];
+        let mut watched = [None::<Instant>; 2];
+        let mut tick = tokio::time::interval(Duration::from_millis(250));
+        loop {
+            tokio::select! {
+                _ = tick.tick() => {}
+                () = self.wake.notified() => {}
+            }
+            let owner = self.is_owner();
+            for level in Level::ALL {
+                let i = level as usize;
+                let now = Instant::now();
+                let local = self.local.interest(level);
+                if local {
+                    watched[i] = Some(now);
+                }
+                let wanted = !owner && watched[i].is_some_and(|t| now - t < RELAY_LINGER);
+                if wanted && relays[i].as_ref().is_none_or(JoinHandle::is_finished) {
+                    relays[i] = Some(tokio::spawn(Arc::clone(&self).relay_level(level)));
+                    announced[i] = None;
+                } else if !wanted && let Some(task) = relays[i].take() {
+                    task.abort();
+                    lock(&self.relay[i]).decoder.reset();
+                }
+                if wanted && local && announced[i].is_none_or(|t| now - t >= ANNOUNCE) {
+                    announced[i] = Some(now);
+                    let interest = v1::Interest {
+                        replica: self.cluster.replica.clone(),
+                        level: v1::Level::from(level) as i32,
+                        ttl_ms: INTEREST_TTL.as_millis() as u32,
+                    };
+                    let _ = self
+                        .cluster
+                        .client
+                        .publish(
+                            subject::interest(&self.room),
+                            interest.encode_to_vec().into(),
+                        )
+                        .await;
+                }
+            }
+        }
+    }
+
+    /// Relay: the owner's frames of `level`, decoded and fanned out locally.
+    async fn relay_level(self: Arc<Self>, level: Level) {
+        let client = &self.cluster.client;
+        let Ok(mut sub) = client.subscribe(subject::frames(&self.room, level)).await else {
+            return;
+        };
+        let key_subject = subject::keyframe(&self.room, level.name());
+        let mut asked: Option<Instant> = None;
+        // Joining mid-stream: the next frame is most likely a delta.
+        let _ = client.publish(key_subject.clone(), "".into()).await;
+        while let Some(msg) = sub.next().await {
+            let link = Arc::clone(&self);
+            let bytes = msg.payload.len() as u64;
+            let relayed =
+                tokio::task::spawn_blocking(move || link.relay_frame(level, &msg.payload)).await;
+            match relayed {
+                Ok(Ok(())) => {
+                    self.cluster.metrics.relayed_frames.inc();
+                    self.cluster.metrics.relayed_bytes.inc_by(bytes);
+                }
+                Ok(Err(RelayError::Codec(_))) => {
+                    if asked.is_none_or(|t| t.elapsed() >= KEY_REQUEST_EVERY) {
+                        asked = Some(Instant::now());
+                        let _ = client.publish(key_subject.clone(), "".into()).await;
+                    }
+                }
+                Ok(Err(e)) => tracing::warn!(room = %self.room, "{e}"),
+                Err(e) => tracing::error!(room = %self.room, "relay task: {e}"),
+            }
+        }
+    }
+
+    /// Relay: decodes one of the owner's frames and fans it out (blocking: run it on the
+    /// blocking pool).
+    ///
+    /// # Errors
+    /// [`RelayError`]; nothing is fanned out then.
+    pub(crate) fn relay_frame(&self, level: Level, payload: &[u8]) -> Result<(), RelayError> {
+        let msg = v1::MeshFrame::decode(payload).map_err(|e| RelayError::Message(e.to_string()))?;
+        let Some(v1::mesh_frame::Body::Frame(frame)) = msg.body else {
+            return Err(RelayError::Message("not a frame".into()));
+        };
+        let mut guard = lock(&self.relay[level as usize]);
+        let relay = &mut *guard;
+        let header = relay.decoder.decode(&frame.data)?;
+        // The frame's age at the owner, carried on: a viewer here sees the owner's latency plus
+        // the relay's.
+        let received = Instant::now()
+            .checked_sub(Duration::from_micros(u64::from(frame.server_latency_us)))
+            .unwrap_or_else(Instant::now);
+        let update = relay
+            .pool
+            .fill(header.qbox, &frame.data, relay.decoder.lanes(), |u| {
+                u.seq = frame.seq;
+                u.capture_time_us = frame.capture_time_us;
+                u.received = received;
+                u.codec_seq = header.seq;
+                u.base_seq = match header.kind {
+                    FrameKind::Key => header.seq,
+                    FrameKind::Delta => header.base_seq,
+                };
+            });
+        drop(guard);
+        self.local.publish(level, update);
+        Ok(())
+    }
+}
+
+impl Fanout for RoomLink {
+    fn publish(&self, level: Level, frame: Arc<MeshUpdate>) {
+        if self.is_owner()
+            && self.is_confirmed()
+            && self.remote_interest(level)
+            && self.out.try_send((level, Arc::clone(&frame))).is_err()
+        {
+            self.cluster.metrics.nats_frames_dropped.inc();
+        }
+        self.local.publish(level, frame);
+    }
+
+    fn subscribe(&self, level: Level) -> Receiver {
+        let r = self.local.subscribe(level);
+        self.wake.notify_one();
+        r
+    }
+
+    fn interest(&self, level: Level) -> bool {
+        self.local.interest(level) || (self.is_owner() && self.remote_interest(level))
+    }
+
+    fn wants_keyframe(&self, level: Level) -> bool {
+        self.key_wanted[level as usize].swap(false, Ordering::AcqRel)
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}

@@ -1,0 +1,114 @@
+//! Models across replicas: a replica can relay or adopt only rooms whose model it has. Every
+//! replica offers its models to the cluster's object store (`crease-models`, the model's
+//! SHA-256 in the object's metadata); one that lacks a room's model fetches it, checks the
+//! digest against the room's registry entry, and loads it on the blocking pool. A model that
+//! is absent, or whose copy fails its digest, is never used: the room is refused here (and so
+//! never adopted here).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use async_nats::jetstream::object_store::ObjectMetadata;
+use crease_core::model::TrainedModel;
+use tokio::io::AsyncReadExt;
+
+use super::Cluster;
+use crate::AppState;
+use crate::registry::{LoadedModel, sha256_hex};
+
+/// The metadata key of an object's SHA-256.
+const SHA256: &str = "sha256";
+
+/// Offers every local model the store lacks (a model of the same name with another digest is
+/// left alone, with a warning: rooms name models by digest too).
+pub(crate) async fn offer(state: Arc<AppState>, cluster: Arc<Cluster>) {
+    for model in state.models.list() {
+        let store = &cluster.models_store;
+        match store.info(&model.name).await {
+            Ok(info) if info.metadata.get(SHA256) == Some(&model.sha256) => continue,
+            Ok(info) => {
+                tracing::warn!(
+                    model = %model.name,
+                    ours = %model.sha256,
+                    cluster = ?info.metadata.get(SHA256),
+                    "the cluster's model of this name differs: not replaced"
+                );
+                continue;
+            }
+            Err(_) => {}
+        }
+        let m = Arc::clone(&model.model);
+        let bytes = match tokio::task::spawn_blocking(move || m.to_bytes()).await {
+            Ok(Ok(bytes)) => bytes,
+            Ok(Err(e)) => {
+                tracing::warn!(model = %model.name, "cannot serialise: {e}");
+                continue;
+            }
+            Err(e) => {
+                tracing::warn!(model = %model.name, "serialising: {e}");
+                continue;
+            }
+        };
+        let meta = ObjectMetadata {
+            name: model.name.clone(),
+            description: Some(format!("crease model {}", model.info.method)),
+            metadata: HashMap::from([(SHA256.to_owned(), model.sha256.clone())]),
+            ..Default::default()
+        };
+        match store.put(meta, &mut bytes.as_slice()).await {
+            Ok(_) => {
+                tracing::info!(model = %model.name, bytes = bytes.len(), "model offered to the cluster")
+            }
+            Err(e) => tracing::warn!(model = %model.name, "offering the model: {e}"),
+        }
+    }
+}
+
+/// The model `name` with digest `sha256`: the local one, or fetched from the cluster, checked
+/// and loaded.
+///
+/// # Errors
+/// What stops this replica from using it: a local model of that name with another digest, no
+/// copy in the cluster, a copy failing its digest or not loading.
+pub(crate) async fn ensure(
+    state: &Arc<AppState>,
+    cluster: &Cluster,
+    name: &str,
+    sha256: &str,
+) -> Result<Arc<LoadedModel>, String> {
+    if let Some(model) = state.models.get(name) {
+        return if model.sha256 == sha256 {
+            Ok(model)
+        } else {
+            Err(format!(
+                "model {name:?}: this replica's has SHA-256 {}, the room's is {sha256}",
+                model.sha256
+            ))
+        };
+    }
+    let mut object = cluster
+        .models_store
+        .get(name)
+        .await
+        .map_err(|e| format!("model {name:?}: not in the cluster's store ({e})"))?;
+    let mut bytes = Vec::new();
+    object
+        .read_to_end(&mut bytes)
+        .await
+        .map_err(|e| format!("model {name:?}: reading the cluster's copy: {e}"))?;
+    let got = sha256_hex(&bytes);
+    if got != sha256 {
+        return Err(format!(
+            "model {name:?}: the cluster's copy has SHA-256 {got}, expected {sha256}: refused"
+        ));
+    }
+    // The copy's bytes are the offering replica's `to_bytes`, so the digest read here is the
+    // model's digest: inserted with it (no second serialisation).
+    let model = tokio::task::spawn_blocking(move || TrainedModel::from_bytes(&bytes))
+        .await
+        .map_err(|e| format!("model {name:?}: loading: {e}"))?
+        .map_err(|e| format!("model {name:?}: the cluster's copy: {e}"))?;
+    let loaded = state.models.insert_with_sha256(name, model, got);
+    tracing::info!(model = %name, "model fetched from the cluster");
+    Ok(loaded)
+}
