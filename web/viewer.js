@@ -92,8 +92,11 @@ let framed = false;
 
 async function loadRoomInfo() {
   const list = await fetch("/api/rooms").then((r) => (r.ok ? r.json() : { rooms: [] }));
+  // In a cluster (crease-server --nats) the list has every room of the cluster and its owner.
+  const owners = new Map((list.cluster ?? []).map((r) => [r.room, r.owner]));
+  const label = (id) => (owners.has(id) ? `${id} (on ${owners.get(id)})` : id);
   roomSelect.replaceChildren(
-    ...[...new Set([roomId, ...list.rooms])].map((id) => new Option(id, id, false, id === roomId)),
+    ...[...new Set([roomId, ...list.rooms])].map((id) => new Option(label(id), id, false, id === roomId)),
   );
   const r = await fetch(`/api/rooms/${encodeURIComponent(roomId)}`);
   if (!r.ok) throw new Error(`room ${roomId}: ${(await r.text()).trim()}`);

@@ -217,7 +217,7 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let tls = config.server.tls.is_some();
     let state = AppState::new(models, config.server);
     if let Some(options) = config.cluster {
-        crease_server::cluster::join(&state, options).await?;
+        crease_server::join_cluster(&state, options).await?;
     }
     let mut demo_token = None;
     if let Some((model, animation)) = demo {

@@ -49,6 +49,12 @@ pub trait Fanout: Send + Sync + std::fmt::Debug {
     fn wants_keyframe(&self, _level: Level) -> bool {
         false
     }
+
+    /// Whether another replica predicts the room and this one only relays its frames (then
+    /// control frames are forwarded to the owner, `crate::cluster::control`).
+    fn relays(&self) -> bool {
+        false
+    }
 }
 
 /// The in-process fan-out: one `watch` channel and one subscriber count per level.

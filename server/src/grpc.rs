@@ -13,9 +13,8 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::ingest;
-use crate::pipeline::BuildError;
 use crate::registry::LoadedModel;
-use crate::room::{Room, RoomError, StreamSettings};
+use crate::room::{Room, StreamSettings};
 use crate::{AddRoomError, AppState};
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
@@ -159,7 +158,7 @@ impl Crease for CreaseService {
             None => {
                 let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
                     .await
-                    .map_err(open_status)?;
+                    .map_err(|e| e.status())?;
                 self.state.add_room(room).map_err(|e| match e {
                     AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
                     AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
@@ -179,9 +178,12 @@ impl Crease for CreaseService {
         req: Request<v1::GetRoomRequest>,
     ) -> Result<Response<v1::RoomInfo>, Status> {
         let room = self.room(&req.get_ref().room).await?;
-        let (owner, replica) = match (self.state.cluster(), room.link()) {
-            (Some(cluster), Some(link)) => (link.entry().0.owner, cluster.replica.clone()),
-            _ => (String::new(), String::new()),
+        let (owner, replica) = match self.state.cluster() {
+            Some(cluster) => (
+                cluster.owner_of(&room.id).unwrap_or_default(),
+                cluster.replica.clone(),
+            ),
+            None => (String::new(), String::new()),
         };
         Ok(Response::new(v1::RoomInfo {
             room: room.id.clone(),
@@ -272,7 +274,7 @@ impl Crease for CreaseService {
         let beta = (r.beta != 0.0).then_some(r.beta);
         let room = Room::open("batch", model, beta, StreamSettings::full(), None)
             .await
-            .map_err(open_status)?;
+            .map_err(|e| e.status())?;
         check_level(&room, level)?;
         Ok(Response::new(Box::pin(crate::stream::batch(
             Arc::clone(&self.state),
@@ -280,18 +282,6 @@ impl Crease for CreaseService {
             level,
             r.frames,
         ))))
-    }
-}
-
-/// The status of a room that could not be opened.
-pub(crate) fn open_status(e: RoomError) -> Status {
-    match e {
-        RoomError::BadId(_) => Status::invalid_argument(format!("room: {e}")),
-        RoomError::Build(BuildError::Predictor(e)) => {
-            Status::invalid_argument(format!("beta: {e}"))
-        }
-        RoomError::Build(BuildError::Codec(e)) => Status::internal(format!("model: {e}")),
-        RoomError::Panicked(_) => Status::internal(e.to_string()),
     }
 }
 

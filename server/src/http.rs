@@ -32,14 +32,6 @@ pub fn router(state: Arc<AppState>) -> Router {
     }
 }
 
-/// The HTTP status of a room lookup's refusal.
-pub(crate) fn http_status(e: &crate::ingest::PublishError) -> StatusCode {
-    match e.code() {
-        crease_proto::errors::ErrorCode::NotFound => StatusCode::NOT_FOUND,
-        _ => StatusCode::SERVICE_UNAVAILABLE,
-    }
-}
-
 async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     if state.is_closing() {
         (StatusCode::SERVICE_UNAVAILABLE, "shutting down\n")
@@ -94,7 +86,7 @@ async fn room_info(
 ) -> axum::response::Response {
     let room = match state.find_room(&id).await {
         Ok(room) => room,
-        Err(e) => return (http_status(&e), format!("{e}\n")).into_response(),
+        Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
     };
     axum::Json(RoomDocument::new(
         &room.id,

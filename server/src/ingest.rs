@@ -51,6 +51,17 @@ pub enum PublishError {
     Forwarded(v1::FrameError),
 }
 
+impl From<crate::cluster::LookupError> for PublishError {
+    fn from(e: crate::cluster::LookupError) -> Self {
+        use crate::cluster::LookupError;
+        match e {
+            LookupError::NoRoom(id) => PublishError::NoRoom(id),
+            LookupError::Unavailable(why) => PublishError::Unavailable(why),
+            LookupError::Internal(why) => PublishError::Internal(why),
+        }
+    }
+}
+
 impl From<PipelineError> for PublishError {
     fn from(e: PipelineError) -> Self {
         match e {
@@ -91,6 +102,14 @@ impl PublishError {
         match self {
             PublishError::Wire(e) => batch_status(index, e),
             e => batch_error_status(index, e.code(), None, &e.to_string()),
+        }
+    }
+
+    /// HTTP: the status of a room lookup's refusal (`/api/rooms/{id}`, the WebSocket upgrade).
+    pub fn http_status(&self) -> axum::http::StatusCode {
+        match self.code() {
+            ErrorCode::NotFound => axum::http::StatusCode::NOT_FOUND,
+            _ => axum::http::StatusCode::SERVICE_UNAVAILABLE,
         }
     }
 
@@ -152,13 +171,36 @@ async fn publish_inner(
         return Err(PublishError::Token(room.id.clone()));
     }
     // In a cluster, a relay forwards the frame to the owner, which applies the rate.
-    if let Some(link) = room.link()
-        && !link.is_owner()
+    if room.relays()
         && let Some(cluster) = state.cluster()
     {
-        return crate::cluster::control::forward(cluster, &room.id, frame, received).await;
+        let ack = crate::cluster::control::forward(cluster, &room.id, frame)
+            .await
+            .map_err(PublishError::Unavailable)?;
+        return match ack.error {
+            Some(e) => Err(PublishError::Forwarded(e)),
+            None => Ok(Published {
+                held: ack.held_controls,
+                latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
+                control_rms: ack.control_residual,
+                // The owner synthesised (or not) the detail layer: not this replica's work.
+                detail: false,
+            }),
+        };
     }
     admit_and_process(state, room, frame, received).await
+}
+
+/// Owner: the ack of a frame a relay forwarded ([`publish_forwarded`]), for the cluster's
+/// control service (`crate::cluster::control::ControlHandler`).
+pub fn ack_forwarded(
+    state: Arc<AppState>,
+    frame: v1::ControlFrame,
+) -> futures_util::future::BoxFuture<'static, v1::PublishAck> {
+    Box::pin(async move {
+        let seq = frame.seq;
+        ack(seq, &publish_forwarded(&state, frame).await)
+    })
 }
 
 /// Owner: a frame a relay forwarded (its token checked there): the rate limit, then the

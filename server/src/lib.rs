@@ -199,7 +199,7 @@ impl AppState {
             return Ok(room);
         }
         match self.cluster() {
-            Some(cluster) => Arc::clone(cluster).local_room(self, id).await,
+            Some(cluster) => Ok(Arc::clone(cluster).local_room(self, id).await?),
             None => Err(ingest::PublishError::NoRoom(id.to_owned())),
         }
     }
@@ -244,6 +244,18 @@ impl AppState {
             .get(id)
             .cloned()
     }
+}
+
+/// Joins the cluster of `options` (`crease-server --nats`): [`cluster::join`] with the server's
+/// publish path for the control frames other replicas forward to this one's rooms.
+///
+/// # Errors
+/// [`cluster::ClusterError`]: NATS unreachable, JetStream missing.
+pub async fn join_cluster(
+    state: &Arc<AppState>,
+    options: cluster::ClusterOptions,
+) -> Result<Arc<cluster::Cluster>, cluster::ClusterError> {
+    cluster::join(state, options, Arc::new(ingest::ack_forwarded)).await
 }
 
 /// Why a room could not be added.

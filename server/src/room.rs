@@ -14,11 +14,26 @@ pub use crate::pipeline::{BuildError, Published, StreamSettings};
 pub use crate::session::{RoomFull, new_token, valid_room_id};
 pub use crease_proto::Level;
 
-use crate::cluster::RoomLink;
 use crate::fanout::{self, Fanout, LocalFanout};
 use crate::pipeline::{Pipeline, PipelineError};
 use crate::registry::LoadedModel;
 use crate::session::{CountGuard, Session};
+
+impl RoomError {
+    /// The gRPC status of a room that could not be opened.
+    pub fn status(&self) -> tonic::Status {
+        match self {
+            RoomError::BadId(_) => tonic::Status::invalid_argument(format!("room: {self}")),
+            RoomError::Build(BuildError::Predictor(e)) => {
+                tonic::Status::invalid_argument(format!("beta: {e}"))
+            }
+            RoomError::Build(BuildError::Codec(e)) => {
+                tonic::Status::internal(format!("model: {e}"))
+            }
+            RoomError::Panicked(_) => tonic::Status::internal(self.to_string()),
+        }
+    }
+}
 
 /// Errors of opening a room.
 #[derive(Debug, thiserror::Error)]
@@ -43,8 +58,6 @@ pub struct Room {
     session: Session,
     pipeline: Pipeline,
     fanout: Arc<dyn Fanout>,
-    /// In a cluster: the room's cluster side (owner or relay; it is also the fan-out).
-    link: Option<Arc<RoomLink>>,
 }
 
 impl std::fmt::Debug for Room {
@@ -85,14 +98,14 @@ impl Room {
         Room::open_with(id, model, beta, settings, filter, None).await
     }
 
-    /// [`Room::open`] with its cluster side, `link` (which is then the room's fan-out).
+    /// [`Room::open`] with `fanout` (a cluster's room link) instead of a [`LocalFanout`].
     pub(crate) async fn open_with(
         id: &str,
         model: Arc<LoadedModel>,
         beta: Option<f32>,
         settings: StreamSettings,
         filter: Option<OneEuroParams>,
-        link: Option<Arc<RoomLink>>,
+        fanout: Option<Arc<dyn Fanout>>,
     ) -> Result<Room, RoomError> {
         if !valid_room_id(id) {
             return Err(RoomError::BadId(id.to_owned()));
@@ -100,26 +113,22 @@ impl Room {
         let id = id.to_owned();
         tokio::task::spawn_blocking(move || {
             let pipeline = Pipeline::build(Arc::clone(&model), beta, settings, filter)?;
-            let fanout: Arc<dyn Fanout> = match &link {
-                Some(link) => Arc::clone(link) as Arc<dyn Fanout>,
-                None => Arc::new(LocalFanout::default()),
-            };
             Ok(Room {
                 id,
                 model,
                 session: Session::new(),
                 pipeline,
-                fanout,
-                link,
+                fanout: fanout.unwrap_or_else(|| Arc::new(LocalFanout::default())),
             })
         })
         .await
         .map_err(|e| RoomError::Panicked(e.to_string()))?
     }
 
-    /// In a cluster: the room's cluster side.
-    pub fn link(&self) -> Option<&Arc<RoomLink>> {
-        self.link.as_ref()
+    /// In a cluster: whether another replica predicts this room (this one relays its frames
+    /// and forwards its control frames).
+    pub fn relays(&self) -> bool {
+        self.fanout.relays()
     }
 
     /// Replaces the publish token by its digest (a room opened on another replica).

@@ -51,7 +51,7 @@ pub async fn room_socket(
 ) -> Response {
     let room = match state.find_room(&id).await {
         Ok(room) => room,
-        Err(e) => return (crate::http::http_status(&e), format!("{e}\n")).into_response(),
+        Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
     };
     let level = match Level::from_query(params.level.as_deref()) {
         Ok(Level::Detail) if !room.has_detail() => {

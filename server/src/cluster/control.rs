@@ -6,41 +6,41 @@
 //! owner's code and message.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crease_proto::errors::{ErrorCode, error_ack, frame_error};
 use crease_proto::v1;
 use futures_util::StreamExt;
+use futures_util::future::BoxFuture;
 use prost::Message as _;
 
 use super::{Cluster, subject};
 use crate::AppState;
-use crate::ingest::{self, PublishError};
-use crate::pipeline::Published;
 
 /// How long a relay waits for the owner's ack.
 const FORWARD_TIMEOUT: Duration = Duration::from_secs(2);
 
+/// What the owner does with a forwarded control frame: rate, pipeline, ack (the server's
+/// publish path, `crate::ingest::ack_forwarded`, handed to [`super::join`] so that the
+/// cluster does not depend on the layer above it).
+pub type ControlHandler = Arc<
+    dyn Fn(Arc<AppState>, v1::ControlFrame) -> BoxFuture<'static, v1::PublishAck> + Send + Sync,
+>;
+
 /// Relay: forwards `frame` (its token already checked here) to the owner of `room` and
-/// returns the owner's outcome.
+/// returns the owner's ack (which may carry the owner's refusal).
 ///
 /// # Errors
-/// The owner's refusal ([`PublishError::Forwarded`]), or [`PublishError::Unavailable`] when
-/// no owner answers (it died and the room is not adopted yet, or NATS is down).
-pub(crate) async fn forward(
+/// Why no owner answered (it died and the room is not adopted yet, or NATS is down), or its
+/// reply was not an ack.
+pub async fn forward(
     cluster: &Cluster,
     room: &str,
     frame: v1::ControlFrame,
-    received: Instant,
-) -> Result<Published, PublishError> {
+) -> Result<v1::PublishAck, String> {
     let request = v1::ForwardedControl {
         frame: Some(frame),
         replica: cluster.replica.clone(),
-    };
-    let unavailable = |why: String| {
-        PublishError::Unavailable(format!(
-            "room {room:?}: its owner does not answer ({why}); a live replica adopts it within the lease"
-        ))
     };
     let reply = cluster
         .client
@@ -51,20 +51,14 @@ pub(crate) async fn forward(
                 .timeout(Some(FORWARD_TIMEOUT)),
         )
         .await
-        .map_err(|e| unavailable(e.to_string()))?;
+        .map_err(|e| {
+            format!(
+                "room {room:?}: its owner does not answer ({e}); a live replica adopts it within the lease"
+            )
+        })?;
     cluster.metrics.forwarded_controls.inc();
-    let ack = v1::PublishAck::decode(reply.payload.as_ref())
-        .map_err(|e| PublishError::Internal(format!("the owner's ack: {e}")))?;
-    match ack.error {
-        Some(e) => Err(PublishError::Forwarded(e)),
-        None => Ok(Published {
-            held: ack.held_controls,
-            latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
-            control_rms: ack.control_residual,
-            // The owner synthesised (or not) the detail layer: not this replica's work.
-            detail: false,
-        }),
-    }
+    v1::PublishAck::decode(reply.payload.as_ref())
+        .map_err(|e| format!("room {room:?}: the owner's reply is not a PublishAck: {e}"))
 }
 
 /// Owner: serves the frames relays forward into `room` until the task is aborted (the room
@@ -84,8 +78,7 @@ pub(crate) async fn serve(state: Arc<AppState>, cluster: Arc<Cluster>, room: Str
                 ..
             }) => {
                 room.clone_into(&mut frame.room);
-                let seq = frame.seq;
-                ingest::ack(seq, &ingest::publish_forwarded(&state, frame).await)
+                (cluster.controls)(Arc::clone(&state), frame).await
             }
             Ok(_) => error_ack(
                 0,

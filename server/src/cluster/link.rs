@@ -435,6 +435,10 @@ impl Fanout for RoomLink {
     fn wants_keyframe(&self, level: Level) -> bool {
         self.key_wanted[level as usize].swap(false, Ordering::AcqRel)
     }
+
+    fn relays(&self) -> bool {
+        !self.is_owner()
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {

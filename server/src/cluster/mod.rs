@@ -44,7 +44,7 @@ use prost::Message as _;
 pub use link::RoomLink;
 
 use crate::AppState;
-use crate::ingest::PublishError;
+use crate::fanout::Fanout;
 use crate::pipeline::StreamSettings;
 use crate::room::Room;
 
@@ -102,6 +102,20 @@ impl ClusterOptions {
             lease: DEFAULT_LEASE,
         }
     }
+}
+
+/// Why a cluster room could not be had as a local room.
+#[derive(Debug, thiserror::Error)]
+pub enum LookupError {
+    /// The cluster has no room of that id.
+    #[error("room: no room {0:?}")]
+    NoRoom(String),
+    /// Its model cannot be had here (absent, or failing its digest), or the room limit.
+    #[error("{0}")]
+    Unavailable(String),
+    /// The registry's entry cannot be used (a server bug or a foreign writer).
+    #[error("{0}")]
+    Internal(String),
 }
 
 /// Errors of joining a cluster.
@@ -222,6 +236,10 @@ pub struct Cluster {
     opening: tokio::sync::Mutex<()>,
     /// Rooms this replica could not serve (its model absent or corrupt): not retried before.
     refused: Mutex<BTreeMap<String, (String, Instant)>>,
+    /// The cluster side of every local room, by id.
+    links: Mutex<BTreeMap<String, Arc<RoomLink>>>,
+    /// The owner's handling of forwarded control frames.
+    pub(crate) controls: control::ControlHandler,
     /// The cluster metrics.
     pub metrics: ClusterMetrics,
 }
@@ -244,13 +262,16 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 const REFUSAL_BACKOFF: Duration = Duration::from_secs(5);
 
 /// Joins the cluster at `options.url` on behalf of `state`: opens the buckets, offers this
-/// replica's models, and starts watching the registry and keeping leases.
+/// replica's models, and starts watching the registry and keeping leases. Forwarded control
+/// frames of the rooms this replica owns go to `controls` (`crate::join_cluster` passes the
+/// server's publish path).
 ///
 /// # Errors
 /// [`ClusterError`]: NATS unreachable, JetStream missing.
 pub async fn join(
     state: &Arc<AppState>,
     options: ClusterOptions,
+    controls: control::ControlHandler,
 ) -> Result<Arc<Cluster>, ClusterError> {
     let (events_tx, events) = tokio::sync::mpsc::unbounded_channel();
     let client = async_nats::ConnectOptions::new()
@@ -284,6 +305,8 @@ pub async fn join(
         connected_at: Mutex::new(Instant::now()),
         opening: tokio::sync::Mutex::new(()),
         refused: Mutex::new(BTreeMap::new()),
+        links: Mutex::new(BTreeMap::new()),
+        controls,
         metrics,
     });
     if state.cluster.set(Arc::clone(&cluster)).is_err() {
@@ -292,7 +315,7 @@ pub async fn join(
     tokio::spawn(models::offer(Arc::clone(state), Arc::clone(&cluster)));
     tokio::spawn(Arc::clone(&cluster).watch_registry(Arc::clone(state)));
     tokio::spawn(Arc::clone(&cluster).keep_leases(Arc::clone(state)));
-    tokio::spawn(Arc::clone(&cluster).follow_connection(Arc::clone(state), events));
+    tokio::spawn(Arc::clone(&cluster).follow_connection(events));
     tracing::info!(replica = %cluster.replica, url = %options.url, "joined the cluster");
     Ok(cluster)
 }
@@ -404,6 +427,20 @@ impl Cluster {
         lock(&self.directory).get(id).cloned()
     }
 
+    /// The replica that owns room `id`, as the registry says.
+    pub fn owner_of(&self, id: &str) -> Option<String> {
+        lock(&self.directory).get(id).map(|k| k.entry.owner.clone())
+    }
+
+    /// The cluster side of local room `id`.
+    pub fn link(&self, id: &str) -> Option<Arc<RoomLink>> {
+        lock(&self.links).get(id).cloned()
+    }
+
+    fn links(&self) -> Vec<Arc<RoomLink>> {
+        lock(&self.links).values().cloned().collect()
+    }
+
     /// Opens room `id` on `model` here, as its owner, and registers it; the compare-and-set
     /// create makes the id the cluster's (a room of that id anywhere is `AlreadyExists`).
     ///
@@ -440,9 +477,10 @@ impl Cluster {
         };
         let vertices = vertex_counts(&model);
         let (link, rx) = RoomLink::new(self, id, vertices, entry.clone(), true, 0);
-        let room = Room::open_with(id, model, beta, settings, filter, Some(Arc::clone(&link)))
+        let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
+        let room = Room::open_with(id, model, beta, settings, filter, Some(fanout))
             .await
-            .map_err(crate::grpc::open_status)?;
+            .map_err(|e| e.status())?;
         entry.beta = room.beta();
         entry.token_sha256 = hex(room.session().token_sha256());
         let revision = self
@@ -460,6 +498,7 @@ impl Cluster {
         let room = state
             .add_room(room)
             .map_err(|e| tonic::Status::resource_exhausted(e.to_string()))?;
+        lock(&self.links).insert(id.to_owned(), Arc::clone(&link));
         link.start(state, rx);
         Ok(room)
     }
@@ -477,7 +516,7 @@ impl Cluster {
             .await
             .map_err(|e| tonic::Status::unavailable(format!("registry: {e}")))?;
         lock(&self.directory).remove(id);
-        close_local(state, id);
+        self.close_local(state, id);
         Ok(())
     }
 
@@ -496,13 +535,13 @@ impl Cluster {
     /// opened now, its model fetched from the cluster if this replica lacks it.
     ///
     /// # Errors
-    /// [`PublishError::NoRoom`] when the cluster has no such room; [`PublishError::Unavailable`]
+    /// [`LookupError::NoRoom`] when the cluster has no such room; [`LookupError::Unavailable`]
     /// when its model cannot be had here (absent, or failing its checksum).
     pub async fn local_room(
         self: &Arc<Self>,
         state: &Arc<AppState>,
         id: &str,
-    ) -> Result<Arc<Room>, PublishError> {
+    ) -> Result<Arc<Room>, LookupError> {
         if let Some(room) = state.room(id) {
             return Ok(room);
         }
@@ -512,14 +551,14 @@ impl Cluster {
         }
         let known = self
             .known(id)
-            .ok_or_else(|| PublishError::NoRoom(id.to_owned()))?;
+            .ok_or_else(|| LookupError::NoRoom(id.to_owned()))?;
         if let Some((why, at)) = lock(&self.refused).get(id)
             && at.elapsed() < REFUSAL_BACKOFF
         {
-            return Err(PublishError::Unavailable(why.clone()));
+            return Err(LookupError::Unavailable(why.clone()));
         }
         let opened = self.open_relay(state, id, &known).await;
-        if let Err(PublishError::Unavailable(why)) = &opened {
+        if let Err(LookupError::Unavailable(why)) = &opened {
             lock(&self.refused).insert(id.to_owned(), (why.clone(), Instant::now()));
         }
         opened
@@ -531,19 +570,19 @@ impl Cluster {
         state: &Arc<AppState>,
         id: &str,
         known: &Known,
-    ) -> Result<Arc<Room>, PublishError> {
+    ) -> Result<Arc<Room>, LookupError> {
         let entry = &known.entry;
         let model = models::ensure(state, self, &entry.model, &entry.model_sha256)
             .await
-            .map_err(|e| PublishError::Unavailable(format!("room {id:?}: {e}")))?;
+            .map_err(|e| LookupError::Unavailable(format!("room {id:?}: {e}")))?;
         let filter = entry.filter.map(OneEuroParams::from);
         if filter.is_some_and(|f| !f.is_valid()) {
-            return Err(PublishError::Internal(format!(
+            return Err(LookupError::Internal(format!(
                 "room {id:?}: the registry's filter {filter:?} is invalid"
             )));
         }
         let digest = unhex32(&entry.token_sha256).ok_or_else(|| {
-            PublishError::Internal(format!(
+            LookupError::Internal(format!(
                 "room {id:?}: the registry's token digest is not SHA-256 hex"
             ))
         })?;
@@ -561,14 +600,15 @@ impl Cluster {
             Some(entry.beta),
             settings_of(entry),
             filter,
-            Some(Arc::clone(&link)),
+            Some(Arc::clone(&link) as Arc<dyn Fanout>),
         )
         .await
-        .map_err(|e| PublishError::Internal(format!("room {id:?}: {e}")))?
+        .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?
         .with_token_sha256(digest);
         let room = state
             .add_room(room)
-            .map_err(|e| PublishError::Unavailable(e.to_string()))?;
+            .map_err(|e| LookupError::Unavailable(e.to_string()))?;
+        lock(&self.links).insert(id.to_owned(), Arc::clone(&link));
         link.start(state, rx);
         tracing::info!(room = %id, owner = %entry.owner, "relaying room");
         Ok(room)
@@ -604,7 +644,7 @@ impl Cluster {
                     tracing::warn!(room = %e.key, "registry: not a RoomEntry, ignored");
                     return;
                 };
-                if let Some(link) = state.room(&e.key).and_then(|r| r.link().cloned()) {
+                if let Some(link) = self.link(&e.key) {
                     let (_, mine) = link.entry();
                     if e.revision >= mine {
                         if link.is_owner() && entry.owner != self.replica {
@@ -617,7 +657,7 @@ impl Cluster {
             }
             kv::Operation::Delete | kv::Operation::Purge => {
                 lock(&self.directory).remove(&e.key);
-                close_local(state, &e.key);
+                self.close_local(state, &e.key);
             }
         }
     }
@@ -632,37 +672,23 @@ impl Cluster {
             if !self.is_connected() {
                 continue;
             }
-            let local: Vec<Arc<Room>> = state
-                .rooms
-                .read()
-                .unwrap_or_else(|e| e.into_inner())
-                .values()
-                .cloned()
-                .collect();
-            for room in &local {
-                let Some(link) = room.link() else { continue };
-                if !link.is_owner() {
-                    continue;
-                }
+            let local = self.links();
+            for link in local.iter().filter(|l| l.is_owner()) {
                 let due = renewed
-                    .get(&room.id)
+                    .get(link.room())
                     .is_none_or(|t| t.elapsed() >= self.lease / 4);
                 if due || !link.is_confirmed() {
-                    renewed.insert(room.id.clone(), Instant::now());
+                    renewed.insert(link.room().to_owned(), Instant::now());
                     self.renew(link).await;
                 }
             }
-            renewed.retain(|id, _| local.iter().any(|r| &r.id == id));
+            renewed.retain(|id, _| local.iter().any(|l| l.room() == id));
             if lock(&self.connected_at).elapsed() < self.lease {
                 continue;
             }
             // Silent for a whole lease and not owned here (a replica restarted under the same
             // id reclaims what it owned before).
-            let owned_here = |id: &str| {
-                local
-                    .iter()
-                    .any(|r| r.id == id && r.link().is_some_and(|l| l.is_owner()))
-            };
+            let owned_here = |id: &str| local.iter().any(|l| l.room() == id && l.is_owner());
             let expired: Vec<(String, Known)> = lock(&self.directory)
                 .iter()
                 .filter(|(id, k)| k.seen.elapsed() >= self.lease && !owned_here(id))
@@ -699,14 +725,11 @@ impl Cluster {
     /// Adopts room `id`, whose owner was silent for a lease, if this replica has or can fetch
     /// its model: a compare-and-set from the revision seen, so that one replica wins.
     async fn adopt(self: &Arc<Self>, state: &Arc<AppState>, id: &str, known: Known) {
-        let room = match self.local_room(state, id).await {
-            Ok(room) => room,
-            Err(e) => {
-                tracing::debug!(room = %id, "cannot adopt: {e}");
-                return;
-            }
-        };
-        let Some(link) = room.link().cloned() else {
+        if let Err(e) = self.local_room(state, id).await {
+            tracing::debug!(room = %id, "cannot adopt: {e}");
+            return;
+        }
+        let Some(link) = self.link(id) else {
             return;
         };
         let mut entry = known.entry.clone();
@@ -733,7 +756,6 @@ impl Cluster {
     /// owned room must renew before it publishes again, and every lease restarts its clock.
     async fn follow_connection(
         self: Arc<Self>,
-        state: Arc<AppState>,
         mut events: tokio::sync::mpsc::UnboundedReceiver<async_nats::Event>,
     ) {
         while let Some(event) = events.recv().await {
@@ -744,15 +766,8 @@ impl Cluster {
                     tracing::warn!("NATS disconnected: serving local clients only");
                 }
                 async_nats::Event::Connected => {
-                    for room in state
-                        .rooms
-                        .read()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .values()
-                    {
-                        if let Some(link) = room.link() {
-                            link.set_confirmed(false);
-                        }
+                    for link in self.links() {
+                        link.set_confirmed(false);
                     }
                     let now = Instant::now();
                     for k in lock(&self.directory).values_mut() {
@@ -777,15 +792,16 @@ fn vertex_counts(model: &crate::registry::LoadedModel) -> [usize; 2] {
     ]
 }
 
-/// Removes room `id` from this replica (closed in the cluster).
-fn close_local(state: &AppState, id: &str) {
-    let removed = {
-        let mut rooms = state.rooms.write().unwrap_or_else(|e| e.into_inner());
-        let removed = rooms.remove(id);
-        state.metrics.rooms.set(rooms.len() as i64);
-        removed
-    };
-    if let Some(link) = removed.as_ref().and_then(|r| r.link()) {
-        link.shutdown();
+impl Cluster {
+    /// Removes room `id` from this replica (closed in the cluster), and stops its link.
+    fn close_local(&self, state: &AppState, id: &str) {
+        {
+            let mut rooms = state.rooms.write().unwrap_or_else(|e| e.into_inner());
+            rooms.remove(id);
+            state.metrics.rooms.set(rooms.len() as i64);
+        }
+        if let Some(link) = lock(&self.links).remove(id) {
+            link.shutdown();
+        }
     }
 }

@@ -16,7 +16,7 @@ use tonic::transport::Channel;
 
 use super::super::common::{authorized, connect, unix_us};
 use super::super::mesh_stream::{self, MeshReader, Subscription};
-use super::report::{Cpu, FrameBytes, Percentiles, ScenarioReport, Spread};
+use super::report::{Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread};
 use super::server::{Target, clock_ticks, cpu_seconds, random_token};
 use super::{BenchNetArgs, Scenario};
 
@@ -193,13 +193,32 @@ async fn read_frames(mut sub: Subscribed, window: Window) -> anyhow::Result<Subs
     Ok(stats)
 }
 
-/// Opens the rooms, connects the subscribers, publishes for warm-up + window, and summarises.
+/// A metric's value from a server's `/metrics` (a plain HTTP/1.1 GET), if it has it.
+async fn metric(http: std::net::SocketAddr, name: &str) -> Option<f64> {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(http).await.ok()?;
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: bench\r\nConnection: close\r\n\r\n")
+        .await
+        .ok()?;
+    let mut text = String::new();
+    s.read_to_string(&mut text).await.ok()?;
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' '))
+        .and_then(|v| v.trim().parse().ok())
+}
+
+/// The owner's NATS bytes so far (cluster scenarios).
+const NATS_BYTES: &str = "crease_cluster_nats_bytes_out_total";
+
+/// Opens the rooms (on the first server), connects the subscribers (spread over the first
+/// `sc.spread` servers), publishes for warm-up + window, and summarises.
 pub(super) async fn run_scenario(
-    target: &Target,
+    targets: &[Target],
     sc: &Scenario,
     frames: &Arc<Vec<v1::ControlFrame>>,
     args: &BenchNetArgs,
 ) -> anyhow::Result<ScenarioReport> {
+    let target = &targets[0];
     let mut admin = connect(&target.url, None).await?;
     let tag = &random_token()[..6];
     let mut rooms = Vec::with_capacity(sc.rooms);
@@ -218,7 +237,24 @@ pub(super) async fn run_scenario(
             .into_inner();
         rooms.push((id, opened.publish_token));
     }
-    let result = drive(target, sc, frames, args, &rooms).await;
+    // The other replicas learn of the rooms through the registry.
+    for other in &targets[1..sc.spread.min(targets.len())] {
+        let mut client = connect(&other.url, None).await?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        for (id, _) in &rooms {
+            while client
+                .get_room(v1::GetRoomRequest { room: id.clone() })
+                .await
+                .is_err()
+            {
+                if Instant::now() > deadline {
+                    bail!("{}: room {id:?} not known there after 10 s", other.url);
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
+    let result = drive(targets, sc, frames, args, &rooms).await;
     for (id, _) in &rooms {
         let close = v1::CloseRoomRequest { room: id.clone() };
         // The rooms die with a spawned server anyway; a running one keeps what fails here.
@@ -233,18 +269,23 @@ pub(super) async fn run_scenario(
 }
 
 async fn drive(
-    target: &Target,
+    targets: &[Target],
     sc: &Scenario,
     frames: &Arc<Vec<v1::ControlFrame>>,
     args: &BenchNetArgs,
     rooms: &[(String, String)],
 ) -> anyhow::Result<ScenarioReport> {
     // Every subscriber on its own connection, subscribed before the first frame.
+    let target = &targets[0];
+    let spread = sc.spread.clamp(1, targets.len());
+    let replica_of = |s: usize| s % spread;
     let mut connecting = JoinSet::new();
     for (r, (id, _)) in rooms.iter().enumerate() {
         for s in 0..sc.subscribers {
-            let (url, id) = (target.url.clone(), id.clone());
-            connecting.spawn(async move { (r, s, subscribe(url, id, s == 0).await) });
+            let (url, id) = (targets[replica_of(s)].url.clone(), id.clone());
+            // One checking (decoding) subscriber per room and replica.
+            let check = s < spread;
+            connecting.spawn(async move { (r, s, subscribe(url, id, check).await) });
         }
     }
     let mut subscribed = Vec::with_capacity(rooms.len() * sc.subscribers);
@@ -290,9 +331,19 @@ async fn drive(
     let me = std::process::id();
     let sample = |pid: Option<u32>| pid.and_then(|p| cpu_seconds(p, hz));
     tokio::time::sleep_until(window.start).await;
+    let nats_bytes = || async {
+        match target.http {
+            Some(http) if spread > 1 => metric(http, NATS_BYTES).await,
+            _ => None,
+        }
+    };
+    let nats0 = nats_bytes().await;
+    let replicas0: Vec<Option<f64>> = targets[..spread].iter().map(|t| sample(t.pid)).collect();
     let (server0, client0, wall0) = (sample(target.pid), sample(Some(me)), Instant::now());
     tokio::time::sleep_until(window.end).await;
     let (server1, client1, wall1) = (sample(target.pid), sample(Some(me)), Instant::now());
+    let replicas1: Vec<Option<f64>> = targets[..spread].iter().map(|t| sample(t.pid)).collect();
+    let nats1 = nats_bytes().await;
     let seconds = (wall1 - wall0).as_secs_f64();
 
     // Publishers by room index; subscribers with their room's.
@@ -302,12 +353,18 @@ async fn drive(
         pubs[k] = stats.with_context(|| format!("publisher of room {k}"))?;
     }
     let mut subs = Vec::with_capacity(rooms.len() * sc.subscribers);
+    let mut by_replica: Vec<Vec<Vec<(u32, u32)>>> = vec![Vec::new(); spread];
     while let Some(done) = readers.join_next().await {
         let (r, s, stats) = done.context("a subscriber task")?;
-        subs.push((
-            r,
-            stats.with_context(|| format!("subscriber {s} of room {r}"))?,
-        ));
+        let stats = stats.with_context(|| format!("subscriber {s} of room {r}"))?;
+        by_replica[replica_of(s)].push(
+            stats
+                .latency
+                .iter()
+                .map(|&(_, server, client)| (server, client))
+                .collect::<Vec<_>>(),
+        );
+        subs.push((r, stats));
     }
     let frames_published: u64 = pubs.iter().map(|p| p.sent_in_window).sum();
     let cpu = |a: Option<f64>, b: Option<f64>| {
@@ -344,7 +401,32 @@ async fn drive(
         )
     });
     let frames_received = key.0 + delta.0;
+    let replicas = if spread > 1 {
+        by_replica
+            .iter()
+            .enumerate()
+            .map(|(k, subs)| {
+                let mut server: Vec<u32> = subs.iter().flatten().map(|l| l.0).collect();
+                let mut client: Vec<u32> = subs.iter().flatten().map(|l| l.1).collect();
+                ReplicaFigures {
+                    replica: k,
+                    subscribers: subs.len(),
+                    server_latency_us: Percentiles::of(&mut server),
+                    client_latency_us: Percentiles::of(&mut client),
+                    cpu: cpu(replicas0[k], replicas1[k]),
+                }
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let nats_bytes_per_frame = match (nats0, nats1) {
+        (Some(a), Some(b)) => Some((b - a) / frames_published.max(1) as f64),
+        _ => None,
+    };
     Ok(ScenarioReport {
+        replicas,
+        nats_bytes_per_frame,
         name: sc.name.clone(),
         rooms: sc.rooms,
         subscribers_per_room: sc.subscribers,

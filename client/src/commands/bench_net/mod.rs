@@ -31,7 +31,9 @@ use crease_core::model::TrainedModel;
 use crease_proto::{control_frame, v1};
 
 use super::control_file::read_control_frames;
-pub use report::{BenchReport, Cpu, FrameBytes, Percentiles, ScenarioReport, Spread};
+pub use report::{
+    BenchReport, Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread,
+};
 use server::Target;
 
 /// The horse gallop beside the checkout (`../shared/data`), as the core benches find it.
@@ -123,25 +125,53 @@ pub struct BenchNetArgs {
     /// Print one JSON object on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Bench a cluster instead: a local `nats-server` (JetStream) and this many `crease-server`
+    /// replicas joined to it; one room, opened on the first replica (its owner), its
+    /// --subscribers (default 300) spread over the replicas, and the same count / replicas
+    /// on the owner alone for comparison. Reports each replica's latency and CPU and the NATS
+    /// bytes per published frame.
+    #[arg(long, value_name = "N", conflicts_with = "server")]
+    pub replicas: Option<usize>,
+    /// The `nats-server` binary for --replicas. Default: /usr/sbin/nats-server (Debian's) or
+    /// one on the PATH.
+    #[arg(long, value_name = "PATH", requires = "replicas")]
+    pub nats_bin: Option<PathBuf>,
 }
 
 /// One load shape: rooms, each with its publisher and subscribers.
 #[derive(Clone, Debug)]
 struct Scenario {
-    /// `one-room`, `many-rooms` or `custom`.
+    /// `one-room`, `many-rooms`, `custom`, `cluster` or `owner-only`.
     name: String,
     /// Rooms.
     rooms: usize,
     /// Subscribers per room.
     subscribers: usize,
+    /// The subscribers are spread round-robin over the first this many servers (1: all on
+    /// the one where the rooms are opened).
+    spread: usize,
 }
+
+/// Viewers of the cluster scenario when --subscribers is not given (issue 17).
+const CLUSTER_VIEWERS: usize = 300;
 
 fn scenarios(args: &BenchNetArgs) -> Vec<Scenario> {
     let named = |name: &str, (rooms, subscribers): (usize, usize)| Scenario {
         name: name.to_owned(),
         rooms,
         subscribers,
+        spread: 1,
     };
+    if let Some(n) = args.replicas {
+        let viewers = args.subscribers.unwrap_or(CLUSTER_VIEWERS);
+        return vec![
+            Scenario {
+                spread: n,
+                ..named("cluster", (1, viewers))
+            },
+            named("owner-only", (1, viewers.div_ceil(n))),
+        ];
+    }
     if let (Some(rooms), Some(subscribers)) = (args.rooms, args.subscribers) {
         return vec![named("custom", (rooms, subscribers))];
     }
@@ -168,6 +198,9 @@ pub fn run(args: &BenchNetArgs) -> anyhow::Result<()> {
     }
     if args.rooms == Some(0) || args.subscribers == Some(0) {
         bail!("--rooms and --subscribers must be at least 1");
+    }
+    if args.replicas.is_some_and(|n| !(2..=16).contains(&n)) {
+        bail!("--replicas must be 2 to 16");
     }
     if args.server.is_some() && args.admin_token.is_none() {
         bail!("--server needs the server's --admin-token (to open the rooms)");
@@ -245,8 +278,14 @@ async fn bench(
     frames: Vec<v1::ControlFrame>,
     source: String,
 ) -> anyhow::Result<BenchReport> {
-    let mut target = match &args.server {
-        Some(url) => Target {
+    let mut nats = None;
+    let mut targets = match &args.server {
+        _ if args.replicas.is_some() => {
+            let (n, replicas) = server::spawn_cluster(args, args.replicas.unwrap_or(2)).await?;
+            nats = Some(n);
+            replicas
+        }
+        Some(url) => vec![Target {
             url: url.clone(),
             admin_token: args.admin_token.clone().unwrap_or_default(),
             model: match &args.model_name {
@@ -264,8 +303,9 @@ async fn bench(
                 None => format!("{url} (no --server-pid: no CPU figure)"),
             },
             spawned: None,
-        },
-        None => server::spawn_server(args).await?,
+            http: None,
+        }],
+        None => vec![server::spawn_server(args).await?],
     };
     let frames = Arc::new(frames);
     let mut reports = Vec::new();
@@ -274,24 +314,31 @@ async fn bench(
             "{}: {} room(s) x {} subscriber(s), {} Hz, {} s warm-up + {} s",
             sc.name, sc.rooms, sc.subscribers, args.rate, args.warmup, args.seconds
         );
-        let report = load::run_scenario(&target, &sc, &frames, args).await;
-        if let Some(server) = &mut target.spawned
-            && let Some(status) = server.child.try_wait()?
-        {
-            bail!(
-                "the server exited ({status}) during {}:\n{}",
-                sc.name,
-                server.log_tail()
-            );
+        let report = load::run_scenario(&targets, &sc, &frames, args).await;
+        for target in &mut targets {
+            if let Some(server) = &mut target.spawned
+                && let Some(status) = server.child.try_wait()?
+            {
+                bail!(
+                    "the server exited ({status}) during {}:\n{}",
+                    sc.name,
+                    server.log_tail()
+                );
+            }
         }
         reports.push(report?);
     }
+    drop(nats);
     Ok(BenchReport {
         model: args.model.display().to_string(),
         vertices: model.rig.rest.vertex_count(),
         control_points: model.controls.len(),
         controls: source,
-        server: target.description.clone(),
+        server: targets
+            .iter()
+            .map(|t| t.description.as_str())
+            .collect::<Vec<_>>()
+            .join("; "),
         cpus: std::thread::available_parallelism().map_or(1, |n| n.get()),
         scenarios: reports,
     })

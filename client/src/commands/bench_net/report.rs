@@ -163,6 +163,29 @@ pub struct ScenarioReport {
     pub decode_errors: u64,
     /// The first decode error.
     pub first_decode_error: Option<String>,
+    /// With --replicas: each replica's subscribers' figures and its CPU (the first is the
+    /// rooms' owner).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub replicas: Vec<ReplicaFigures>,
+    /// With --replicas: bytes the owner published into NATS per control frame (every level,
+    /// every room), from its `crease_cluster_nats_bytes_out_total`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nats_bytes_per_frame: Option<f64>,
+}
+
+/// One replica of a cluster scenario.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplicaFigures {
+    /// Its index (`r0` owns the rooms).
+    pub replica: usize,
+    /// Subscribers connected to it.
+    pub subscribers: usize,
+    /// Their server latency (on a relay: the owner's, plus the relay's), µs.
+    pub server_latency_us: Percentiles,
+    /// Their client latency (capture -> frame read here), µs.
+    pub client_latency_us: Percentiles,
+    /// Its CPU over the window, per control frame published.
+    pub cpu: Option<Cpu>,
 }
 
 /// The whole report.
@@ -265,6 +288,32 @@ pub(super) fn print_table(report: &BenchReport) {
     row("decoded / decode errors", &|r| {
         format!("{} / {}", r.decoded_frames, r.decode_errors)
     });
+    for r in s.iter().filter(|r| !r.replicas.is_empty()) {
+        println!();
+        println!(
+            "{}: per replica (r0 owns the room){}",
+            r.name,
+            r.nats_bytes_per_frame.map_or(String::new(), |b| format!(
+                "; NATS {b:.0} bytes per published frame"
+            ))
+        );
+        println!(
+            "| replica | subscribers | server latency µs p50 / p99 | client latency µs p50 / p99 | CPU |"
+        );
+        println!("|---|---|---|---|---|");
+        for f in &r.replicas {
+            println!(
+                "| r{} | {} | {} / {} | {} / {} | {} |",
+                f.replica,
+                f.subscribers,
+                f.server_latency_us.p50,
+                f.server_latency_us.p99,
+                f.client_latency_us.p50,
+                f.client_latency_us.p99,
+                cpu(&f.cpu)
+            );
+        }
+    }
     println!();
     println!(
         "server latency: control frame received -> mesh frame handed to the subscriber's stream \

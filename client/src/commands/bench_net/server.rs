@@ -59,6 +59,8 @@ pub(super) struct Target {
     pub(super) description: String,
     /// The child process, when spawned here.
     pub(super) spawned: Option<SpawnedServer>,
+    /// Its HTTP address (`/metrics`), when spawned here.
+    pub(super) http: Option<std::net::SocketAddr>,
 }
 
 /// 128 random bits, hex (std's per-map random SipHash keys: no extra dependency).
@@ -80,6 +82,15 @@ fn free_address(held: &mut Vec<std::net::TcpListener>) -> anyhow::Result<std::ne
 
 /// Spawns `crease-server` on the model and waits until it answers.
 pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> {
+    spawn_server_with(args, &[], &random_token()).await
+}
+
+/// [`spawn_server`] with `extra` arguments (a cluster's `--nats`) and admin token `admin`.
+async fn spawn_server_with(
+    args: &BenchNetArgs,
+    extra: &[String],
+    admin_token: &str,
+) -> anyhow::Result<Target> {
     let bin = match &args.server_bin {
         Some(bin) => bin.clone(),
         None => std::env::current_exe()
@@ -118,11 +129,12 @@ pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> 
     let grpc = free_address(&mut held)?;
     let http = free_address(&mut held)?;
     drop(held);
-    let admin_token = random_token();
+    let admin_token = admin_token.to_owned();
     let child = Command::new(&bin)
         .arg("--models")
         .arg(&models)
         .args(["--grpc", &grpc.to_string(), "--http", &http.to_string()])
+        .args(extra)
         .env("CREASE_ADMIN_TOKEN", &admin_token)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
@@ -161,7 +173,101 @@ pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> 
         admin_token,
         model,
         spawned: Some(server),
+        http: Some(http),
     })
+}
+
+/// A `nats-server` child (JetStream on, a scratch store), killed and its store removed when
+/// dropped.
+#[derive(Debug)]
+pub(super) struct SpawnedNats {
+    child: Child,
+    dir: PathBuf,
+    /// Its client URL.
+    pub(super) url: String,
+}
+
+impl Drop for SpawnedNats {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The `nats-server` binary: `--nats-bin`, else Debian's or one on the PATH.
+fn nats_binary(args: &BenchNetArgs) -> anyhow::Result<PathBuf> {
+    if let Some(bin) = &args.nats_bin {
+        return Ok(bin.clone());
+    }
+    let on_path = std::env::var_os("PATH")
+        .map(|p| {
+            std::env::split_paths(&p)
+                .map(|d| d.join("nats-server"))
+                .collect::<Vec<_>>()
+        })
+        .unwrap_or_default();
+    [
+        PathBuf::from("/usr/sbin/nats-server"),
+        PathBuf::from("/usr/bin/nats-server"),
+    ]
+    .into_iter()
+    .chain(on_path)
+    .find(|p| p.is_file())
+    .context("no nats-server binary (apt-get install -y nats-server, or --nats-bin PATH)")
+}
+
+/// A local cluster: `nats-server` with JetStream and `n` `crease-server` replicas joined to
+/// it (ids `r0`, `r1`, ...), each hosting the model; the first is where rooms are opened.
+pub(super) async fn spawn_cluster(
+    args: &BenchNetArgs,
+    n: usize,
+) -> anyhow::Result<(SpawnedNats, Vec<Target>)> {
+    let bin = nats_binary(args)?;
+    let dir = std::env::temp_dir().join(format!(
+        "crease-bench-nats-{}-{}",
+        std::process::id(),
+        &random_token()[..8]
+    ));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut held = Vec::new();
+    let port = free_address(&mut held)?.port();
+    drop(held);
+    let child = Command::new(&bin)
+        .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
+        .arg(dir.join("js"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .with_context(|| format!("starting {}", bin.display()))?;
+    let nats = SpawnedNats {
+        child,
+        dir,
+        url: format!("nats://127.0.0.1:{port}"),
+    };
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while tokio::net::TcpStream::connect(("127.0.0.1", port))
+        .await
+        .is_err()
+    {
+        if Instant::now() > deadline {
+            bail!("{} did not listen on port {port}", bin.display());
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let admin = random_token();
+    let mut replicas = Vec::with_capacity(n);
+    for r in 0..n {
+        let extra = [
+            "--nats".to_owned(),
+            nats.url.clone(),
+            "--replica-id".to_owned(),
+            format!("r{r}"),
+        ];
+        replicas.push(spawn_server_with(args, &extra, &admin).await?);
+    }
+    Ok((nats, replicas))
 }
 
 /// `USER_HZ`, the unit of `/proc/PID/stat`'s times: `getconf CLK_TCK`, else Linux's 100.
