@@ -373,6 +373,22 @@ impl Publisher {
         }
     }
 
+    /// Sends frames at ~50 Hz until `done` holds (checked after each), up to `limit`; the
+    /// time it took.
+    async fn send_until(
+        &mut self,
+        limit: Duration,
+        what: &str,
+        done: impl Fn() -> bool,
+    ) -> Duration {
+        let start = Instant::now();
+        while !done() {
+            assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
+            self.send(1).await;
+        }
+        start.elapsed()
+    }
+
     async fn finish(self) -> Vec<v1::PublishAck> {
         drop(self.tx);
         self.acks.await.unwrap()
@@ -458,15 +474,21 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
     // Relays announce their interest within a second.
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let mut publisher = Publisher::new(&c, &model, "r", &token).await;
-    publisher.send(60).await;
-    for (name, seen) in [("A", &on_a), ("B", &on_b), ("C", &on_c)] {
-        until(
+    publisher
+        .send_until(Duration::from_secs(10), "40 frames on A, B and C", || {
+            [&on_a, &on_b, &on_c].iter().all(|s| frames(s) >= 40)
+        })
+        .await;
+    // A viewer joining B late, while B relays: its first frame is a keyframe made on B from
+    // the lanes B decoded (the owner is not asked), and it matches the prediction.
+    let (late_b, _tl) = grpc_viewer(&b, &model, "r", v1::Level::Base).await;
+    publisher
+        .send_until(
             Duration::from_secs(5),
-            &format!("frames on {name}"),
-            || async { frames(seen) >= 40 },
+            "frames of the late viewer on B",
+            || frames(&late_b) >= 10,
         )
         .await;
-    }
     let detail_before = a.metric("crease_detail_frames_total").await;
     publisher.send(20).await;
     assert_eq!(
@@ -476,14 +498,13 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
     );
     // Detail interest from C alone.
     let (detail_c, detail_task) = ws_viewer(&c, &model, "r", "detail").await;
-    tokio::time::sleep(Duration::from_millis(1500)).await;
-    publisher.send(30).await;
-    until(Duration::from_secs(5), "detail frames on C", || async {
-        frames(&detail_c) >= 10
-    })
-    .await;
+    publisher
+        .send_until(Duration::from_secs(5), "detail frames on C", || {
+            frames(&detail_c) >= 10
+        })
+        .await;
     assert_eq!(detail_c.lock().unwrap().decode_errors, 0);
-    assert!(a.metric("crease_detail_frames_total").await > detail_before + 10.0);
+    assert!(a.metric("crease_detail_frames_total").await >= detail_before + 10.0);
     detail_task.abort();
     drop(detail_task);
     // The interest lapses (3 s) and C stops relaying (2 s after its last viewer).
@@ -495,7 +516,11 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         idle,
         "detail after C's viewer left"
     );
-    assert!(c.metric("crease_cluster_forwarded_controls_total").await >= 100.0);
+    // Every frame so far went C -> A and back (the acks are read at the end).
+    assert_eq!(
+        c.metric("crease_cluster_forwarded_controls_total").await,
+        publisher.seq as f64
+    );
 
     // kill -9 of A: B or C adopts the room.
     let killed = Instant::now();
@@ -514,13 +539,17 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
     assert!(killed.elapsed() < Duration::from_secs(10));
     let _ = adopted;
     let before = frames(&on_c);
-    publisher.send(40).await;
-    until(
-        Duration::from_secs(5),
-        "C's viewer after the adoption",
-        || async { frames(&on_c) >= before + 20 },
-    )
-    .await;
+    publisher
+        .send_until(
+            Duration::from_secs(5),
+            "C's viewer after the adoption",
+            || frames(&on_c) >= before + 20,
+        )
+        .await;
+    eprintln!(
+        "C's viewer had 20 new frames {} ms after the kill",
+        killed.elapsed().as_millis()
+    );
 
     // A NATS restart: the replicas reconnect, the room goes on under the same owner.
     nats.restart();
@@ -531,13 +560,13 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         .await;
     }
     let before = (frames(&on_b), frames(&on_c));
-    publisher.send(60).await;
-    until(
-        Duration::from_secs(10),
-        "frames after the NATS restart",
-        || async { frames(&on_b) >= before.0 + 20 && frames(&on_c) >= before.1 + 20 },
-    )
-    .await;
+    publisher
+        .send_until(
+            Duration::from_secs(10),
+            "frames after the NATS restart",
+            || frames(&on_b) >= before.0 + 20 && frames(&on_c) >= before.1 + 20,
+        )
+        .await;
     assert_eq!(
         b.owner_of("r").await.as_deref(),
         Some(new_owner.as_str()),
@@ -567,7 +596,7 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         unavailable > 0,
         "frames sent while the owner was dead were accepted"
     );
-    assert!(ok >= 200, "{ok} accepted");
+    assert!(ok >= 100, "{ok} accepted");
 
     // Rooms on tube2 and tube3 owned by B; C lacks both models. tube2's cluster copy is
     // corrupted and tube3's removed: when B dies, C never adopts either.

@@ -212,7 +212,13 @@ fn services_target_named_container_ports_and_select_the_pods() {
     let mut services = 0;
     for file in kustomize_resources() {
         for doc in k8s(&file) {
-            if doc.opt("kind").map(Node::str) != Some("Service") {
+            // The server's Services (nats.yaml's is checked by its own test).
+            if doc.opt("kind").map(Node::str) != Some("Service")
+                || doc
+                    .opt("spec.selector.app.kubernetes.io/name")
+                    .map(Node::str)
+                    != Some("crease")
+            {
                 continue;
             }
             services += 1;
@@ -549,6 +555,91 @@ fn long_flags(text: &str) -> BTreeSet<String> {
         .filter(|w| w.len() > 2 && w.starts_with("--"))
         .map(str::to_string)
         .collect()
+}
+
+#[test]
+fn the_nats_url_names_the_nats_service_and_its_jetstream_statefulset() {
+    let args = container_args(&container());
+    let url = flag_value(&args, "--nats").expect("deployment.yaml: --nats URL (issue 17)");
+    let rest = url
+        .strip_prefix("nats://")
+        .unwrap_or_else(|| panic!("--nats {url}: expected nats://HOST:PORT"));
+    let (host, port) = rest
+        .rsplit_once(':')
+        .unwrap_or_else(|| panic!("--nats {url}: expected nats://HOST:PORT"));
+    let port: u16 = port
+        .parse()
+        .unwrap_or_else(|_| panic!("--nats {url}: port"));
+    assert!(
+        kustomize_resources().iter().any(|f| f == "nats.yaml"),
+        "kustomization.yaml does not list nats.yaml"
+    );
+    let service = resource("nats.yaml", "Service");
+    assert_eq!(
+        service.at("metadata.name").str(),
+        host,
+        "--nats host vs the Service"
+    );
+    let client = service
+        .at("spec.ports")
+        .seq()
+        .iter()
+        .find(|p| p.at("port").u16() == port)
+        .unwrap_or_else(|| panic!("nats.yaml: the Service has no port {port} (--nats {url})"));
+    let set = resource("nats.yaml", "StatefulSet");
+    assert_eq!(
+        set.at("spec.serviceName").str(),
+        host,
+        "StatefulSet serviceName"
+    );
+    let pod_labels = set.at("spec.template.metadata.labels").map();
+    for (k, v) in service.at("spec.selector").map() {
+        assert!(
+            pod_labels.iter().any(|(pk, pv)| pk == k && pv == v),
+            "nats.yaml: the Service selects {k}={}, not a label of the StatefulSet's pods",
+            v.str()
+        );
+    }
+    let nats = &set.at("spec.template.spec.containers").seq()[0];
+    let target = client.at("targetPort").str();
+    assert!(
+        nats.at("ports")
+            .seq()
+            .iter()
+            .any(|p| p.at("name").str() == target && p.at("containerPort").u16() == port),
+        "nats.yaml: targetPort {target} is not the container's port {port}"
+    );
+    let nats_args: Vec<&str> = nats.at("args").seq().iter().map(Node::str).collect();
+    assert!(
+        nats_args.contains(&"-js"),
+        "nats.yaml: JetStream off (args {nats_args:?})"
+    );
+    let store = nats_args
+        .iter()
+        .position(|a| *a == "-sd")
+        .and_then(|i| nats_args.get(i + 1))
+        .expect("nats.yaml: -sd DIR (the JetStream store)");
+    let mounted = nats
+        .at("volumeMounts")
+        .seq()
+        .iter()
+        .find(|m| m.at("mountPath").str() == *store)
+        .unwrap_or_else(|| panic!("nats.yaml: the store {store} is not a mounted volume"));
+    let claim = mounted.at("name").str();
+    assert!(
+        set.at("spec.volumeClaimTemplates")
+            .seq()
+            .iter()
+            .any(|t| t.at("metadata.name").str() == claim),
+        "nats.yaml: the store's volume {claim} is not a volumeClaimTemplate"
+    );
+    // Each replica's id is its pod's name.
+    let env = container().at("env").seq().to_vec();
+    let id = env
+        .iter()
+        .find(|e| e.at("name").str() == "CREASE_REPLICA_ID")
+        .expect("deployment.yaml: CREASE_REPLICA_ID");
+    assert_eq!(id.at("valueFrom.fieldRef.fieldPath").str(), "metadata.name");
 }
 
 #[test]
