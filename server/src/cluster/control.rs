@@ -17,8 +17,11 @@ use prost::Message as _;
 use super::{Cluster, subject};
 use crate::AppState;
 
-/// How long a relay waits for the owner's ack.
-const FORWARD_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long a relay waits for the owner's ack. A forwarded frame normally takes about a
+/// millisecond; one whose owner died mid-request would otherwise hold up the publisher's later
+/// frames (they queue behind it, then arrive as a burst over the rate limit), and a live frame
+/// half a second late is stale anyway.
+const FORWARD_TIMEOUT: Duration = Duration::from_millis(500);
 
 /// What the owner does with a forwarded control frame: rate, pipeline, ack (the server's
 /// publish path, `crate::ingest::ack_forwarded`, handed to [`super::join`] so that the
