@@ -662,3 +662,176 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
     let (_, body) = http_get(c.http, "/api/rooms/q2").await;
     assert!(body.contains("SHA-256"), "{body}");
 }
+
+/// A TCP forwarder from a loopback port to `to` that can cut every connection and refuse new
+/// ones (a network partition between one replica and NATS), and heal.
+struct Partition {
+    port: u16,
+    cut: Arc<std::sync::atomic::AtomicBool>,
+    /// Bumped on every cut: live connections end when they see it change.
+    epoch: Arc<tokio::sync::watch::Sender<u64>>,
+}
+
+impl Partition {
+    async fn forward_to(to: u16) -> Partition {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let cut = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let epoch = Arc::new(tokio::sync::watch::channel(0u64).0);
+        let (c, e) = (Arc::clone(&cut), Arc::clone(&epoch));
+        tokio::spawn(async move {
+            loop {
+                let Ok((mut inbound, _)) = listener.accept().await else {
+                    return;
+                };
+                if c.load(std::sync::atomic::Ordering::SeqCst) {
+                    continue; // dropped: refused while cut
+                }
+                let mut cut_seen = e.subscribe();
+                tokio::spawn(async move {
+                    let Ok(mut outbound) = tokio::net::TcpStream::connect(("127.0.0.1", to)).await
+                    else {
+                        return;
+                    };
+                    tokio::select! {
+                        _ = tokio::io::copy_bidirectional(&mut inbound, &mut outbound) => {}
+                        _ = cut_seen.changed() => {}
+                    }
+                });
+            }
+        });
+        Partition { port, cut, epoch }
+    }
+
+    fn url(&self) -> String {
+        format!("nats://127.0.0.1:{}", self.port)
+    }
+
+    fn cut(&self) {
+        self.cut.store(true, std::sync::atomic::Ordering::SeqCst);
+        self.epoch.send_modify(|e| *e += 1);
+    }
+
+    fn heal(&self) {
+        self.cut.store(false, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Fencing: an owner cut off from NATS keeps serving its own clients, another replica adopts
+/// the room, and when the partition heals the old owner yields (its renewal's compare-and-set
+/// fails) and relays the new owner's frames: never two owners publishing into one room.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_partitioned_owner_serves_its_own_clients_then_yields_to_the_adopter() {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
+    let partition = Partition::forward_to(nats.port).await;
+    let model = Arc::new(model_with_detail());
+    let models = dir.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    model.save(models.join("tube.crease")).unwrap();
+    let mut d = Replica::start("D", &models, &partition.url(), dir.path());
+    let mut e = Replica::start("E", &models, &nats.url(), dir.path());
+    d.ready().await;
+    e.ready().await;
+    let open = v1::OpenRoomRequest {
+        room: "p".into(),
+        model: "tube".into(),
+        beta: 0.0,
+        filter: None,
+    };
+    let token = d
+        .client()
+        .await
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    until(Duration::from_secs(5), "the room listed on E", || async {
+        e.owner_of("p").await.as_deref() == Some("D")
+    })
+    .await;
+    let (on_d, _td) = grpc_viewer(&d, &model, "p", v1::Level::Base).await;
+    let (on_e, _te) = grpc_viewer(&e, &model, "p", v1::Level::Base).await;
+    let mut publisher = Publisher::new(&d, &model, "p", &token).await;
+    publisher
+        .send_until(Duration::from_secs(10), "frames on D and E", || {
+            frames(&on_d) >= 20 && frames(&on_e) >= 20
+        })
+        .await;
+
+    // The partition: D keeps its own publisher and viewer; E adopts the room.
+    partition.cut();
+    let cut = Instant::now();
+    let before = frames(&on_d);
+    publisher
+        .send_until(
+            Duration::from_secs(10),
+            "E adopts while D is cut off",
+            || {
+                // `owner_of` is async: E's view is polled below; here D's local service.
+                frames(&on_d) >= before + 20
+            },
+        )
+        .await;
+    until(Duration::from_secs(10), "adoption by E", || async {
+        e.owner_of("p").await.as_deref() == Some("E")
+    })
+    .await;
+    eprintln!(
+        "E adopted the room {} ms after the partition",
+        cut.elapsed().as_millis()
+    );
+    assert_eq!(
+        http_get(d.http, "/readyz").await.0,
+        503,
+        "D is unready without NATS"
+    );
+    let before = frames(&on_d);
+    publisher
+        .send_until(
+            Duration::from_secs(5),
+            "D's own viewer while cut off",
+            || frames(&on_d) >= before + 10,
+        )
+        .await;
+
+    // Healed: D's renewal fails, it yields and relays E's frames; only E publishes.
+    partition.heal();
+    until(Duration::from_secs(15), "D reconnected", || async {
+        http_get(d.http, "/readyz").await.0 == 200
+    })
+    .await;
+    until(Duration::from_secs(5), "D sees E as the owner", || async {
+        d.owner_of("p").await.as_deref() == Some("E")
+    })
+    .await;
+    let (d0, e0) = (
+        d.metric("crease_cluster_nats_frames_out_total").await,
+        e.metric("crease_cluster_nats_frames_out_total").await,
+    );
+    let before = (frames(&on_d), frames(&on_e));
+    publisher
+        .send_until(
+            Duration::from_secs(10),
+            "frames on both after the heal",
+            || frames(&on_d) >= before.0 + 20 && frames(&on_e) >= before.1 + 20,
+        )
+        .await;
+    assert_eq!(
+        d.metric("crease_cluster_nats_frames_out_total").await,
+        d0,
+        "D published into the cluster after yielding"
+    );
+    assert!(
+        e.metric("crease_cluster_nats_frames_out_total").await > e0,
+        "E relays to D"
+    );
+    assert!(d.metric("crease_cluster_forwarded_controls_total").await > 0.0);
+    assert_eq!(e.owner_of("p").await.as_deref(), Some("E"));
+    drop(publisher);
+}

@@ -11,7 +11,9 @@
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crease_core::codec::{CodecError, QuantBox, encode_keyframe_from_lanes};
+use crease_core::codec::{
+    CodecError, FrameHeader, FrameKind, QuantBox, encode_keyframe_from_lanes,
+};
 use prost::bytes::{Bytes, BytesMut};
 
 /// Most frames a level's pool keeps. A frame is held by the fan-out (the newest) and by each
@@ -79,6 +81,15 @@ impl MeshUpdate {
     /// The room encoder's frame as it was encoded (a keyframe or a delta), shared.
     pub(crate) fn encoded(&self) -> Bytes {
         self.frame.clone()
+    }
+
+    /// Takes the codec sequence numbers of the encoded frame's `header`.
+    pub(crate) fn set_codec_header(&mut self, header: &FrameHeader) {
+        self.codec_seq = header.seq;
+        self.base_seq = match header.kind {
+            FrameKind::Key => header.seq,
+            FrameKind::Delta => header.base_seq,
+        };
     }
 
     /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).

@@ -191,7 +191,7 @@ async fn publish_inner(
     admit_and_process(state, room, frame, received).await
 }
 
-/// Owner: the ack of a frame a relay forwarded ([`publish_forwarded`]), for the cluster's
+/// Owner: the ack of a frame a relay forwarded (rate, pipeline, metrics), for the cluster's
 /// control service (`crate::cluster::control::ControlHandler`).
 pub fn ack_forwarded(
     state: Arc<AppState>,

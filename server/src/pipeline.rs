@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use crease_core::codec::{
-    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameKind, QuantBox, encode_indices,
+    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, QuantBox, encode_indices,
 };
 use crease_core::glam::Vec3;
 use crease_core::model::ControlPoint;
@@ -368,11 +368,7 @@ impl Pipeline {
                 u.seq = frame.seq;
                 u.capture_time_us = frame.capture_time_us;
                 u.received = received;
-                u.codec_seq = header.seq;
-                u.base_seq = match header.kind {
-                    FrameKind::Key => header.seq,
-                    FrameKind::Delta => header.base_seq,
-                };
+                u.set_codec_header(&header);
             });
             fanout.publish(level, update);
             Ok(())

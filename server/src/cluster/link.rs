@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use crease_core::codec::{CodecError, FrameDecoder, FrameKind};
+use crease_core::codec::{CodecError, FrameDecoder};
 use crease_proto::{Level, frame_message, v1};
 use futures_util::StreamExt;
 use prost::Message as _;
@@ -273,6 +273,12 @@ impl RoomLink {
         let subjects = Level::ALL.map(|l| subject::frames(&self.room, l));
         let metrics = &self.cluster.metrics;
         while let Some((level, update)) = rx.recv().await {
+            // Checked again here: a frame queued before NATS went away must not be sent after
+            // it comes back (async-nats would buffer it), when this replica may have been
+            // replaced.
+            if !(self.is_owner() && self.is_confirmed() && self.cluster.is_connected()) {
+                continue;
+            }
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
             let msg = frame_message(
                 update.seq,
@@ -407,11 +413,7 @@ impl RoomLink {
                 u.seq = frame.seq;
                 u.capture_time_us = frame.capture_time_us;
                 u.received = received;
-                u.codec_seq = header.seq;
-                u.base_seq = match header.kind {
-                    FrameKind::Key => header.seq,
-                    FrameKind::Delta => header.base_seq,
-                };
+                u.set_codec_header(&header);
             });
         drop(guard);
         self.local.publish(level, update);
@@ -423,6 +425,7 @@ impl Fanout for RoomLink {
     fn publish(&self, level: Level, frame: Arc<MeshUpdate>) {
         if self.is_owner()
             && self.is_confirmed()
+            && self.cluster.is_connected()
             && self.remote_interest(level)
             && self.out.try_send((level, Arc::clone(&frame))).is_err()
         {
