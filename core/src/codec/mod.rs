@@ -21,6 +21,8 @@
 //! - [`stream`]: [`FrameEncoder`] / [`FrameDecoder`] (keyframes and deltas, reusable buffers) and
 //!   the stateless keyframe path ([`encode_keyframe`], [`decode_keyframe`]).
 //! - [`index`]: the index buffer (topology) through meshopt's index codec.
+//! - [`palette`]: palette frames, a skinned mesh's frame as its bone transforms and detail
+//!   kernel vector (quantised quaternions and translations, the error bound of a skinned vertex).
 //!
 //! # Vertices: 8 bytes, four 16-bit lanes
 //!
@@ -113,6 +115,7 @@
 
 pub mod frame;
 pub mod index;
+pub mod palette;
 pub mod quant;
 pub mod stream;
 
