@@ -207,13 +207,7 @@ impl Crease for CreaseService {
             cluster.close_room(&self.state, id).await?;
             return Ok(Response::new(v1::CloseRoomResponse {}));
         }
-        let removed = {
-            let mut rooms = self.state.rooms.write().unwrap_or_else(|e| e.into_inner());
-            let removed = rooms.remove(id);
-            self.state.metrics.rooms.set(rooms.len() as i64);
-            removed
-        };
-        match removed {
+        match self.state.remove_room(id) {
             Some(_) => Ok(Response::new(v1::CloseRoomResponse {})),
             None => Err(Status::not_found(format!("room: no room {id:?}"))),
         }

@@ -236,6 +236,14 @@ impl AppState {
         Ok(room)
     }
 
+    /// Removes room `id` from this server (its streams end as their subscribers leave).
+    pub fn remove_room(&self, id: &str) -> Option<Arc<Room>> {
+        let mut rooms = self.rooms.write().unwrap_or_else(|e| e.into_inner());
+        let removed = rooms.remove(id);
+        self.metrics.rooms.set(rooms.len() as i64);
+        removed
+    }
+
     /// The room `id`.
     pub fn room(&self, id: &str) -> Option<Arc<Room>> {
         self.rooms

@@ -24,8 +24,10 @@ pub struct LoadedModel {
     /// Its public description (`GetModel`).
     pub info: v1::ModelInfo,
     /// SHA-256 of the model's serialised form (`TrainedModel::to_bytes`), hex: the same model
-    /// has the same digest on every replica, whatever file it was read from.
-    pub sha256: String,
+    /// has the same digest on every replica, whatever file it was read from. Only a cluster
+    /// needs it: computed when it joins (or known when a model is fetched), never on a single
+    /// server's start-up ([`LoadedModel::sha256`]).
+    sha256: OnceLock<String>,
     /// The box around the rest pose and every training pose (skinned by the rig): where the
     /// model's meshes live, the basis of the streams' quantisation box.
     pub pose_bounds: (Vec3, Vec3),
@@ -64,6 +66,27 @@ impl SpatialStream {
 }
 
 impl LoadedModel {
+    /// The model's digest (the field's docs); serialises the model the first time (blocking:
+    /// a cluster sets it off the async threads before it is read there).
+    pub fn sha256(&self) -> &str {
+        self.sha256.get_or_init(|| {
+            self.model
+                .to_bytes()
+                .map(|b| sha256_hex(&b))
+                .unwrap_or_default()
+        })
+    }
+
+    /// Sets the digest from `bytes`, the model's serialised form, unless it is set already.
+    pub(crate) fn set_sha256_of(&self, bytes: &[u8]) {
+        self.sha256.get_or_init(|| sha256_hex(bytes));
+    }
+
+    /// Sets the digest (of the bytes the model was just read from), unless it is set already.
+    pub(crate) fn set_sha256(&self, hex: String) {
+        let _ = self.sha256.set(hex);
+    }
+
     /// The base mesh's spatial streaming order (computed once).
     pub fn spatial(&self) -> &SpatialStream {
         self.spatial.get_or_init(|| {
@@ -174,25 +197,13 @@ impl ModelRegistry {
         Ok(registry)
     }
 
-    /// Adds (or replaces) a model under `name` (serialises it once for its digest).
+    /// Adds (or replaces) a model under `name`.
     pub fn insert(&self, name: &str, model: TrainedModel) -> Arc<LoadedModel> {
-        let sha256 = model.to_bytes().map(|b| sha256_hex(&b)).unwrap_or_default();
-        self.insert_with_sha256(name, model, sha256)
-    }
-
-    /// [`ModelRegistry::insert`] of a model whose digest is known (it was read from the bytes
-    /// it was loaded from, which are its serialised form).
-    pub fn insert_with_sha256(
-        &self,
-        name: &str,
-        model: TrainedModel,
-        sha256: String,
-    ) -> Arc<LoadedModel> {
         let loaded = Arc::new(LoadedModel {
             name: name.to_owned(),
             info: model_info(name, &model),
             pose_bounds: pose_bounds(&model),
-            sha256,
+            sha256: OnceLock::new(),
             spatial: OnceLock::new(),
             detail_spatial: OnceLock::new(),
             model: Arc::new(model),

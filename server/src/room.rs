@@ -19,6 +19,20 @@ use crate::pipeline::{Pipeline, PipelineError};
 use crate::registry::LoadedModel;
 use crate::session::{CountGuard, Session};
 
+/// Errors of opening a room.
+#[derive(Debug, thiserror::Error)]
+pub enum RoomError {
+    /// The room id is not 1-64 characters of `[A-Za-z0-9_-]`.
+    #[error("room id {0:?}: expected 1-64 characters of A-Z, a-z, 0-9, _ and -")]
+    BadId(String),
+    /// The pipeline could not be built.
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    /// The blocking task building it panicked.
+    #[error("building the room: {0}")]
+    Panicked(String),
+}
+
 impl RoomError {
     /// The gRPC status of a room that could not be opened.
     pub fn status(&self) -> tonic::Status {
@@ -33,20 +47,6 @@ impl RoomError {
             RoomError::Panicked(_) => tonic::Status::internal(self.to_string()),
         }
     }
-}
-
-/// Errors of opening a room.
-#[derive(Debug, thiserror::Error)]
-pub enum RoomError {
-    /// The room id is not 1-64 characters of `[A-Za-z0-9_-]`.
-    #[error("room id {0:?}: expected 1-64 characters of A-Z, a-z, 0-9, _ and -")]
-    BadId(String),
-    /// The pipeline could not be built.
-    #[error(transparent)]
-    Build(#[from] BuildError),
-    /// The blocking task building it panicked.
-    #[error("building the room: {0}")]
-    Panicked(String),
 }
 
 /// A live session on one model (module docs).

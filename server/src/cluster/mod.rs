@@ -43,6 +43,10 @@ use prost::Message as _;
 
 pub use link::RoomLink;
 
+/// The frames a room link's owner side hands to its NATS sender.
+type LinkFrames =
+    tokio::sync::mpsc::Receiver<(crease_proto::Level, Arc<crate::frames::MeshUpdate>)>;
+
 use crate::AppState;
 use crate::fanout::Fanout;
 use crate::pipeline::StreamSettings;
@@ -166,41 +170,46 @@ impl ClusterMetrics {
     /// Registers the metrics in `registry`.
     pub(crate) fn register(&self, registry: &mut prometheus_client::registry::Registry) {
         let r = registry.sub_registry_with_prefix("cluster");
-        r.register(
-            "nats_frames_out",
-            "Frames published into NATS (owner)",
-            self.nats_frames_out.clone(),
-        );
-        r.register(
-            "nats_bytes_out",
-            "Bytes of frames published into NATS",
-            self.nats_bytes_out.clone(),
-        );
-        r.register(
-            "nats_frames_dropped",
-            "Frames dropped on their way to NATS",
-            self.nats_frames_dropped.clone(),
-        );
-        r.register(
-            "relayed_frames",
-            "Frames received from an owner and fanned out here",
-            self.relayed_frames.clone(),
-        );
-        r.register(
-            "relayed_bytes",
-            "Bytes of relayed frames",
-            self.relayed_bytes.clone(),
-        );
-        r.register(
-            "forwarded_controls",
-            "Control frames forwarded to an owner",
-            self.forwarded_controls.clone(),
-        );
-        r.register(
-            "adoptions",
-            "Rooms adopted from a dead owner",
-            self.adoptions.clone(),
-        );
+        let counters = [
+            (
+                "nats_frames_out",
+                "Frames published into NATS (owner)",
+                &self.nats_frames_out,
+            ),
+            (
+                "nats_bytes_out",
+                "Bytes of frames published into NATS",
+                &self.nats_bytes_out,
+            ),
+            (
+                "nats_frames_dropped",
+                "Frames dropped on their way to NATS",
+                &self.nats_frames_dropped,
+            ),
+            (
+                "relayed_frames",
+                "Frames received from an owner and fanned out here",
+                &self.relayed_frames,
+            ),
+            (
+                "relayed_bytes",
+                "Bytes of relayed frames",
+                &self.relayed_bytes,
+            ),
+            (
+                "forwarded_controls",
+                "Control frames forwarded to an owner",
+                &self.forwarded_controls,
+            ),
+            (
+                "adoptions",
+                "Rooms adopted from a dead owner",
+                &self.adoptions,
+            ),
+        ];
+        for (name, help, counter) in counters {
+            r.register(name, help, counter.clone());
+        }
         r.register(
             "nats_connected",
             "1 while connected to NATS",
@@ -312,7 +321,9 @@ pub async fn join(
     if state.cluster.set(Arc::clone(&cluster)).is_err() {
         tracing::warn!("this server already joined a cluster");
     }
-    tokio::spawn(models::offer(Arc::clone(state), Arc::clone(&cluster)));
+    // Every local model's digest is set here, off the async threads, before any room reads it.
+    let serialised = models::serialise_local(state).await;
+    tokio::spawn(models::offer(Arc::clone(&cluster), serialised));
     tokio::spawn(Arc::clone(&cluster).watch_registry(Arc::clone(state)));
     tokio::spawn(Arc::clone(&cluster).keep_leases(Arc::clone(state)));
     tokio::spawn(Arc::clone(&cluster).follow_connection(events));
@@ -376,23 +387,6 @@ async fn open_object_store(
                 message: e.to_string(),
             }),
     }
-}
-
-/// The lowercase hex of `bytes`.
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// The bytes of a hex digest, if it is one.
-fn unhex32(s: &str) -> Option<[u8; 32]> {
-    if s.len() != 64 {
-        return None;
-    }
-    let mut out = [0u8; 32];
-    for (i, o) in out.iter_mut().enumerate() {
-        *o = u8::from_str_radix(s.get(2 * i..2 * i + 2)?, 16).ok()?;
-    }
-    Some(out)
 }
 
 fn now_unix_ms() -> i64 {
@@ -462,11 +456,11 @@ impl Cluster {
         let settings = state.config.stream;
         let mut entry = v1::RoomEntry {
             model: model.name.clone(),
-            model_sha256: model.sha256.clone(),
+            model_sha256: model.sha256().to_owned(),
             beta: 0.0,
             filter: filter.map(v1::MarkerFilter::from),
             owner: self.replica.clone(),
-            token_sha256: String::new(),
+            token_sha256: Vec::new(),
             base_bits: u32::from(settings.base_bits),
             detail_bits: u32::from(settings.detail_bits),
             spatial_order: settings.spatial_order,
@@ -475,14 +469,12 @@ impl Cluster {
             renewed_unix_ms: now_unix_ms(),
             adoptions: 0,
         };
-        let vertices = vertex_counts(&model);
-        let (link, rx) = RoomLink::new(self, id, vertices, entry.clone(), true, 0);
-        let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
-        let room = Room::open_with(id, model, beta, settings, filter, Some(fanout))
+        let (room, link, rx) = self
+            .open_linked(id, model, beta, settings, filter, &entry, true, 0)
             .await
             .map_err(|e| e.status())?;
         entry.beta = room.beta();
-        entry.token_sha256 = hex(room.session().token_sha256());
+        entry.token_sha256 = room.session().token_sha256().to_vec();
         let revision = self
             .rooms_kv
             .create(id, entry.encode_to_vec().into())
@@ -495,12 +487,8 @@ impl Cluster {
             })?;
         link.set_entry(entry.clone(), revision);
         self.note(id, entry, revision);
-        let room = state
-            .add_room(room)
-            .map_err(|e| tonic::Status::resource_exhausted(e.to_string()))?;
-        lock(&self.links).insert(id.to_owned(), Arc::clone(&link));
-        link.start(state, rx);
-        Ok(room)
+        self.install(state, room, link, rx)
+            .map_err(|e| tonic::Status::resource_exhausted(e.to_string()))
     }
 
     /// Closes room `id` in the whole cluster (every replica's watch then closes it locally).
@@ -564,6 +552,42 @@ impl Cluster {
         opened
     }
 
+    /// Builds room `id` (on the blocking pool) with its cluster side as its fan-out: as
+    /// `owner` or relay, at registry `revision`. [`Cluster::install`] then makes it live.
+    #[allow(clippy::too_many_arguments)] // a room's settings and its registry position
+    async fn open_linked(
+        self: &Arc<Self>,
+        id: &str,
+        model: Arc<crate::registry::LoadedModel>,
+        beta: Option<f32>,
+        settings: StreamSettings,
+        filter: Option<OneEuroParams>,
+        entry: &v1::RoomEntry,
+        owner: bool,
+        revision: u64,
+    ) -> Result<(Room, Arc<RoomLink>, LinkFrames), crate::room::RoomError> {
+        let vertices = vertex_counts(&model);
+        let (link, rx) = RoomLink::new(self, id, vertices, entry.clone(), owner, revision);
+        let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
+        let room = Room::open_with(id, model, beta, settings, filter, Some(fanout)).await?;
+        Ok((room, link, rx))
+    }
+
+    /// Adds a room built by [`Cluster::open_linked`] to this server and starts its cluster
+    /// side.
+    fn install(
+        &self,
+        state: &Arc<AppState>,
+        room: Room,
+        link: Arc<RoomLink>,
+        rx: LinkFrames,
+    ) -> Result<Arc<Room>, crate::AddRoomError> {
+        let room = state.add_room(room)?;
+        lock(&self.links).insert(room.id.clone(), Arc::clone(&link));
+        link.start(state, rx);
+        Ok(room)
+    }
+
     /// Opens a local relay of room `id` as the registry describes it.
     async fn open_relay(
         self: &Arc<Self>,
@@ -581,35 +605,28 @@ impl Cluster {
                 "room {id:?}: the registry's filter {filter:?} is invalid"
             )));
         }
-        let digest = unhex32(&entry.token_sha256).ok_or_else(|| {
+        let digest = <[u8; 32]>::try_from(entry.token_sha256.as_slice()).map_err(|_| {
             LookupError::Internal(format!(
-                "room {id:?}: the registry's token digest is not SHA-256 hex"
+                "room {id:?}: the registry's token digest has {} bytes, a SHA-256 has 32",
+                entry.token_sha256.len()
             ))
         })?;
-        let (link, rx) = RoomLink::new(
-            self,
-            id,
-            vertex_counts(&model),
-            entry.clone(),
-            false,
-            known.revision,
-        );
-        let room = Room::open_with(
-            id,
-            model,
-            Some(entry.beta),
-            settings_of(entry),
-            filter,
-            Some(Arc::clone(&link) as Arc<dyn Fanout>),
-        )
-        .await
-        .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?
-        .with_token_sha256(digest);
-        let room = state
-            .add_room(room)
+        let (room, link, rx) = self
+            .open_linked(
+                id,
+                model,
+                Some(entry.beta),
+                settings_of(entry),
+                filter,
+                entry,
+                false,
+                known.revision,
+            )
+            .await
+            .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?;
+        let room = self
+            .install(state, room.with_token_sha256(digest), link, rx)
             .map_err(|e| LookupError::Unavailable(e.to_string()))?;
-        lock(&self.links).insert(id.to_owned(), Arc::clone(&link));
-        link.start(state, rx);
         tracing::info!(room = %id, owner = %entry.owner, "relaying room");
         Ok(room)
     }
@@ -795,11 +812,7 @@ fn vertex_counts(model: &crate::registry::LoadedModel) -> [usize; 2] {
 impl Cluster {
     /// Removes room `id` from this replica (closed in the cluster), and stops its link.
     fn close_local(&self, state: &AppState, id: &str) {
-        {
-            let mut rooms = state.rooms.write().unwrap_or_else(|e| e.into_inner());
-            rooms.remove(id);
-            state.metrics.rooms.set(rooms.len() as i64);
-        }
+        state.remove_room(id);
         if let Some(link) = lock(&self.links).remove(id) {
             link.shutdown();
         }

@@ -19,17 +19,45 @@ use crate::registry::{LoadedModel, sha256_hex};
 /// The metadata key of an object's SHA-256.
 const SHA256: &str = "sha256";
 
-/// Offers every local model the store lacks (a model of the same name with another digest is
-/// left alone, with a warning: rooms name models by digest too).
-pub(crate) async fn offer(state: Arc<AppState>, cluster: Arc<Cluster>) {
-    for model in state.models.list() {
+/// Serialises every local model once, on the blocking pool: sets its digest (so that nothing
+/// on the async threads computes one) and returns the bytes to [`offer`].
+pub(crate) async fn serialise_local(state: &AppState) -> Vec<(Arc<LoadedModel>, Vec<u8>)> {
+    let models = state.models.list();
+    let serialised = tokio::task::spawn_blocking(move || {
+        models
+            .into_iter()
+            .filter_map(|m| match m.model.to_bytes() {
+                Ok(bytes) => {
+                    m.set_sha256_of(&bytes);
+                    Some((m, bytes))
+                }
+                Err(e) => {
+                    tracing::warn!(model = %m.name, "cannot serialise: {e}");
+                    None
+                }
+            })
+            .collect()
+    })
+    .await;
+    serialised.unwrap_or_else(|e| {
+        tracing::warn!("serialising the models: {e}");
+        Vec::new()
+    })
+}
+
+/// Offers every local model (`serialised`, from [`serialise_local`]) the store lacks (a model
+/// of the same name with another digest is left alone, with a warning: rooms name models by
+/// digest too).
+pub(crate) async fn offer(cluster: Arc<Cluster>, serialised: Vec<(Arc<LoadedModel>, Vec<u8>)>) {
+    for (model, bytes) in serialised {
         let store = &cluster.models_store;
+        let ours = model.sha256();
         match store.info(&model.name).await {
-            Ok(info) if info.metadata.get(SHA256) == Some(&model.sha256) => continue,
+            Ok(info) if info.metadata.get(SHA256).map(String::as_str) == Some(ours) => continue,
             Ok(info) => {
                 tracing::warn!(
                     model = %model.name,
-                    ours = %model.sha256,
+                    ours,
                     cluster = ?info.metadata.get(SHA256),
                     "the cluster's model of this name differs: not replaced"
                 );
@@ -37,22 +65,10 @@ pub(crate) async fn offer(state: Arc<AppState>, cluster: Arc<Cluster>) {
             }
             Err(_) => {}
         }
-        let m = Arc::clone(&model.model);
-        let bytes = match tokio::task::spawn_blocking(move || m.to_bytes()).await {
-            Ok(Ok(bytes)) => bytes,
-            Ok(Err(e)) => {
-                tracing::warn!(model = %model.name, "cannot serialise: {e}");
-                continue;
-            }
-            Err(e) => {
-                tracing::warn!(model = %model.name, "serialising: {e}");
-                continue;
-            }
-        };
         let meta = ObjectMetadata {
             name: model.name.clone(),
             description: Some(format!("crease model {}", model.info.method)),
-            metadata: HashMap::from([(SHA256.to_owned(), model.sha256.clone())]),
+            metadata: HashMap::from([(SHA256.to_owned(), ours.to_owned())]),
             ..Default::default()
         };
         match store.put(meta, &mut bytes.as_slice()).await {
@@ -77,12 +93,12 @@ pub(crate) async fn ensure(
     sha256: &str,
 ) -> Result<Arc<LoadedModel>, String> {
     if let Some(model) = state.models.get(name) {
-        return if model.sha256 == sha256 {
+        return if model.sha256() == sha256 {
             Ok(model)
         } else {
             Err(format!(
                 "model {name:?}: this replica's has SHA-256 {}, the room's is {sha256}",
-                model.sha256
+                model.sha256()
             ))
         };
     }
@@ -108,7 +124,8 @@ pub(crate) async fn ensure(
         .await
         .map_err(|e| format!("model {name:?}: loading: {e}"))?
         .map_err(|e| format!("model {name:?}: the cluster's copy: {e}"))?;
-    let loaded = state.models.insert_with_sha256(name, model, got);
+    let loaded = state.models.insert(name, model);
+    loaded.set_sha256(got);
     tracing::info!(model = %name, "model fetched from the cluster");
     Ok(loaded)
 }
