@@ -367,10 +367,10 @@ impl RoomLink {
             // than a hand-off to the blocking pool costs in latency; a large one (a detail
             // frame) goes to the blocking pool.
             let relayed = if msg.payload.len() <= INLINE_DECODE_BYTES {
-                Ok(self.relay_frame(level, &msg.payload))
+                Ok(self.relay_frame(level, msg.payload))
             } else {
                 let link = Arc::clone(&self);
-                tokio::task::spawn_blocking(move || link.relay_frame(level, &msg.payload)).await
+                tokio::task::spawn_blocking(move || link.relay_frame(level, msg.payload)).await
             };
             match relayed {
                 Ok(Ok(())) => {
@@ -394,7 +394,13 @@ impl RoomLink {
     ///
     /// # Errors
     /// [`RelayError`]; nothing is fanned out then.
-    pub(crate) fn relay_frame(&self, level: Level, payload: &[u8]) -> Result<(), RelayError> {
+    pub(crate) fn relay_frame(
+        &self,
+        level: Level,
+        payload: prost::bytes::Bytes,
+    ) -> Result<(), RelayError> {
+        // Decoded from the message's own `Bytes`: `Frame.data` is a `Bytes` field, so it is a
+        // slice of the payload, not a copy (the pool below copies it once, into its slot).
         let msg = v1::MeshFrame::decode(payload).map_err(|e| RelayError::Message(e.to_string()))?;
         let Some(v1::mesh_frame::Body::Frame(frame)) = msg.body else {
             return Err(RelayError::Message("not a frame".into()));
