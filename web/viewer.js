@@ -2,15 +2,23 @@
 // frames (codec.js, meshoptimizer's decoder), renders them with three.js, and lets an animator
 // drag the model's control points, publishing control frames into the room (HZY11 §7, FKY08 §7:
 // the keyframe interface). State for tests and curious users: `window.crease`.
+//
+// Two stream encodings (`?encoding=vertices|palette|auto`, default auto): vertices (every vertex
+// of every frame, quantised: decoded here, normals on the CPU) and palette (issue 18: the bones
+// and the detail kernel vector per frame; palette.js skins, subdivides, displaces and computes
+// the normals on the GPU). auto takes palette where the renderer has float render targets
+// (WebGL2 + EXT_color_buffer_float), else vertices; the overlay says which and why.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { decodeFrame, decodeIndices, ready } from "./codec.js";
+import { PaletteSynth, floatTargetsSupported } from "./palette.js";
 import { readMeshFrame } from "./wire.js";
 
 const params = new URLSearchParams(location.search);
 const roomId = params.get("room") || "demo";
 const level = params.get("level") === "detail" ? "detail" : "base";
+const encodingParam = ["vertices", "palette"].includes(params.get("encoding")) ? params.get("encoding") : "auto";
 
 const state = {
   connected: false,
@@ -24,8 +32,19 @@ const state = {
   published: 0,
   acks: 0,
   handles: [],
+  encoding: null, // "palette" or "vertices": what the viewer asks for and draws
+  paletteReason: null, // why
+  headers: 0, // stream headers received (one per socket)
+  sockets: 0, // sockets opened
+  rendered: 0, // requestAnimationFrame redraws that showed a new frame
+  renderFps: 0, // of those, per second (over the last second)
 };
 window.crease = state;
+// Not enumerable, so JSON.stringify(window.crease) stays small: `palette` ({header, frame: the
+// raw MeshFrame messages, seq, readback()} in palette mode) and reconnect().
+const hidden = (name, value) =>
+  Object.defineProperty(state, name, { value, enumerable: false, configurable: true, writable: true });
+hidden("palette", null);
 
 // ---- UI ----------------------------------------------------------------------------------
 const banner = document.getElementById("banner");
@@ -69,9 +88,28 @@ scene.add(key);
 const rim = new THREE.DirectionalLight(0xa8c0ff, 0.7);
 rim.position.set(-1.5, 0.5, -1);
 scene.add(rim);
-const material = new THREE.MeshStandardMaterial({ color: 0xd9a58c, roughness: 0.62, metalness: 0 });
+const materialParams = { color: 0xd9a58c, roughness: 0.62, metalness: 0 };
+const material = new THREE.MeshStandardMaterial(materialParams);
 let mesh = null;
 let geometry = null;
+
+// ---- Encoding ------------------------------------------------------------------------------
+const floatTargets = floatTargetsSupported(renderer);
+if (encodingParam === "vertices") {
+  state.encoding = "vertices";
+  state.paletteReason = "?encoding=vertices";
+} else if (!floatTargets) {
+  state.encoding = "vertices";
+  state.paletteReason = "no float render targets";
+} else {
+  state.encoding = "palette";
+  state.paletteReason = encodingParam === "palette" ? "GPU, ?encoding=palette" : "GPU";
+}
+let synth = null; // PaletteSynth, once a palette header came
+let paletteMaterial = null;
+let stream = null; // the current socket's encoding, from its first message
+let pendingMessage = null; // the palette frame message waiting for the GPU passes
+let fresh = false; // a new frame since the last redraw
 const handleGroup = new THREE.Group();
 scene.add(handleGroup);
 
@@ -115,24 +153,36 @@ let fpsWindow = { t: performance.now(), frames: 0, bytes: 0, latency: 0, fps: 0,
 
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
-  const q = new URLSearchParams({ level });
+  const q = new URLSearchParams({ level, encoding: state.encoding });
   if (tokenInput.value) q.set("token", tokenInput.value);
   ws = new WebSocket(`${scheme}://${location.host}/ws/rooms/${encodeURIComponent(roomId)}?${q}`);
   ws.binaryType = "arraybuffer";
   ws.onopen = () => {
     state.connected = true;
+    state.sockets += 1;
     backoff = 500;
-    if (!state.error) showBanner();
+    showBanner(state.error ? "error" : "", state.error || ""); // not "disconnected" any more
   };
   ws.onmessage = (e) => {
     if (typeof e.data === "string") return onAck(JSON.parse(e.data));
-    const msg = readMeshFrame(new Uint8Array(e.data));
+    const bytes = new Uint8Array(e.data);
+    let msg;
+    try {
+      msg = readMeshFrame(bytes);
+    } catch (err) {
+      state.error = `message: ${err.message}`;
+      showBanner("error", state.error);
+      return;
+    }
     if (msg.topology) onTopology(msg.topology);
-    else if (msg.frame) onFrame(msg.frame);
+    else if (msg.paletteTopology) onPaletteTopology(msg.paletteTopology, bytes);
+    else if (msg.frame && stream === "palette") onPaletteFrame(msg.frame, bytes);
+    else if (msg.frame && stream === "vertices") onFrame(msg.frame);
   };
   ws.onclose = (e) => {
     state.connected = false;
     lanes = null;
+    stream = null;
     const wait = backoff;
     backoff = Math.min(backoff * 2, 10000);
     showBanner("warn", `disconnected${e.reason ? `: ${e.reason}` : ""} — reconnecting in ${(wait / 1000).toFixed(1)} s`);
@@ -149,20 +199,48 @@ function reconnect() {
   showBanner();
   connect();
 }
+hidden("reconnect", reconnect);
+
+/** Shows `geo` with `mat` (creating the mesh on the first header). */
+function showMesh(geo, mat) {
+  if (geometry && geometry !== geo) geometry.dispose();
+  geometry = geo;
+  if (!mesh) {
+    mesh = new THREE.Mesh(geometry, mat);
+    scene.add(mesh);
+  } else {
+    mesh.geometry = geometry;
+    mesh.material = mat;
+  }
+}
 
 function onTopology(t) {
+  let index;
+  try {
+    index = decodeIndices(t.indices, t.triangleCount, t.vertexCount);
+  } catch (err) {
+    state.error = `topology: ${err.message}`;
+    showBanner("error", state.error);
+    stream = null;
+    return;
+  }
+  stream = "vertices";
+  state.headers += 1;
+  if (state.encoding === "palette") {
+    // A server without palette streams ignores ?encoding=palette.
+    state.encoding = "vertices";
+    state.paletteReason = "the server sent vertices";
+  }
+  hidden("palette", null);
   state.model = t.model;
   state.vertexCount = t.vertexCount;
   lanes = spare = positionsBuf = null;
-  const index = decodeIndices(t.indices, t.triangleCount, t.vertexCount);
-  if (geometry) geometry.dispose();
-  geometry = new THREE.BufferGeometry();
-  geometry.setAttribute("position", new THREE.BufferAttribute(new Float32Array(3 * t.vertexCount), 3));
-  geometry.setIndex(new THREE.BufferAttribute(index, 1));
-  if (!mesh) {
-    mesh = new THREE.Mesh(geometry, material);
-    scene.add(mesh);
-  } else mesh.geometry = geometry;
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute("position", new THREE.BufferAttribute(new Float32Array(3 * t.vertexCount), 3));
+  geo.setIndex(new THREE.BufferAttribute(index, 1));
+  showMesh(geo, material);
+  mesh.frustumCulled = true;
+  mesh.visible = true;
   // Control points index model vertices; the stream may be in its own order (base level).
   streamIndex = null;
   if (t.vertexOrder.length === t.vertexCount) {
@@ -190,6 +268,53 @@ function onFrame(f) {
   geometry.computeVertexNormals();
   geometry.computeBoundingSphere();
   if (!framed) frameCamera();
+  fresh = true;
+  state.frames += 1;
+  state.bytes += f.data.length;
+  fpsWindow.frames += 1;
+  fpsWindow.bytes += f.data.length;
+  fpsWindow.latency += f.serverLatencyUs;
+}
+
+// A palette stream's header: everything but the bones. A second one (a new socket) rebuilds.
+function onPaletteTopology(t, bytes) {
+  if (!synth) synth = new PaletteSynth(renderer);
+  let h;
+  try {
+    h = synth.load(t);
+  } catch (err) {
+    state.error = err.message;
+    showBanner("error", state.error);
+    stream = null;
+    if (mesh) mesh.visible = false;
+    return;
+  }
+  stream = "palette";
+  state.headers += 1;
+  state.encoding = "palette";
+  state.model = h.model;
+  state.vertexCount = h.vertexCount;
+  pendingMessage = null;
+  if (!paletteMaterial) paletteMaterial = synth.material(materialParams);
+  showMesh(synth.geometry(), paletteMaterial);
+  // The shader places the vertices: the header's box is the bound, no culling needed.
+  mesh.frustumCulled = false;
+  mesh.visible = false; // until the first frame's passes ran
+  streamIndex = null; // model vertex order
+  hidden("palette", { header: bytes, frame: null, seq: null, readback: () => synth.readback() });
+  buildHandles();
+}
+
+// A palette frame: decoded now, synthesised on the GPU at the next redraw (latest wins).
+function onPaletteFrame(f, bytes) {
+  try {
+    synth.setFrame(f.data || new Uint8Array(0));
+  } catch (err) {
+    state.error = `frame ${f.seq}: ${err.message}`;
+    showBanner("error", state.error);
+    return;
+  }
+  pendingMessage = { bytes, seq: f.seq };
   state.frames += 1;
   state.bytes += f.data.length;
   fpsWindow.frames += 1;
@@ -209,9 +334,10 @@ function onAck(ack) {
 function frameCamera() {
   // The model's rest box (every pose stays near it) rather than the first frame's pose, so the
   // framing does not depend on when the page joined; the first frame's sphere as a fallback.
+  // The same at both levels and in both encodings, so the same frame looks the same.
   let center;
   let radius;
-  if (roomInfo && roomInfo.bounds && level === "base") {
+  if (roomInfo && roomInfo.bounds) {
     const [lo, hi] = roomInfo.bounds.map((v) => new THREE.Vector3(...v));
     center = lo.clone().add(hi).multiplyScalar(0.5);
     radius = hi.distanceTo(lo) / 2;
@@ -251,6 +377,7 @@ function buildHandles() {
 }
 
 function vertexPosition(modelVertex, out) {
+  if (stream === "palette") return synth.skinVertex(modelVertex, out);
   const i = streamIndex ? streamIndex[modelVertex] : modelVertex;
   const a = geometry.getAttribute("position").array;
   return out.set(a[3 * i], a[3 * i + 1], a[3 * i + 2]);
@@ -266,7 +393,7 @@ function toNdc(e) {
 }
 
 canvas.addEventListener("pointerdown", (e) => {
-  if (!geometry || handleMeshes.length === 0) return;
+  if (!geometry || !stream || handleMeshes.length === 0) return;
   // The nearest handle within 20 px.
   let best = null;
   for (const h of state.handles) {
@@ -325,10 +452,23 @@ function publish(points) {
 
 // ---- Render loop ---------------------------------------------------------------------------
 const tmp = new THREE.Vector3();
+let renderWindow = { t: performance.now(), rendered: 0 };
 function render() {
   requestAnimationFrame(render);
   controls.update();
-  if (geometry && handleMeshes.length) {
+  if (stream === "palette" && synth.update()) {
+    state.palette.frame = pendingMessage.bytes;
+    state.palette.seq = pendingMessage.seq;
+    mesh.visible = true;
+    if (!framed) frameCamera();
+    fresh = true;
+  }
+  if (fresh) {
+    state.rendered += 1;
+    renderWindow.rendered += 1;
+    fresh = false;
+  }
+  if (geometry && stream && handleMeshes.length) {
     const r = canvas.getBoundingClientRect();
     state.handles = handleMeshes.map((m, k) => {
       if (drag && drag.handle === m) m.position.copy(drag.points[drag.index]);
@@ -351,10 +491,16 @@ function render() {
     fpsWindow.lat = fpsWindow.latency / Math.max(fpsWindow.frames, 1);
     fpsWindow = { ...fpsWindow, t: now, frames: 0, bytes: 0, latency: 0 };
   }
+  if (now - renderWindow.t >= 1000) {
+    state.renderFps = renderWindow.rendered / ((now - renderWindow.t) / 1000);
+    renderWindow = { t: now, rendered: 0 };
+  }
   stats.textContent =
     `model ${state.model || "…"} · ${level}\n` +
+    `${state.encoding} (${state.paletteReason})\n` +
     `${state.vertexCount.toLocaleString()} vertices\n` +
     `${fpsWindow.fps.toFixed(1)} frames/s · ${Math.round(fpsWindow.bpf).toLocaleString()} B/frame\n` +
+    `${state.renderFps.toFixed(1)} frames/s drawn\n` +
     `server latency ${(fpsWindow.lat / 1000).toFixed(2)} ms\n` +
     `published ${state.published} · acks ${state.acks}`;
 }

@@ -1,6 +1,8 @@
 // The few protobuf messages the viewer reads off the WebSocket (`crease.v1.MeshFrame` of
 // proto/crease/v1/crease.proto): a minimal reader of the protobuf wire format (varints and
-// length-delimited fields; unknown fields are skipped, as protobuf requires).
+// length-delimited fields; unknown fields are skipped, as protobuf requires). Two kinds of
+// stream (proto Encoding): vertices (a Topology, then codec frames) and palette (a
+// PaletteTopology, then palette frames, issue 18).
 
 class Reader {
   constructor(bytes) {
@@ -110,13 +112,96 @@ function readFrame(bytes) {
   return f;
 }
 
-/** Reads a `MeshFrame`: `{topology}` or `{frame}`. */
+/** A copy of `bytes` (any alignment) as little-endian elements of `Type`; throws unless the
+ * byte length is a multiple of the element size. */
+function littleEndian(bytes, Type, what) {
+  const size = Type.BYTES_PER_ELEMENT;
+  if (bytes.length % size !== 0) {
+    throw new Error(`palette header: ${what} is ${bytes.length} bytes, not a multiple of ${size}`);
+  }
+  const out = new Type(bytes.length / size);
+  if (size === 1) {
+    out.set(bytes);
+    return out;
+  }
+  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const get = {
+    2: Type === Int16Array ? (i) => dv.getInt16(i, true) : (i) => dv.getUint16(i, true),
+    4: Type === Float32Array ? (i) => dv.getFloat32(i, true) : (i) => dv.getUint32(i, true),
+  }[size];
+  for (let i = 0; i < out.length; i++) out[i] = get(i * size);
+  return out;
+}
+
+/** Packed (wire type 2) or unpacked (wire 5) `repeated float`, appended to `into`. */
+function readFloats(r, wire, into) {
+  if (wire === 5) {
+    if (r.pos + 4 > r.b.length) throw new Error("protobuf: truncated float");
+    into.push(readFloat(r.b.subarray(r.pos, r.pos + 4)));
+    r.pos += 4;
+  } else {
+    for (const v of littleEndian(r.bytes(), Float32Array, "weights")) into.push(v);
+  }
+}
+
+function readSubdivisionStep(bytes) {
+  const r = new Reader(bytes);
+  const s = { rows: 0, columns: 0, rowPtr: new Uint8Array(0), cols: new Uint8Array(0), weightIndex: new Uint8Array(0), weights: [] };
+  for (const [field, wire] of r.fields()) {
+    if (field === 1 && wire === 0) s.rows = r.varint();
+    else if (field === 2 && wire === 0) s.columns = r.varint();
+    else if (field === 3 && wire === 2) s.rowPtr = r.bytes();
+    else if (field === 4 && wire === 2) s.cols = r.bytes();
+    else if (field === 5 && wire === 2) s.weightIndex = r.bytes();
+    else if (field === 6 && (wire === 2 || wire === 5)) readFloats(r, wire, s.weights);
+    else r.skip(wire);
+  }
+  return s;
+}
+
+/**
+ * Reads a `PaletteTopology` (issue 18): the counts as numbers, the byte arrays as they are
+ * (subarrays of the message: `decodePaletteTopology` in palette.js checks and converts them),
+ * `bounds` as {min, max}, `subdivision` as steps {rows, columns, rowPtr, cols, weightIndex,
+ * weights: number[]}.
+ */
+export function readPaletteTopology(bytes) {
+  const r = new Reader(bytes);
+  const empty = new Uint8Array(0);
+  const t = {
+    model: "", level: 0, version: 0, vertexCount: 0, triangleCount: 0, indices: empty, bounds: null,
+    bones: 0, baseVertices: 0, restPositions: empty, influences: 0, skinBones: empty, skinWeights: empty,
+    subdivision: [], examples: 0, detailRows: empty, detailScales: empty,
+  };
+  for (const [field, wire] of r.fields()) {
+    if (wire === 0) {
+      const v = r.varint();
+      const name = { 2: "level", 3: "version", 4: "vertexCount", 5: "triangleCount", 8: "bones", 9: "baseVertices", 11: "influences", 15: "examples" }[field];
+      if (name) t[name] = v;
+    } else if (wire === 2) {
+      const b = r.bytes();
+      if (field === 1) t.model = text.decode(b);
+      else if (field === 7) t.bounds = readBox(b);
+      else if (field === 14) t.subdivision.push(readSubdivisionStep(b));
+      else {
+        const name = { 6: "indices", 10: "restPositions", 12: "skinBones", 13: "skinWeights", 16: "detailRows", 17: "detailScales" }[field];
+        if (name) t[name] = b;
+      }
+    } else r.skip(wire);
+  }
+  return t;
+}
+
+export { littleEndian };
+
+/** Reads a `MeshFrame`: `{topology}`, `{frame}` or `{paletteTopology}`. */
 export function readMeshFrame(bytes) {
   const r = new Reader(bytes);
   for (const [field, wire] of r.fields()) {
     if (field === 1 && wire === 2) return { topology: readTopology(r.bytes()) };
     if (field === 2 && wire === 2) return { frame: readFrame(r.bytes()) };
+    if (field === 3 && wire === 2) return { paletteTopology: readPaletteTopology(r.bytes()) };
     r.skip(wire);
   }
-  throw new Error("protobuf: a MeshFrame with neither topology nor frame");
+  throw new Error("protobuf: a MeshFrame with neither topology, frame nor palette topology");
 }

@@ -12,8 +12,8 @@ import fs from "node:fs";
 import os from "node:os";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
-import zlib from "node:zlib";
 import { chromium } from "playwright-core";
+import { LAUNCH_ARGS, capturePng, changedPixels as changed, decodePng, imageStats, screenshotPng, watchPage } from "./common.mjs";
 
 const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
 const httpAddr = process.env.CREASE_HTTP;
@@ -43,116 +43,8 @@ const MIN_CHANGED_PIXELS = 200;
 /** The whole run's limit: a hung page or server ends the test with a clear message. */
 const OVERALL_TIMEOUT_MS = 300_000;
 
-// ---------------------------------------------------------------------------------------------
-// PNG decoding (what page.screenshot returns): 8-bit grey/grey+alpha/RGB/RGBA, no interlace,
-// filters 0-4 (PNG spec, section 9). Returns {width, height, rgba: Uint8Array}.
-
-function decodePng(buf) {
-  const sig = [0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a];
-  assert.ok(sig.every((b, i) => buf[i] === b), "png: bad signature");
-  let off = 8;
-  let ihdr = null;
-  const idat = [];
-  while (off + 8 <= buf.length) {
-    const len = buf.readUInt32BE(off);
-    const type = buf.toString("latin1", off + 4, off + 8);
-    const data = buf.subarray(off + 8, off + 8 + len);
-    if (type === "IHDR") {
-      ihdr = {
-        width: data.readUInt32BE(0),
-        height: data.readUInt32BE(4),
-        depth: data[8],
-        colour: data[9],
-        interlace: data[12],
-      };
-    } else if (type === "IDAT") {
-      idat.push(data);
-    } else if (type === "IEND") {
-      break;
-    }
-    off += 12 + len;
-  }
-  assert.ok(ihdr, "png: no IHDR");
-  const { width, height, depth, colour, interlace } = ihdr;
-  const channels = { 0: 1, 2: 3, 4: 2, 6: 4 }[colour];
-  assert.ok(depth === 8 && channels && interlace === 0, `png: unsupported ${JSON.stringify(ihdr)}`);
-  const raw = zlib.inflateSync(Buffer.concat(idat));
-  const stride = width * channels;
-  assert.equal(raw.length, height * (stride + 1), "png: image data length");
-  const px = new Uint8Array(height * stride);
-  for (let y = 0; y < height; y++) {
-    const filter = raw[y * (stride + 1)];
-    const src = y * (stride + 1) + 1;
-    const row = y * stride;
-    const up = row - stride;
-    for (let i = 0; i < stride; i++) {
-      const x = raw[src + i];
-      const a = i >= channels ? px[row + i - channels] : 0;
-      const b = y > 0 ? px[up + i] : 0;
-      const c = i >= channels && y > 0 ? px[up + i - channels] : 0;
-      let v;
-      switch (filter) {
-        case 0: v = x; break;
-        case 1: v = x + a; break;
-        case 2: v = x + b; break;
-        case 3: v = x + ((a + b) >> 1); break;
-        case 4: {
-          const p = a + b - c;
-          const pa = Math.abs(p - a), pb = Math.abs(p - b), pc = Math.abs(p - c);
-          v = x + (pa <= pb && pa <= pc ? a : pb <= pc ? b : c);
-          break;
-        }
-        default: throw new Error(`png: filter ${filter} on row ${y}`);
-      }
-      px[row + i] = v & 0xff;
-    }
-  }
-  if (channels === 4) return { width, height, rgba: px };
-  const rgba = new Uint8Array(width * height * 4);
-  for (let i = 0, j = 0; i < width * height; i++, j += channels) {
-    const grey = channels <= 2;
-    rgba[4 * i] = px[j];
-    rgba[4 * i + 1] = grey ? px[j] : px[j + 1];
-    rgba[4 * i + 2] = grey ? px[j] : px[j + 2];
-    rgba[4 * i + 3] = channels === 2 ? px[j + 1] : channels === 4 ? px[j + 3] : 255;
-  }
-  return { width, height, rgba };
-}
-
-/** Luminance spread and the share of pixels unlike the most common colour. */
-function imageStats(img) {
-  const n = img.width * img.height;
-  let sum = 0, sum2 = 0;
-  const counts = new Map();
-  for (let i = 0; i < n; i++) {
-    const [r, g, b] = img.rgba.subarray(4 * i, 4 * i + 3);
-    const l = 0.2126 * r + 0.7152 * g + 0.0722 * b;
-    sum += l;
-    sum2 += l * l;
-    const key = ((r >> 3) << 10) | ((g >> 3) << 5) | (b >> 3);
-    counts.set(key, (counts.get(key) || 0) + 1);
-  }
-  const mean = sum / n;
-  const stddev = Math.sqrt(Math.max(0, sum2 / n - mean * mean));
-  const background = Math.max(...counts.values());
-  return { mean, stddev, foreground: 1 - background / n };
-}
-
 /** Pixels whose colour changed by more than PIXEL_TOLERANCE in some channel. */
-function changedPixels(a, b) {
-  assert.equal(a.width, b.width, "screenshot widths differ");
-  assert.equal(a.height, b.height, "screenshot heights differ");
-  let changed = 0;
-  for (let i = 0; i < a.width * a.height; i++) {
-    for (let c = 0; c < 3; c++) {
-      if (Math.abs(a.rgba[4 * i + c] - b.rgba[4 * i + c]) > PIXEL_TOLERANCE) {
-        changed++;
-        break;
-      }
-    }
-  }
-  return changed;
-}
+const changedPixels = (a, b) => changed(a, b, PIXEL_TOLERANCE);
 
 // ---------------------------------------------------------------------------------------------
 // Harness: each check runs even when an earlier one failed (unless it needs what failed).
@@ -200,56 +92,11 @@ async function metric(name) {
   return Number(m[1]);
 }
 
-const cdpSessions = new WeakMap();
-
-/** A PNG of the page clipped to `clip` (CSS pixels), straight from Chromium's DevTools
- * protocol: on this busy page (WebGL in software, 60 frames/s) Playwright's own screenshots
- * take 0.5-1.7 s (they wait for the page to settle), too slow for "500 ms apart"; this ~0.2 s. */
-async function capturePng(page, clip) {
-  let cdp = cdpSessions.get(page);
-  if (!cdp) {
-    cdp = await page.context().newCDPSession(page);
-    cdpSessions.set(page, cdp);
-  }
-  const r = await cdp.send("Page.captureScreenshot", {
-    format: "png",
-    optimizeForSpeed: true,
-    clip: { ...clip, scale: 1 },
-  });
-  return Buffer.from(r.data, "base64");
-}
-
-/** A PNG of the canvas #view. */
-async function screenshotPng(page) {
-  // Generous: at the detail level the page's main thread is busy for seconds at a time.
-  const box = await page.locator("#view").boundingBox({ timeout: 30_000 });
-  assert.ok(box && box.width > 0 && box.height > 0, `#view has no box: ${JSON.stringify(box)}`);
-  return capturePng(page, box);
-}
-
 /** screenshotPng, decoded; saved as `file` in the screenshot folder when given. */
 async function screenshot(page, file) {
   const png = await screenshotPng(page);
   if (file) fs.writeFileSync(path.join(shots, file), png);
   return decodePng(png);
-}
-
-/** Collects uncaught page errors and console errors for the report. */
-function watchPage(page, label) {
-  const errors = [];
-  page.on("pageerror", (e) => errors.push(`${label}: uncaught ${e.message}`));
-  page.on("console", (m) => {
-    if (m.type() === "error" && !/favicon/.test(m.location()?.url ?? "")) {
-      errors.push(`${label}: console.error ${m.text()}`);
-    }
-  });
-  page.on("requestfailed", (r) => {
-    // Requests cut short by closing the page are no fault of the viewer.
-    if (r.failure()?.errorText !== "net::ERR_ABORTED") {
-      errors.push(`${label}: request failed ${r.url()} ${r.failure()?.errorText}`);
-    }
-  });
-  return errors;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -265,14 +112,7 @@ const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-chromium-"));
 const context = await chromium.launchPersistentContext(userDataDir, {
   executablePath,
   headless: true,
-  args: [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-  ],
+  args: LAUNCH_ARGS,
   viewport: VIEWPORT,
 });
 console.log(`chromium ${context.browser()?.version() ?? "(version unknown)"} at ${executablePath}; server ${base}`);

@@ -1,0 +1,370 @@
+// Synthetic palette streams for palette.test.mjs: a small closed mesh (an octahedron, Loop-
+// subdivided), a few bones, a skin, a detail regressor, encoded as the server would (protobuf
+// MeshFrame { palette_topology } and "CRPF" palette frames, core/src/codec/palette), and a
+// reference of what the viewer must draw, computed here in f64 from the decoded values
+// (web/codec.js's decodePaletteFrame, the header's q / 65535 and q * scale). Lets the GPU passes
+// of web/palette.js be checked without a server that streams palettes, on meshes small enough
+// to read, with every branch the real one has (several subdivision steps, K up to 8, bones
+// over 256, rows of D longer than one texel, buffers wider than the texture).
+
+import { MeshoptEncoder } from "../../web/node_modules/meshoptimizer/meshopt_encoder.js";
+
+const f = Math.fround;
+
+// ---- protobuf writer -----------------------------------------------------------------------
+
+class Writer {
+  constructor() {
+    this.parts = [];
+  }
+  raw(bytes) {
+    this.parts.push(bytes);
+    return this;
+  }
+  varint(v) {
+    const out = [];
+    let x = BigInt(v);
+    do {
+      let byte = Number(x & 0x7fn);
+      x >>= 7n;
+      if (x > 0n) byte |= 0x80;
+      out.push(byte);
+    } while (x > 0n);
+    return this.raw(Uint8Array.from(out));
+  }
+  tag(field, wire) {
+    return this.varint(field * 8 + wire);
+  }
+  uint(field, v) {
+    return v ? this.tag(field, 0).varint(v) : this;
+  }
+  bytes(field, b) {
+    return this.tag(field, 2).varint(b.length).raw(b);
+  }
+  message(field, w) {
+    return this.bytes(field, w.finish());
+  }
+  string(field, s) {
+    return this.bytes(field, new TextEncoder().encode(s));
+  }
+  f32(field, v) {
+    const b = new Uint8Array(4);
+    new DataView(b.buffer).setFloat32(0, v, true);
+    return this.tag(field, 5).raw(b);
+  }
+  finish() {
+    const n = this.parts.reduce((s, p) => s + p.length, 0);
+    const out = new Uint8Array(n);
+    let at = 0;
+    for (const p of this.parts) {
+      out.set(p, at);
+      at += p.length;
+    }
+    return out;
+  }
+}
+
+const le = (Type, values) => new Uint8Array(Type.from(values).buffer);
+
+// ---- the mesh ------------------------------------------------------------------------------
+
+/** An octahedron, outward winding, `size` across, centred at `c`. */
+function octahedron(size, c) {
+  const r = size / 2;
+  const v = [
+    [r, 0, 0], [-r, 0, 0], [0, r, 0], [0, -r, 0], [0, 0, r], [0, 0, -r],
+  ].map((p) => p.map((x, k) => f(x + c[k])));
+  const t = [
+    [0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4],
+    [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5],
+  ];
+  return { positions: v, triangles: t };
+}
+
+/** One Loop subdivision step of a closed manifold triangle mesh (n vertices, triangles): the
+ * CSR matrix (rows: the old vertices, then one per edge) and the new triangles. */
+function loopStep(n, triangles) {
+  const edges = new Map(); // "a,b" (a < b) -> {id, opposite: []}
+  const neighbours = Array.from({ length: n }, () => new Set());
+  const key = (a, b) => (a < b ? `${a},${b}` : `${b},${a}`);
+  for (const [a, b, c] of triangles) {
+    for (const [x, y, z] of [[a, b, c], [b, c, a], [c, a, b]]) {
+      const k = key(x, y);
+      if (!edges.has(k)) edges.set(k, { a: Math.min(x, y), b: Math.max(x, y), id: n + edges.size, opposite: [] });
+      edges.get(k).opposite.push(z);
+      neighbours[x].add(y);
+      neighbours[y].add(x);
+    }
+  }
+  const rows = [];
+  for (let v = 0; v < n; v++) {
+    const ring = [...neighbours[v]].sort((x, y) => x - y);
+    const k = ring.length;
+    const beta = k === 3 ? 3 / 16 : 3 / (8 * k);
+    rows.push([[v, f(1 - k * beta)], ...ring.map((u) => [u, f(beta)])]);
+  }
+  for (const e of edges.values()) {
+    if (e.opposite.length !== 2) throw new Error("loopStep: not a closed manifold");
+    rows.push([[e.a, f(3 / 8)], [e.b, f(3 / 8)], [e.opposite[0], f(1 / 8)], [e.opposite[1], f(1 / 8)]]);
+  }
+  const mid = (x, y) => edges.get(key(x, y)).id;
+  const next = [];
+  for (const [a, b, c] of triangles) {
+    const ab = mid(a, b), bc = mid(b, c), ca = mid(c, a);
+    next.push([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]);
+  }
+  return { rows, columns: n, triangles: next };
+}
+
+/** A deterministic generator (mulberry32). */
+function rng(seed) {
+  let a = seed >>> 0;
+  return () => {
+    a = (a + 0x6d2b79f5) >>> 0;
+    let t = a;
+    t = Math.imul(t ^ (t >>> 15), t | 1);
+    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
+    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
+  };
+}
+
+function normalise(q) {
+  const l = Math.hypot(...q);
+  return q.map((x) => x / l);
+}
+
+/**
+ * A synthetic palette stream: {header (MeshFrame bytes), frames: [MeshFrame bytes], decoded:
+ * what the header decodes to (for the reference), bones (the exact transforms encoded),
+ * vertexCount, bounds, steps}. `level` "base" or "detail"; `steps` Loop steps; `K`; `bones`;
+ * `examples` N.
+ */
+export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, examples = 5, seed = 18, frames = 2 }) {
+  await MeshoptEncoder.ready;
+  const rand = rng(seed);
+  const base = octahedron(0.2, [0.01, 0.08, -0.005]);
+  const nb = base.positions.length;
+  // Skin: K slots per vertex, the first few used, weights summing to 65535.
+  const skinBones = [];
+  const skinWeights = [];
+  for (let v = 0; v < nb; v++) {
+    const used = 1 + Math.floor(rand() * K);
+    const raw = Array.from({ length: used }, () => 0.05 + rand());
+    const total = raw.reduce((s, x) => s + x, 0);
+    const q = raw.map((x) => Math.floor((x / total) * 65535));
+    q[0] += 65535 - q.reduce((s, x) => s + x, 0);
+    for (let k = 0; k < K; k++) {
+      skinBones.push(k < used ? Math.floor(rand() * bones) : 0);
+      skinWeights.push(k < used ? q[k] : 0);
+    }
+  }
+  let triangles = base.triangles;
+  let n = nb;
+  const stepList = [];
+  if (level === "detail") {
+    for (let s = 0; s < steps; s++) {
+      const st = loopStep(n, triangles);
+      stepList.push(st);
+      triangles = st.triangles;
+      n = st.rows.length;
+    }
+  }
+  const N = level === "detail" ? examples : 0;
+  const detailRows = [];
+  const detailScales = [];
+  if (level === "detail") {
+    for (let v = 0; v < n; v++) {
+      detailScales.push(f((0.004 * (0.5 + rand())) / 32767));
+      for (let j = 0; j <= N; j++) detailRows.push(Math.round((rand() * 2 - 1) * 32767));
+    }
+  }
+  const flat = triangles.flat();
+  const indices = MeshoptEncoder.encodeIndexBuffer(Uint32Array.from(flat), flat.length, 4);
+  const lo = [-0.15, -0.05, -0.15];
+  const hi = [0.17, 0.25, 0.14];
+  const topo = new Writer()
+    .string(1, "synthetic")
+    .uint(2, level === "detail" ? 2 : 1)
+    .uint(3, 1)
+    .uint(4, n)
+    .uint(5, triangles.length)
+    .bytes(6, indices)
+    .message(
+      7,
+      new Writer()
+        .message(1, new Writer().f32(1, lo[0]).f32(2, lo[1]).f32(3, lo[2]))
+        .message(2, new Writer().f32(1, hi[0]).f32(2, hi[1]).f32(3, hi[2])),
+    )
+    .uint(8, bones)
+    .uint(9, nb)
+    .bytes(10, le(Float32Array, base.positions.flat()))
+    .uint(11, K)
+    .bytes(12, bones <= 256 ? Uint8Array.from(skinBones) : le(Uint16Array, skinBones))
+    .bytes(13, le(Uint16Array, skinWeights));
+  for (const st of stepList) {
+    const table = [...new Set(st.rows.flat().map((e) => e[1]))].sort((a, b) => a - b);
+    const rowPtr = [0];
+    const cols = [];
+    const index = [];
+    for (const row of st.rows) {
+      for (const [c, w] of row) {
+        cols.push(c);
+        index.push(table.indexOf(w));
+      }
+      rowPtr.push(cols.length);
+    }
+    const w = new Writer()
+      .uint(1, st.rows.length)
+      .uint(2, st.columns)
+      .bytes(3, le(Uint32Array, rowPtr))
+      .bytes(4, le(Uint32Array, cols))
+      .bytes(5, table.length <= 256 ? Uint8Array.from(index) : le(Uint16Array, index))
+      .bytes(6, le(Float32Array, table)); // packed repeated float
+    topo.message(14, w);
+  }
+  if (level === "detail") {
+    topo.uint(15, N).bytes(16, le(Int16Array, detailRows)).bytes(17, le(Float32Array, detailScales));
+  }
+  const header = new Writer().message(3, topo).finish();
+  // Frames: random rotations (both signs of the quaternion) and translations.
+  const exact = [];
+  const out = [];
+  for (let s = 0; s < frames; s++) {
+    const bs = [];
+    for (let b = 0; b < bones; b++) {
+      let q = normalise([rand() * 2 - 1, rand() * 2 - 1, rand() * 2 - 1, rand() * 2 - 1]);
+      if (b === 0 && s === 0) q = [0, 0, 0, 1]; // identity
+      if (b === 1 && s === 0) q = [0, 1, 0, 0]; // a half turn (w = 0)
+      bs.push({ q, t: [0.05 * (rand() * 2 - 1), 0.05 * (rand() * 2 - 1), 0.05 * (rand() * 2 - 1)] });
+    }
+    const xi = Array.from({ length: N }, () => f(rand() * 2 - 1));
+    exact.push({ bones: bs, xi });
+    const data = encodePaletteFrame(100 + s, bs, xi);
+    const frame = new Writer().uint(1, 100 + s).uint(3, 5).bytes(4, data);
+    out.push(new Writer().message(2, frame).finish());
+  }
+  return {
+    header,
+    frames: out,
+    exact,
+    vertexCount: n,
+    baseVertices: nb,
+    triangles,
+    bounds: [lo, hi],
+    model: {
+      rest: base.positions,
+      K,
+      bones,
+      skinBones,
+      skinWeights,
+      steps: stepList.map((s) => s.rows),
+      N,
+      detailRows,
+      detailScales,
+    },
+  };
+}
+
+/** A palette frame ("CRPF" v1) as encode_palette_frame writes it (core/src/codec/palette). */
+export function encodePaletteFrame(seq, bones, xi) {
+  const B = bones.length;
+  const bytes = new Uint8Array(44 + 13 * B + 4 * xi.length);
+  const dv = new DataView(bytes.buffer);
+  bytes.set([0x43, 0x52, 0x50, 0x46], 0);
+  dv.setUint8(4, 1);
+  dv.setUint32(8, seq, true);
+  dv.setUint32(12, B, true);
+  dv.setUint32(16, xi.length, true);
+  const lo = [0, 1, 2].map((k) => f(Math.min(...bones.map((b) => f(b.t[k])))));
+  const hi = [0, 1, 2].map((k) => f(Math.max(...bones.map((b) => f(b.t[k])))));
+  const step = [0, 1, 2].map((k) => (hi[k] - lo[k] > 0 ? f(f(hi[k] - lo[k]) / 65535) : 1));
+  for (let k = 0; k < 3; k++) {
+    dv.setFloat32(20 + 4 * k, lo[k], true);
+    dv.setFloat32(32 + 4 * k, step[k], true);
+  }
+  bones.forEach((b, i) => {
+    const at = 44 + 13 * i;
+    const c = normalise(b.q);
+    let index = 0;
+    for (let k = 1; k < 4; k++) if (Math.abs(c[k]) >= Math.abs(c[index])) index = k; // the last max
+    const sign = c[index] < 0 ? -1 : 1;
+    bytes[at] = index;
+    let slot = 0;
+    for (let k = 0; k < 4; k++) {
+      if (k === index) continue;
+      const v = Math.min(1, Math.max(-1, sign * c[k] * Math.SQRT2));
+      dv.setUint16(at + 1 + 2 * slot++, Math.round((v + 1) * 0.5 * 65535), true);
+    }
+    for (let k = 0; k < 3; k++) {
+      const q = Math.min(65535, Math.max(0, Math.round((f(b.t[k]) - lo[k]) / step[k])));
+      dv.setUint16(at + 7 + 2 * k, q, true);
+    }
+  });
+  xi.forEach((x, k) => dv.setFloat32(44 + 13 * B + 4 * k, x, true));
+  return bytes;
+}
+
+// ---- the reference ---------------------------------------------------------------------------
+
+function rotate([x, y, z, w], [px, py, pz]) {
+  // q p q* for a unit quaternion.
+  const tx = 2 * (y * pz - z * py), ty = 2 * (z * px - x * pz), tz = 2 * (x * py - y * px);
+  return [px + w * tx + (y * tz - z * ty), py + w * ty + (z * tx - x * tz), pz + w * tz + (x * ty - y * tx)];
+}
+
+/** Area-weighted unit vertex normals (zero where the sum is zero), f64. */
+export function vertexNormals(positions, triangles) {
+  const n = positions.map(() => [0, 0, 0]);
+  for (const [a, b, c] of triangles) {
+    const [pa, pb, pc] = [positions[a], positions[b], positions[c]];
+    const u = [pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]];
+    const v = [pc[0] - pa[0], pc[1] - pa[1], pc[2] - pa[2]];
+    const cr = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    for (const i of [a, b, c]) for (let k = 0; k < 3; k++) n[i][k] += cr[k];
+  }
+  return n.map((x) => {
+    const l = Math.hypot(...x);
+    return l > 0 ? x.map((c) => c / l) : [0, 0, 0];
+  });
+}
+
+/**
+ * The drawn mesh of one decoded frame (`decoded`: decodePaletteFrame's {rotations,
+ * translations, xi}), f64 from the header's decoded values: {positions: [[x, y, z]], normals}.
+ */
+export function referenceMesh(stream, decoded) {
+  const m = stream.model;
+  const base = m.rest.map((p, v) => {
+    const out = [0, 0, 0];
+    for (let k = 0; k < m.K; k++) {
+      const w = f(m.skinWeights[v * m.K + k] / 65535);
+      const b = m.skinBones[v * m.K + k];
+      const q = Array.from(decoded.rotations.subarray(4 * b, 4 * b + 4));
+      const t = decoded.translations.subarray(3 * b, 3 * b + 3);
+      const r = rotate(q, p);
+      for (let c = 0; c < 3; c++) out[c] += w * (r[c] + t[c]);
+    }
+    return out;
+  });
+  let level = base;
+  for (const rows of m.steps) {
+    level = rows.map((row) => {
+      const out = [0, 0, 0];
+      for (const [c, w] of row) for (let k = 0; k < 3; k++) out[k] += w * level[c][k];
+      return out;
+    });
+  }
+  let out = level;
+  if (m.steps.length) {
+    const n = vertexNormals(level, stream.triangles);
+    out = level.map((p, v) => {
+      let h = 0;
+      for (let j = 0; j <= m.N; j++) {
+        const d = f(m.detailRows[v * (m.N + 1) + j] * m.detailScales[v]);
+        h += d * (j < m.N ? decoded.xi[j] : 1);
+      }
+      return p.map((x, k) => x + h * n[v][k]);
+    });
+  }
+  return { positions: out, normals: vertexNormals(out, stream.triangles) };
+}

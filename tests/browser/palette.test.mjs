@@ -1,0 +1,742 @@
+// Palette streams in the viewer (issue 18): web/palette.js's GPU synthesis in a real headless
+// Chromium (software GL, the flags of viewer.test.mjs), first on synthetic streams against an
+// f64 reference (no palette server needed), then against a live crease-server running its demo
+// and the Rust core's own decoder (`crease decode-stream`). Plain Node ESM (node:assert +
+// playwright-core): see README.md beside this file. run.sh runs it after viewer.test.mjs; alone:
+//   CREASE_HTTP=127.0.0.1:PORT CREASE_TOKEN=TOKEN CREASE_BIN=target/release/crease \
+//     node tests/browser/palette.test.mjs
+// Env: CREASE_HTTP (host:port of the server's HTTP side, required), CREASE_TOKEN (the demo
+// room's publish token, required), CREASE_BIN (the `crease` CLI; default
+// ${CARGO_TARGET_DIR:-target}/release/crease), CREASE_SHOTS (screenshots; default
+// ${CARGO_TARGET_DIR:-target}/browser-test), CHROMIUM (default /usr/bin/chromium),
+// PALETTE_ONLY=synthetic (only the checks that need no palette server).
+// Prints one line per check and the measured figures, closes on "palette: N passed, N failed";
+// exits 1 on a failure.
+
+import assert from "node:assert/strict";
+import { execFileSync } from "node:child_process";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import { fileURLToPath } from "node:url";
+import { chromium } from "playwright-core";
+import { LAUNCH_ARGS, changedPixels, decodePng, imageStats, screenshotPng, watchPage } from "./common.mjs";
+import { encodePaletteFrame, referenceMesh, syntheticStream } from "./palette-synthetic.mjs";
+import { decodePaletteFrame, ready as codecReady } from "../../web/codec.js";
+import { decodePaletteTopology } from "../../web/palette.js";
+import { readMeshFrame } from "../../web/wire.js";
+
+const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
+const httpAddr = process.env.CREASE_HTTP;
+const token = process.env.CREASE_TOKEN;
+if (!httpAddr || !token) {
+  console.error("FAIL: set CREASE_HTTP (host:port of crease-server's HTTP side) and CREASE_TOKEN");
+  process.exit(2);
+}
+const base = `http://${httpAddr}`;
+const target = process.env.CARGO_TARGET_DIR || "target";
+const shots = path.resolve(root, process.env.CREASE_SHOTS || path.join(target, "browser-test"));
+const creaseBin = path.resolve(root, process.env.CREASE_BIN || path.join(target, "release", "crease"));
+const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
+const syntheticOnly = process.env.PALETTE_ONLY === "synthetic";
+
+const VIEWPORT = { width: 1024, height: 768 };
+/** GPU vs reference: the largest coordinate error allowed, as a share of the bounds' diagonal
+ * (f32 rounding of the passes: ~1e-7 of the coordinates per pass). */
+const RELATIVE_TOLERANCE = 1e-5;
+/** Unit normals, GPU vs f64 reference (f32 cross products of short edges). */
+const NORMAL_TOLERANCE = 1e-4;
+/** A quaternion's stored error bound, core::codec::palette::ROTATION_ERROR (4 half steps). */
+const ROTATION_ERROR = Math.fround((4 * Math.SQRT1_2) / 65535);
+/** A pixel "differs" when a channel changed by more than this (as viewer.test.mjs). */
+const PIXEL_TOLERANCE = 16;
+/**
+ * The share of the canvas that may differ between the vertex and the palette encoding of the
+ * same frame. The geometry is the same to well under a pixel (the vertex stream's quantisation
+ * step is ~1e-5 of the box, a pixel ~2e-3 of it), so what differs is shading: the vertex
+ * path's normals come from quantised positions (on the detail level's ~0.3 mm triangles a
+ * quantisation step tilts a normal by up to a few degrees), and antialiased edges. Measured
+ * ~0.1% (README); 1% leaves room for another rasteriser.
+ */
+const MAX_DIFFERING_SHARE = 0.01;
+const OVERALL_TIMEOUT_MS = 600_000;
+
+// ---------------------------------------------------------------------------------------------
+// Harness (as viewer.test.mjs): each check runs even when an earlier one failed.
+
+const results = [];
+let failed = 0;
+const notes = [];
+const figures = [];
+
+async function check(name, fn) {
+  const t0 = Date.now();
+  try {
+    const detail = await fn();
+    results.push(`ok   ${name}${detail ? ` — ${detail}` : ""} (${Date.now() - t0} ms)`);
+  } catch (e) {
+    failed++;
+    results.push(`FAIL ${name}: ${e && e.message ? e.message : e}`);
+  }
+  console.log(results.at(-1));
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/** The small, enumerable part of window.crease (not `palette`, which is hidden). */
+const creaseState = (page) => page.evaluate(() => (window.crease ? JSON.parse(JSON.stringify(window.crease)) : null));
+
+async function waitForCrease(page, what, pred, ms) {
+  const deadline = Date.now() + ms;
+  let last;
+  for (;;) {
+    last = await creaseState(page);
+    if (last && pred(last)) return last;
+    if (Date.now() > deadline) {
+      const shown = last ? { ...last, handles: last.handles && `${last.handles.length} handles` } : last;
+      throw new Error(`${what}: not within ${ms / 1000} s; window.crease = ${JSON.stringify(shown)}`);
+    }
+    await sleep(100);
+  }
+}
+
+const overlay = (page) => page.evaluate(() => document.getElementById("stats").textContent);
+
+/** {header, frame, seq, readback} of the page's palette mode, in one go (the readback is of
+ * that frame), as Buffers: base64 through a data: URL (the header is megabytes). */
+async function paletteCapture(page) {
+  return page.evaluate(async () => {
+    const p = window.crease.palette;
+    if (!p || !p.frame) return null;
+    const header = p.header;
+    const frame = p.frame;
+    const seq = p.seq;
+    const xyz = p.readback();
+    const b64 = (bytes) =>
+      new Promise((resolve, reject) => {
+        const r = new FileReader();
+        r.onload = () => resolve(String(r.result).slice(String(r.result).indexOf(",") + 1));
+        r.onerror = () => reject(r.error);
+        r.readAsDataURL(new Blob([bytes]));
+      });
+    return {
+      header: await b64(header),
+      frame: await b64(frame),
+      seq,
+      readback: await b64(new Uint8Array(xyz.buffer, xyz.byteOffset, xyz.byteLength)),
+    };
+  });
+}
+
+function floats(buf) {
+  const copy = Buffer.from(buf);
+  return new Float32Array(copy.buffer, copy.byteOffset, copy.length / 4);
+}
+
+function diagonal([lo, hi]) {
+  return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+}
+
+/** The largest |a_i - b_i| and where. */
+function maxError(a, b) {
+  assert.equal(a.length, b.length, `lengths ${a.length} and ${b.length}`);
+  let worst = 0;
+  let at = -1;
+  for (let i = 0; i < a.length; i++) {
+    const e = Math.abs(a[i] - b[i]);
+    if (!(e <= worst)) {
+      worst = e;
+      at = i;
+      if (Number.isNaN(e)) break;
+    }
+  }
+  return { worst, vertex: Math.floor(at / 3) };
+}
+
+// ---------------------------------------------------------------------------------------------
+
+const watchdog = setTimeout(() => {
+  console.error(`FAIL: the palette test did not finish within ${OVERALL_TIMEOUT_MS / 1000} s`);
+  process.exit(1);
+}, OVERALL_TIMEOUT_MS);
+
+fs.mkdirSync(shots, { recursive: true });
+const shotFiles = ["palette-vertices.png", "palette-palette.png", "palette-synthetic.png"];
+for (const f of shotFiles) fs.rmSync(path.join(shots, f), { force: true });
+const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-chromium-"));
+const context = await chromium.launchPersistentContext(userDataDir, {
+  executablePath,
+  headless: true,
+  args: LAUNCH_ARGS,
+  viewport: VIEWPORT,
+});
+console.log(`chromium ${context.browser()?.version() ?? "(version unknown)"} at ${executablePath}; server ${base}`);
+await codecReady;
+
+const pageErrors = [];
+/** A new page, its errors collected (`expected`: console errors it is meant to cause). */
+async function newPage(label, expected) {
+  const page = await context.newPage();
+  const errors = watchPage(page, label);
+  page.on("close", () => pageErrors.push(...errors.filter((e) => !(expected && expected.test(e)))));
+  return page;
+}
+
+/** The import map of the viewer's index.html, for pages that import its modules. */
+const importMap = (await (await fetch(`${base}/`)).text()).match(/<script type="importmap">[\s\S]*?<\/script>/)?.[0];
+
+try {
+  await check("(a) palette frames decode as core::codec::palette does (codec.js)", async () => {
+    let frames = 0;
+    let worstQ = 0;
+    let worstT = 0;
+    for (const cfg of [{ level: "base", bones: 40, frames: 20 }, { level: "detail", bones: 3, frames: 20 }]) {
+      const s = await syntheticStream({ ...cfg, K: 2 });
+      s.frames.forEach((msg, i) => {
+        const data = readMeshFrame(msg).frame.data;
+        const d = decodePaletteFrame(data, cfg.bones, s.model.N);
+        assert.equal(d.seq, 100 + i, "seq");
+        const exact = s.exact[i];
+        exact.bones.forEach((b, k) => {
+          const l = Math.hypot(...b.q);
+          const q = b.q.map((x) => x / l);
+          const got = Array.from(d.rotations.subarray(4 * k, 4 * k + 4));
+          const e = Math.min(
+            Math.hypot(...got.map((x, j) => x - q[j])),
+            Math.hypot(...got.map((x, j) => x + q[j])),
+          );
+          worstQ = Math.max(worstQ, e);
+          assert.ok(e <= ROTATION_ERROR + 1e-7, `frame ${i} bone ${k}: quaternion error ${e} > ${ROTATION_ERROR}`);
+          for (let j = 0; j < 3; j++) {
+            const te = Math.abs(d.translations[3 * k + j] - b.t[j]);
+            worstT = Math.max(worstT, te / d.step[j]);
+            assert.ok(te <= d.step[j] * 0.5 * 1.0001 + 1e-7, `frame ${i} bone ${k}: translation error ${te}`);
+          }
+        });
+        exact.xi.forEach((x, j) => assert.ok(Object.is(d.xi[j], x), `xi ${j}: ${d.xi[j]}, sent ${x}`));
+        frames++;
+      });
+    }
+    // Malformed frames: each refused with an Error that says why.
+    const bones = [0, 1, 2, 3].map((k) => ({ q: [0.1 * k, 0.5, -0.3, 0.8], t: [0.01 * k, 0.02, -0.01] }));
+    const good = encodePaletteFrame(3, bones, [0.5, 1.0]);
+    const decode = (b, nb = 4, nx = 2) => decodePaletteFrame(b, nb, nx);
+    decode(good);
+    const variant = (fn) => {
+      const b = Uint8Array.from(good);
+      fn(b, new DataView(b.buffer));
+      return b;
+    };
+    const bad = {
+      "10 bytes": good.subarray(0, 10),
+      "one byte short": good.subarray(0, good.length - 1),
+      "one byte long": Uint8Array.from([...good, 0]),
+      magic: variant((b) => (b[0] = 0x58)),
+      "version 2": variant((b) => (b[4] = 2)),
+      "flags 1": variant((b) => (b[5] = 1)),
+      "reserved 1": variant((b) => (b[7] = 1)),
+      "zero step": variant((b, dv) => dv.setFloat32(32, 0, true)),
+      "NaN min": variant((b, dv) => dv.setFloat32(24, NaN, true)),
+      "quaternion index 4": variant((b) => (b[44 + 13] = 4)),
+      "NaN xi": variant((b, dv) => dv.setFloat32(44 + 4 * 13, NaN, true)),
+    };
+    const refused = [];
+    for (const [what, b] of Object.entries(bad)) {
+      assert.throws(() => decode(b), (e) => e instanceof Error && e.message.length > 0, `${what}: decoded`);
+      refused.push(what);
+    }
+    assert.throws(() => decode(good, 5), /bones 4, expected 5/, "a frame of another bone count");
+    assert.throws(() => decode(good, 4, 3), /xi values 2, expected 3/, "a frame of another xi length");
+    // Every prefix and every single-byte change decodes or is refused with an Error.
+    for (let cut = 0; cut < good.length; cut++) {
+      try {
+        decode(good.subarray(0, cut));
+      } catch (e) {
+        assert.ok(e instanceof Error, `prefix ${cut}: threw ${e}`);
+      }
+    }
+    for (let i = 0; i < good.length; i++) {
+      try {
+        decode(variant((b) => (b[i] ^= 0xa5)));
+      } catch (e) {
+        assert.ok(e instanceof Error, `byte ${i} changed: threw ${e}`);
+      }
+    }
+    return (
+      `${frames} frames within the bounds (worst quaternion error ${worstQ.toExponential(2)} of ${ROTATION_ERROR.toExponential(2)}, ` +
+      `translation ${worstT.toFixed(3)} steps), ${refused.length + 2} malformed frames refused, ` +
+      `${2 * good.length} prefixes and byte changes without a crash`
+    );
+  });
+
+  await check("(b) malformed palette headers are refused naming the field (palette.js)", async () => {
+    const s = await syntheticStream({ level: "detail", K: 3, bones: 4 });
+    const t0 = readMeshFrame(s.header).paletteTopology;
+    decodePaletteTopology(t0);
+    const fresh = () => readMeshFrame(Uint8Array.from(s.header)).paletteTopology;
+    const cases = {
+      "version 2": [(t) => (t.version = 2), /version 2/],
+      "influences 9": [(t) => (t.influences = 9), /influences 9/],
+      "skin weights short": [(t) => (t.skinWeights = t.skinWeights.subarray(2)), /skin weights has/],
+      "a skin bone past the bones": [(t) => (t.bones = 1), /skin bone|skin bones/],
+      "weights not summing to 65535": [(t) => (t.skinWeights = Uint8Array.from(t.skinWeights).fill(1, 0, 2)), /sum to/],
+      "rest positions short": [(t) => (t.restPositions = t.restPositions.subarray(12)), /rest_positions/],
+      "a column past the previous level": [(t) => (t.subdivision[1].columns += 1), /columns/],
+      "row_ptr short": [(t) => (t.subdivision[0].rowPtr = t.subdivision[0].rowPtr.subarray(4)), /row_ptr/],
+      "a weight index past the table": [
+        (t) => (t.subdivision[0].weightIndex = Uint8Array.from(t.subdivision[0].weightIndex).fill(200, 0, 1)),
+        /weight_index/,
+      ],
+      "detail rows short": [(t) => (t.detailRows = t.detailRows.subarray(2)), /detail rows/],
+      "detail scales odd length": [(t) => (t.detailScales = t.detailScales.subarray(1)), /detail_scales/],
+      "vertex count off": [(t) => (t.vertexCount += 1), /vertex_count/],
+      "no steps at the detail level": [(t) => (t.subdivision = []), /no steps/],
+      "indices corrupt": [(t) => (t.indices = Uint8Array.from(t.indices).fill(0xff, 1)), /palette header/],
+    };
+    for (const [what, [fn, re]] of Object.entries(cases)) {
+      const t = fresh();
+      fn(t);
+      assert.throws(() => decodePaletteTopology(t), (e) => e instanceof Error && re.test(e.message), what);
+    }
+    return `${Object.keys(cases).length} malformed headers refused`;
+  });
+
+  assert.ok(importMap, "the viewer's index.html has no import map");
+  const synthUrl = `${base}/__palette_synthetic.html`;
+  const synthPage = await newPage("synthetic page");
+  await synthPage.route(synthUrl, (r) =>
+    r.fulfill({ contentType: "text/html", body: `<!doctype html><html><head>${importMap}</head><body></body></html>` }),
+  );
+  await synthPage.goto(synthUrl);
+
+  await check("(c) GPU synthesis of synthetic streams matches an f64 reference", async () => {
+    const configs = [
+      // Bones over 256 (u16 skin bones), 8 influences, buffers 7 texels wide (many rows).
+      { level: "base", K: 8, bones: 300, width: 7 },
+      // Two Loop steps, N = 5 (D rows over two texels).
+      { level: "detail", K: 4, bones: 3, steps: 2, examples: 5, width: 7 },
+      // One step, N + 1 = 4 (one texel), one influence, the default width.
+      { level: "detail", K: 1, bones: 2, steps: 1, examples: 3, width: 0 },
+    ];
+    const lines = [];
+    for (const cfg of configs) {
+      const s = await syntheticStream({ ...cfg, frames: 2 });
+      const tol = RELATIVE_TOLERANCE * diagonal(s.bounds);
+      const got = await synthPage.evaluate(
+        async ({ header, frames, width, bounds }) => {
+          const THREE = await import("three");
+          const { PaletteSynth } = await import("/palette.js");
+          const { readMeshFrame } = await import("/wire.js");
+          await (await import("/codec.js")).ready;
+          const canvas = document.createElement("canvas");
+          canvas.width = canvas.height = 96;
+          const renderer = new THREE.WebGLRenderer({ canvas, preserveDrawingBuffer: true });
+          const synth = new PaletteSynth(renderer, width ? { width } : {});
+          synth.load(readMeshFrame(Uint8Array.from(header)).paletteTopology);
+          const out = [];
+          for (const f of frames) {
+            synth.setFrame(readMeshFrame(Uint8Array.from(f)).frame.data);
+            const ran = synth.update();
+            out.push({ ran, again: synth.update(), pos: Array.from(synth.readback()), nrm: Array.from(synth.readback("normals")) });
+          }
+          // Drawn with the viewer's material: something lands on the canvas.
+          const scene = new THREE.Scene();
+          scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 2));
+          const mesh = new THREE.Mesh(synth.geometry(), synth.material({ color: 0xd9a58c }));
+          mesh.frustumCulled = false;
+          scene.add(mesh);
+          const c = new THREE.Vector3(...bounds[0]).add(new THREE.Vector3(...bounds[1])).multiplyScalar(0.5);
+          const camera = new THREE.PerspectiveCamera(50, 1, 0.01, 10);
+          camera.position.copy(c).add(new THREE.Vector3(0, 0, 0.6));
+          camera.lookAt(c);
+          renderer.setClearColor(0x000000, 1);
+          renderer.render(scene, camera);
+          const gl = renderer.getContext();
+          const px = new Uint8Array(4 * 96 * 96);
+          gl.readPixels(0, 0, 96, 96, gl.RGBA, gl.UNSIGNED_BYTE, px);
+          let lit = 0;
+          for (let i = 0; i < 96 * 96; i++) if (px[4 * i] + px[4 * i + 1] + px[4 * i + 2] > 30) lit++;
+          synth.dispose();
+          renderer.dispose();
+          return { frames: out, lit };
+        },
+        { header: Array.from(s.header), frames: s.frames.map((f) => Array.from(f)), width: cfg.width, bounds: s.bounds },
+      );
+      got.frames.forEach((g, i) => {
+        assert.ok(g.ran && !g.again, `frame ${i}: update() ran ${g.ran}, then again ${g.again}`);
+        const d = decodePaletteFrame(readMeshFrame(s.frames[i]).frame.data, cfg.bones, s.model.N);
+        const ref = referenceMesh(s, d);
+        const p = maxError(g.pos, ref.positions.flat());
+        const n = maxError(g.nrm, ref.normals.flat());
+        assert.ok(p.worst <= tol, `${cfg.level} frame ${i}: position error ${p.worst} at vertex ${p.vertex} > ${tol}`);
+        assert.ok(n.worst <= NORMAL_TOLERANCE, `${cfg.level} frame ${i}: normal error ${n.worst} at vertex ${n.vertex}`);
+        if (i === got.frames.length - 1) {
+          lines.push(
+            `${cfg.level} K=${cfg.K} B=${cfg.bones}${cfg.steps ? ` L=${cfg.steps} N=${cfg.examples}` : ""} ` +
+              `W=${cfg.width || "default"}: ${s.vertexCount} vertices, position error ${p.worst.toExponential(2)} ` +
+              `(${(p.worst / diagonal(s.bounds)).toExponential(1)} of the diagonal), normal ${n.worst.toExponential(1)}`,
+          );
+        }
+      });
+      assert.ok(got.lit > 20, `${cfg.level}: the drawn mesh lit ${got.lit} pixels of 96x96`);
+    }
+    figures.push(...lines.map((l) => `synthetic ${l}`));
+    return lines.join("; ");
+  });
+  await synthPage.close();
+
+  await check("(d) the viewer on a mocked palette socket: overlay, window.crease.palette, bad frames, reconnects", async () => {
+    // A room the test makes up: its /api document, and a socket that streams a synthetic
+    // palette (base level first, the detail level on the second connection: a rebuild with
+    // other sizes), closing the first connection itself (as a server going away does).
+    const s1 = await syntheticStream({ level: "base", K: 4, bones: 5, frames: 3, seed: 1 });
+    const s2 = await syntheticStream({ level: "detail", K: 2, bones: 5, frames: 3, seed: 2 });
+    const page = await newPage("mocked page", /palette frame|WebSocket/);
+    const doc = {
+      base_vertices: s1.baseVertices,
+      beta: 3,
+      bounds: s1.bounds,
+      control_points: [{ id: 0, name: "tip", rest: [0.1, 0.08, 0], vertex: 0 }],
+      detail_vertices: s2.vertexCount,
+      has_detail: true,
+      model: "synthetic",
+      room: "synthetic",
+    };
+    await page.route(`${base}/api/rooms/synthetic`, (r) => r.fulfill({ json: doc }));
+    await page.route(`${base}/api/rooms`, (r) => r.fulfill({ json: { rooms: ["synthetic"] } }));
+    const sockets = [];
+    await page.routeWebSocket(/\/ws\/rooms\/synthetic/, (ws) => {
+      const k = sockets.length;
+      const s = k === 0 ? s1 : s2;
+      const entry = { url: ws.url(), sent: 0, timer: null, closed: false };
+      sockets.push(entry);
+      ws.onClose(() => {
+        entry.closed = true;
+        clearInterval(entry.timer);
+      });
+      ws.send(Buffer.from(s.header));
+      let i = 0;
+      entry.timer = setInterval(() => {
+        if (entry.closed) return;
+        ws.send(Buffer.from(s.frames[i++ % s.frames.length]));
+        entry.sent++;
+      }, 50);
+      entry.ws = ws;
+    });
+    await page.goto(`${base}/?room=synthetic`, { waitUntil: "load" });
+    const first = await waitForCrease(page, "palette frames", (c) => c.rendered > 2 && c.frames > 3, 20_000);
+    assert.equal(first.encoding, "palette", "window.crease.encoding");
+    assert.equal(first.paletteReason, "GPU", "window.crease.paletteReason");
+    assert.equal(first.vertexCount, s1.vertexCount, "vertexCount");
+    assert.equal(first.model, "synthetic", "model");
+    assert.equal(first.error, null, "error");
+    const url = new URL(sockets[0].url);
+    assert.equal(url.searchParams.get("encoding"), "palette", `socket URL ${sockets[0].url}`);
+    assert.equal(url.searchParams.get("level"), "base", `socket URL ${sockets[0].url}`);
+    const text = await overlay(page);
+    assert.match(text, /palette \(GPU\)/, `overlay: ${JSON.stringify(text)}`);
+    assert.match(text, /frames\/s drawn/, `overlay: ${JSON.stringify(text)}`);
+    // What the page shows is the frame it says, exactly the header and frame bytes sent.
+    const compare = async (s, what) => {
+      const c = await paletteCapture(page);
+      assert.ok(c, `${what}: no window.crease.palette.frame`);
+      assert.ok(Buffer.from(c.header, "base64").equals(Buffer.from(s.header)), `${what}: palette.header is not the header sent`);
+      const frame = Buffer.from(c.frame, "base64");
+      const i = s.frames.findIndex((f) => Buffer.from(f).equals(frame));
+      assert.ok(i >= 0, `${what}: palette.frame is none of the frames sent`);
+      assert.equal(c.seq, 100 + i, `${what}: palette.seq`);
+      const d = decodePaletteFrame(readMeshFrame(s.frames[i]).frame.data, s.model.bones, s.model.N);
+      const e = maxError(floats(Buffer.from(c.readback, "base64")), referenceMesh(s, d).positions.flat());
+      const tol = RELATIVE_TOLERANCE * diagonal(s.bounds);
+      assert.ok(e.worst <= tol, `${what}: readback error ${e.worst} > ${tol}`);
+      return e.worst;
+    };
+    const e1 = await compare(s1, "base");
+    // The handle of the control point sits on skinned vertex 0.
+    const handles = await page.evaluate(() => window.crease.handles.length);
+    assert.equal(handles, 1, "handles");
+    // A malformed frame: an error on the banner, the page goes on with the next good frames.
+    // MeshFrame { frame { seq: 7, data: a palette frame 5 bytes short } }.
+    const data = readMeshFrame(s1.frames[0]).frame.data;
+    const short = data.subarray(0, data.length - 5);
+    const frameMsg = Buffer.concat([Buffer.from([0x08, 7, 0x22]), varint(short.length), Buffer.from(short)]);
+    const mesh = Buffer.concat([Buffer.from([0x12]), varint(frameMsg.length), frameMsg]);
+    const before = await creaseState(page);
+    sockets[0].ws.send(mesh);
+    const errored = await waitForCrease(page, "the bad frame's error", (c) => c.error !== null, 5_000);
+    assert.match(errored.error, /frame 7: palette frame truncated/, "window.crease.error");
+    const banner = await page.evaluate(() => [document.getElementById("banner").className, document.getElementById("banner").textContent]);
+    assert.equal(banner[0], "error", `banner ${JSON.stringify(banner)}`);
+    await waitForCrease(page, "frames after the bad one", (c) => c.rendered > before.rendered + 3, 10_000);
+    // The server closes the socket: the viewer reconnects, gets the (detail) header, rebuilds.
+    sockets[0].ws.close({ code: 1011, reason: "test: server going away" });
+    const second = await waitForCrease(
+      page,
+      "the header again after the server closed the socket",
+      (c) => c.headers === 2 && c.vertexCount === s2.vertexCount && c.rendered > before.rendered + 6,
+      20_000,
+    );
+    assert.equal(sockets.length, 2, "sockets opened");
+    assert.equal(second.sockets, 2, "window.crease.sockets");
+    const e2 = await compare(s2, "after the reconnect (detail)");
+    const img = decodePng(await screenshotPng(page).then((png) => (fs.writeFileSync(path.join(shots, "palette-synthetic.png"), png), png)));
+    const fg = imageStats(img).foreground;
+    assert.ok(fg > 0.005, `the synthetic mesh is not on the canvas (${(100 * fg).toFixed(2)}% foreground)`);
+    // The page's own reconnect: a third socket, the header again.
+    await page.evaluate(() => window.crease.reconnect());
+    const third = await waitForCrease(page, "the header after reconnect()", (c) => c.headers === 3 && c.frames > second.frames + 3, 20_000);
+    assert.equal(third.error, null, "reconnect() clears the error");
+    await compare(s2, "after reconnect()");
+    for (const s of sockets) s.ws.close();
+    await page.close();
+    return (
+      `readback error ${e1.toExponential(2)} (base), ${e2.toExponential(2)} (detail after a reconnect); ` +
+      `bad frame refused ("${errored.error}"); ${sockets.length} sockets, 3 headers`
+    );
+  });
+
+  await check("(e) no float render targets: encoding=auto falls back to vertices and says why", async () => {
+    const page = await newPage("fallback page");
+    await page.addInitScript(() => {
+      for (const C of [WebGL2RenderingContext, WebGLRenderingContext]) {
+        const get = C.prototype.getExtension;
+        C.prototype.getExtension = function (name) {
+          return /^EXT_color_buffer_(half_)?float$/.test(name) ? null : get.call(this, name);
+        };
+        const list = C.prototype.getSupportedExtensions;
+        C.prototype.getSupportedExtensions = function () {
+          return (list.call(this) || []).filter((n) => !/^EXT_color_buffer_(half_)?float$/.test(n));
+        };
+      }
+    });
+    const urls = [];
+    page.on("websocket", (ws) => urls.push(ws.url()));
+    await page.goto(`${base}/?room=demo&encoding=auto`, { waitUntil: "load" });
+    const c = await waitForCrease(page, "frames", (c) => c.frames > 3 && c.rendered > 0, 30_000);
+    assert.equal(c.encoding, "vertices", "window.crease.encoding");
+    assert.equal(c.paletteReason, "no float render targets", "window.crease.paletteReason");
+    assert.equal(c.error, null, "error");
+    assert.equal(await page.evaluate(() => window.crease.palette), null, "window.crease.palette");
+    assert.ok(urls.length && new URL(urls[0]).searchParams.get("encoding") === "vertices", `socket URLs ${urls}`);
+    const text = await overlay(page);
+    assert.match(text, /vertices \(no float render targets\)/, `overlay ${JSON.stringify(text)}`);
+    await page.close();
+    return `overlay "${text.split("\n")[1]}", socket ${new URL(urls[0]).search}`;
+  });
+
+  if (syntheticOnly) {
+    notes.push("PALETTE_ONLY=synthetic: the checks against the palette server were skipped");
+  } else {
+    await serverChecks();
+  }
+} catch (e) {
+  failed++;
+  results.push(`FAIL ${e && e.stack ? e.stack : e}`);
+  console.log(results.at(-1));
+} finally {
+  for (const p of context.pages()) await p.close().catch(() => {});
+  await context.close().catch(() => {});
+  fs.rmSync(userDataDir, { recursive: true, force: true });
+  clearTimeout(watchdog);
+}
+
+function varint(v) {
+  const out = [];
+  do {
+    let b = v & 0x7f;
+    v = Math.floor(v / 128);
+    if (v > 0) b |= 0x80;
+    out.push(b);
+  } while (v > 0);
+  return Buffer.from(out);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Against the live server's demo room.
+
+async function serverChecks() {
+  const roomInfo = await (await fetch(`${base}/api/rooms/demo`)).json();
+  const diag = diagonal(roomInfo.bounds);
+
+  /** A viewer page on the demo room, waited on until it draws frames. */
+  async function viewer(query, label, minFrames = 2) {
+    const page = await newPage(label);
+    await page.goto(`${base}/?room=demo&${query}`, { waitUntil: "load" });
+    const c = await waitForCrease(page, `${label}: frames`, (c) => c.rendered >= minFrames && c.frames >= minFrames, 120_000);
+    return { page, state: c };
+  }
+
+  for (const level of ["detail", "base"]) {
+    await check(`(f) ${level} level: the GPU's mesh is the Rust core's (crease decode-stream)`, async () => {
+      assert.ok(fs.existsSync(creaseBin), `no ${creaseBin} (set CREASE_BIN)`);
+      const { page, state } = await viewer(`level=${level}&encoding=palette`, `${level} palette page`);
+      assert.equal(state.encoding, "palette", `window.crease.encoding (reason: ${state.paletteReason})`);
+      const c = await paletteCapture(page);
+      await page.close();
+      assert.ok(c, "no window.crease.palette.frame");
+      const header = Buffer.from(c.header, "base64");
+      const frame = Buffer.from(c.frame, "base64");
+      const gpu = floats(Buffer.from(c.readback, "base64"));
+      const dir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-palette-"));
+      try {
+        const capture = path.join(dir, `${level}.capture`);
+        const len = (b) => {
+          const l = Buffer.alloc(4);
+          l.writeUInt32LE(b.length);
+          return l;
+        };
+        fs.writeFileSync(capture, Buffer.concat([len(header), header, len(frame), frame]));
+        fs.copyFileSync(capture, path.join(shots, `palette-${level}.capture`));
+        const out = path.join(dir, `${level}.f32`);
+        const stdout = execFileSync(creaseBin, ["decode-stream", capture, "--out", out], { encoding: "utf8", timeout: 120_000 });
+        const line = stdout.trim().split("\n").filter((l) => l.startsWith("{")).at(-1);
+        assert.ok(line, `decode-stream printed no JSON line: ${stdout}`);
+        const info = JSON.parse(line);
+        assert.equal(info.encoding, "palette", `decode-stream: ${line}`);
+        assert.equal(info.level, level, `decode-stream: ${line}`);
+        assert.equal(info.frames, 1, `decode-stream: ${line}`);
+        assert.equal(info.seq, c.seq, `decode-stream seq vs window.crease.palette.seq: ${line}`);
+        assert.equal(info.vertex_count * 3, gpu.length, `decode-stream vertex_count vs the readback: ${line}`);
+        const core = floats(fs.readFileSync(out));
+        const e = maxError(gpu, core);
+        const tol = RELATIVE_TOLERANCE * diag;
+        figures.push(
+          `${level}: max |gpu - core| ${e.worst.toExponential(3)} m (${(e.worst / diag).toExponential(2)} of the ` +
+            `bounds' diagonal ${diag.toFixed(4)} m; allowed ${tol.toExponential(2)}), ${info.vertex_count} vertices, seq ${c.seq}`,
+        );
+        assert.ok(e.worst <= tol, `max |gpu - core| ${e.worst} at vertex ${e.vertex} > ${tol}`);
+        return `${info.vertex_count} vertices, max |gpu - core| ${e.worst.toExponential(3)} (${(e.worst / diag).toExponential(2)} of the diagonal), header ${header.length} B, frame ${frame.length} B`;
+      } finally {
+        fs.rmSync(dir, { recursive: true, force: true });
+      }
+    });
+  }
+
+  await check("(g) reconnects on the live server: the header again, after a close by the server side and after reconnect()", async () => {
+    const page = await newPage("reconnect page", /WebSocket/);
+    let routes = 0;
+    let firstRoute = null;
+    // A proxy to the real server; closing its page side is, to the page, the server closing.
+    await page.routeWebSocket(/\/ws\/rooms\/demo/, (ws) => {
+      routes++;
+      ws.connectToServer();
+      if (!firstRoute) firstRoute = ws;
+    });
+    await page.goto(`${base}/?room=demo&encoding=palette`, { waitUntil: "load" });
+    const a = await waitForCrease(page, "frames", (c) => c.headers === 1 && c.rendered > 2, 60_000);
+    assert.equal(a.encoding, "palette", "encoding");
+    firstRoute.close({ code: 1001, reason: "test: going away" });
+    const b = await waitForCrease(page, "the header after the close", (c) => c.headers === 2 && c.frames > a.frames + 3 && c.connected, 30_000);
+    await page.evaluate(() => window.crease.reconnect());
+    const c = await waitForCrease(page, "the header after reconnect()", (c) => c.headers === 3 && c.frames > b.frames + 3, 30_000);
+    assert.equal(c.error, null, "error");
+    assert.equal(routes, 3, "sockets the page opened");
+    const cap = await paletteCapture(page);
+    assert.ok(cap && cap.header.length > 0, "window.crease.palette after the reconnects");
+    await page.close();
+    return `3 sockets, 3 headers, ${c.frames} frames, encoding ${c.encoding}`;
+  });
+
+  // A fixed pose (the control points' rest positions), published over and over: the demo
+  // animation yields to another publisher (demo/src/animation.rs: it pauses until none came
+  // for 3 s), so every frame is the same pose and both encodings show the same mesh.
+  const publisher = await newPage("publisher page");
+  await publisher.goto(`${base}/healthz`);
+  const positions = roomInfo.control_points.flatMap((c) => c.rest);
+  await publisher.evaluate(
+    ({ url, positions }) => {
+      window.pub = { acks: 0, errors: [], seq: 0 };
+      const ws = new WebSocket(url);
+      window.pub.ws = ws;
+      ws.onmessage = (e) => {
+        const ack = JSON.parse(e.data);
+        window.pub.acks++;
+        if (ack.error) window.pub.errors.push(ack.error.message);
+      };
+      ws.onopen = () => {
+        window.pub.timer = setInterval(() => {
+          ws.send(JSON.stringify({ seq: window.pub.seq++, capture_time_us: Date.now() * 1000, positions }));
+        }, 100);
+      };
+    },
+    { url: `ws://${httpAddr}/ws/rooms/demo?subscribe=false&token=${encodeURIComponent(token)}`, positions },
+  );
+  const stopPublishing = () =>
+    publisher.evaluate(() => {
+      clearInterval(window.pub.timer);
+      window.pub.ws.close();
+      return window.pub;
+    });
+
+  await check("(h) screenshots: the same frame in both encodings (detail level, fixed pose)", async () => {
+    const deadline = Date.now() + 10_000;
+    let pub;
+    while (Date.now() < deadline) {
+      pub = await publisher.evaluate(() => ({ acks: window.pub.acks, errors: window.pub.errors }));
+      if (pub.acks >= 5) break;
+      await sleep(100);
+    }
+    assert.ok(pub.acks >= 5 && pub.errors.length === 0, `publishing the fixed pose: ${JSON.stringify(pub)}`);
+    const imgs = {};
+    for (const encoding of ["vertices", "palette"]) {
+      const { page, state } = await viewer(`level=detail&encoding=${encoding}`, `${encoding} screenshot page`, 3);
+      assert.equal(state.encoding, encoding, "window.crease.encoding");
+      // Two more frames (the pose held), then the canvas alone.
+      await waitForCrease(page, "two more frames", (c) => c.rendered >= state.rendered + 2, 60_000);
+      await page.addStyleTag({ content: "#panel, #help, #banner { display: none !important; }" });
+      await sleep(500);
+      const png = await screenshotPng(page);
+      fs.writeFileSync(path.join(shots, `palette-${encoding}.png`), png);
+      imgs[encoding] = decodePng(png);
+      await page.close();
+    }
+    const n = imgs.vertices.width * imgs.vertices.height;
+    const differing = changedPixels(imgs.vertices, imgs.palette, PIXEL_TOLERANCE);
+    const share = differing / n;
+    const fg = imageStats(imgs.palette).foreground;
+    figures.push(
+      `screenshots (detail, fixed pose): ${differing} of ${n} pixels differ by > ${PIXEL_TOLERANCE}/255 ` +
+        `(${(100 * share).toFixed(3)}% of the canvas, ${((100 * share) / fg).toFixed(2)}% of the hand's ${(100 * fg).toFixed(1)}%)`,
+    );
+    assert.ok(fg > 0.01, `the palette screenshot looks blank (${(100 * fg).toFixed(2)}% foreground)`);
+    assert.ok(share < MAX_DIFFERING_SHARE, `${(100 * share).toFixed(3)}% of the pixels differ (allowed ${100 * MAX_DIFFERING_SHARE}%)`);
+    return `${(100 * share).toFixed(3)}% of the pixels differ by > ${PIXEL_TOLERANCE} (allowed ${100 * MAX_DIFFERING_SHARE}%)`;
+  });
+  const pub = await stopPublishing();
+  await publisher.close();
+  notes.push(`the fixed pose: ${pub.seq} control frames published, ${pub.acks} acks, ${pub.errors.length} refused`);
+
+  await check("(i) frames drawn per second at the detail level, both encodings (demo animation)", async () => {
+    await sleep(3500); // the demo animation resumes 3 s after the last foreign frame
+    const rates = {};
+    for (const encoding of ["vertices", "palette"]) {
+      const { page } = await viewer(`level=detail&encoding=${encoding}`, `${encoding} fps page`, 1);
+      await sleep(1500);
+      const a = await creaseState(page);
+      const t0 = Date.now();
+      await sleep(5000);
+      const b = await creaseState(page);
+      const s = (Date.now() - t0) / 1000;
+      rates[encoding] = { drawn: (b.rendered - a.rendered) / s, received: (b.frames - a.frames) / s, encoding: b.encoding };
+      await page.close();
+      assert.equal(b.encoding, encoding, "window.crease.encoding");
+      assert.ok(b.rendered > a.rendered, `${encoding}: no frame drawn in ${s.toFixed(1)} s`);
+    }
+    const line = Object.entries(rates)
+      .map(([k, r]) => `${k} ${r.drawn.toFixed(1)} frames/s drawn (${r.received.toFixed(1)} received)`)
+      .join(", ");
+    figures.push(`detail level, ~5 s each: ${line}`);
+    return line;
+  });
+}
+
+// Every page is closed by now: their errors were collected as they closed.
+await check("no uncaught page errors", async () => {
+  assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);
+});
+for (const n of notes) console.log(`note ${n}`);
+for (const f of figures) console.log(`figure ${f}`);
+const saved = shotFiles.filter((f) => fs.existsSync(path.join(shots, f)));
+console.log(`screenshots: ${saved.length ? saved.map((f) => path.join(shots, f)).join(" ") : "none"}`);
+console.log(`palette: ${results.length - failed} passed, ${failed} failed`);
+process.exit(failed ? 1 : 0);
