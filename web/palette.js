@@ -11,11 +11,11 @@
 //
 // at the base level `out` is `base`. A vertex's normal is the sum over its incident triangles
 // [v, a, b] (winding order) of cross(p_a - p_v, p_b - p_v), normalised, zero when the sum is
-// zero: the per-vertex (a, b) pairs are built once at load, in CSR. Every buffer is an RGBA32F
+// zero: the per-vertex neighbour chains (incidentChains) are built once at load, in CSR. Every buffer is an RGBA32F
 // render target W = min(4096, max texture size) texels wide, vertex i at (i % W, i / W); the
 // constant data are DataTextures (R32UI / RG32UI for indices, with weights as their f32 bits,
 // RGBA32F for positions and D). Per frame the main thread decodes the palette frame and
-// uploads 2 texels per bone and (N + 1) / 4 texels of xi: no per-vertex work.
+// uploads 2 texels per bone and (N + 1) / 4 vec4s of xi (a uniform array): no per-vertex work.
 //
 //   const synth = new PaletteSynth(renderer);
 //   synth.load(readPaletteTopology(bytes));   // throws an Error naming what is wrong
@@ -156,7 +156,8 @@ export function decodePaletteTopology(t) {
   };
 }
 
-/** Per vertex, the (a, b) corners of its incident triangles [v, a, b] in winding order, CSR. */
+/** Per vertex, the (a, b) corners of its incident triangles [v, a, b] in winding order, CSR:
+ * pairs 2 * (ptr[v] .. ptr[v + 1]). */
 export function incidentPairs(vertexCount, triangles) {
   const ptr = new Uint32Array(vertexCount + 1);
   for (let i = 0; i < triangles.length; i++) ptr[triangles[i] + 1]++;
@@ -176,6 +177,68 @@ export function incidentPairs(vertexCount, triangles) {
     pairs[at + 1] = b;
   }
   return { ptr, pairs };
+}
+
+/** Separates two chains of one vertex in incidentChains. */
+export const CHAIN_BREAK = 0xffffffff;
+
+/**
+ * The incident triangles of every vertex as chains of their other corners, in CSR (as
+ * VertexFans in core/src/runtime/detail.rs): consecutive entries r_i, r_i+1 of a chain are the
+ * (a, b) of one triangle [v, a, b], so a vertex inside a closed fan of k triangles takes k + 1
+ * entries (its first neighbour repeated at the end) and each neighbour is fetched once, where
+ * the pairs take 2k. Triangles that do not chain follow as further chains after CHAIN_BREAK.
+ * The sum of cross(p_r_i - p_v, p_r_i+1 - p_v) over a vertex's chains is the same sum as over
+ * its pairs. Returns {ptr (vertexCount + 1), chain}.
+ */
+export function incidentChains(vertexCount, triangles) {
+  const { ptr: pptr, pairs } = incidentPairs(vertexCount, triangles);
+  const ptr = new Uint32Array(vertexCount + 1);
+  const chain = new Uint32Array(pairs.length / 2 + vertexCount * 2);
+  let len = 0;
+  const used = [];
+  for (let v = 0; v < vertexCount; v++) {
+    const first = pptr[v];
+    const k = pptr[v + 1] - first;
+    used.length = 0;
+    for (let i = 0; i < k; i++) used.push(false);
+    let left = k;
+    let chains = 0;
+    while (left > 0) {
+      // Start where no unused pair leads in (an open fan's end), else anywhere.
+      let start = -1;
+      for (let i = 0; i < k && start < 0; i++) {
+        if (used[i]) continue;
+        const a = pairs[2 * (first + i)];
+        let led = false;
+        for (let j = 0; j < k; j++) if (!used[j] && j !== i && pairs[2 * (first + j) + 1] === a) led = true;
+        if (!led) start = i;
+      }
+      if (start < 0) start = used.indexOf(false);
+      if (chains++ > 0) chain[len++] = CHAIN_BREAK;
+      used[start] = true;
+      left--;
+      chain[len++] = pairs[2 * (first + start)];
+      let cur = pairs[2 * (first + start) + 1];
+      chain[len++] = cur;
+      for (;;) {
+        let next = -1;
+        for (let j = 0; j < k; j++) {
+          if (!used[j] && pairs[2 * (first + j)] === cur) {
+            next = j;
+            break;
+          }
+        }
+        if (next < 0) break;
+        used[next] = true;
+        left--;
+        cur = pairs[2 * (first + next) + 1];
+        chain[len++] = cur;
+      }
+    }
+    ptr[v + 1] = len;
+  }
+  return { ptr, chain: chain.slice(0, len) };
 }
 
 // ---- Shaders -----------------------------------------------------------------------------
@@ -249,16 +312,25 @@ void main() {
   fragColor = vec4(v, 1.0);
 }`;
 
-// The normal of uIn at vertex i; with DISPLACE, uIn moved along it by h = D xi + b.
-const NORMAL_FRAGMENT = (displace) => /* glsl */ `${COMMON}
+/** xi travels as a uniform array up to this many vec4s (well inside WebGL2's 224 fragment
+ * uniform vectors), as a texture beyond. */
+const XI_UNIFORM_TEXELS = 64;
+
+// The normal of uIn at vertex i; with `texels` (D's texels per vertex), uIn moved along it by
+// h = D xi + b.
+const NORMAL_FRAGMENT = (texels) => /* glsl */ `${COMMON}
 uniform sampler2D uIn;
 uniform usampler2D uFanPtr;
-uniform usampler2D uFans;     // per (vertex, incident triangle): its other corners a, b
-${displace ? "#define DISPLACE" : ""}
-#ifdef DISPLACE
-uniform sampler2D uDetail;    // per vertex uTexels texels: D_v0 .. D_v(N-1), b_v, zero padding
-uniform sampler2D uXi;        // xi_0 .. xi_(N-1), 1, zero padding
-uniform int uTexels;
+uniform usampler2D uFans;     // per vertex, its chains of neighbours (incidentChains)
+${texels ? `#define TEXELS ${texels}` : ""}
+${texels && texels <= XI_UNIFORM_TEXELS ? "#define XI_UNIFORM" : ""}
+#ifdef TEXELS
+uniform sampler2D uDetail;    // per vertex TEXELS texels: D_v0 .. D_v(N-1), b_v, zero padding
+#ifdef XI_UNIFORM
+uniform vec4 uXi[TEXELS];     // xi_0 .. xi_(N-1), 1, zero padding
+#else
+uniform sampler2D uXi;
+#endif
 #endif
 void main() {
   int i = fragIndex();
@@ -267,16 +339,29 @@ void main() {
   int start = int(fetchu(uFanPtr, i).x);
   int end = int(fetchu(uFanPtr, i + 1).x);
   vec3 n = vec3(0.0);
+  vec3 q = vec3(0.0);
+  bool open = false; // q holds the chain's previous corner
   for (int e = start; e < end; e++) {
-    uvec2 ab = fetchu(uFans, e).xy;
-    n += cross(fetch(uIn, int(ab.x)).xyz - p, fetch(uIn, int(ab.y)).xyz - p);
+    uint r = fetchu(uFans, e).x;
+    if (r == ${CHAIN_BREAK}u) { open = false; continue; }
+    vec3 d = fetch(uIn, int(r)).xyz - p;
+    if (open) n += cross(q, d);
+    q = d;
+    open = true;
   }
   // glam's normalize_or_zero: times 1 / length when that is finite and positive.
   float rcp = 1.0 / length(n);
   n = (isinf(rcp) || isnan(rcp) || rcp <= 0.0) ? vec3(0.0) : n * rcp;
-#ifdef DISPLACE
+#ifdef TEXELS
   float h = 0.0;
-  for (int k = 0; k < uTexels; k++) h += dot(fetch(uDetail, i * uTexels + k), fetch(uXi, k));
+  int row = i * TEXELS;
+  for (int k = 0; k < TEXELS; k++) {
+#ifdef XI_UNIFORM
+    h += dot(fetch(uDetail, row + k), uXi[k]);
+#else
+    h += dot(fetch(uDetail, row + k), fetch(uXi, k));
+#endif
+  }
   fragColor = vec4(p + h * n, 1.0);
 #else
   fragColor = vec4(n, 0.0);
@@ -414,38 +499,39 @@ export class PaletteSynth {
       level = next;
     }
     const n = h.vertexCount;
-    const fans = incidentPairs(n, h.triangles);
+    const fans = incidentChains(n, h.triangles);
     const fanUniforms = {
       uFanPtr: { value: this.texture(fans.ptr, 1, true) },
-      uFans: { value: this.texture(fans.pairs, 2, true) },
+      uFans: { value: this.texture(fans.chain, 1, true) },
     };
     let out = level;
     this.xiTex = null;
+    this.xiData = null;
     if (h.detail) {
       const N = h.examples;
       const texels = Math.ceil((N + 1) / 4);
       const d = new Float32Array(4 * texels * n);
       for (let v = 0; v < n; v++) d.set(h.detail.subarray(v * (N + 1), (v + 1) * (N + 1)), 4 * texels * v);
-      this.xiTex = this.texture(new Float32Array(4 * texels), 4, false);
-      this.xiData = this.xiTex.image.data;
+      if (texels <= XI_UNIFORM_TEXELS) {
+        this.xiData = new Float32Array(4 * texels);
+        this.xiUniform = { value: this.xiData };
+      } else {
+        this.xiTex = this.texture(new Float32Array(4 * texels), 4, false);
+        this.xiData = this.xiTex.image.data;
+        this.xiUniform = { value: this.xiTex };
+      }
       this.xiData[N] = 1; // b_v's coefficient
       out = this.target(n);
       passes.push(
         this.pass(
-          NORMAL_FRAGMENT(true),
-          {
-            uIn: { value: level.texture },
-            ...fanUniforms,
-            uDetail: { value: this.texture(d, 4, false) },
-            uXi: { value: this.xiTex },
-            uTexels: { value: texels },
-          },
+          NORMAL_FRAGMENT(texels),
+          { uIn: { value: level.texture }, ...fanUniforms, uDetail: { value: this.texture(d, 4, false) }, uXi: this.xiUniform },
           out,
         ),
       );
     }
     const normals = this.target(n);
-    passes.push(this.pass(NORMAL_FRAGMENT(false), { uIn: { value: out.texture }, ...fanUniforms }, normals));
+    passes.push(this.pass(NORMAL_FRAGMENT(0), { uIn: { value: out.texture }, ...fanUniforms }, normals));
     this.passes = passes;
     this.out = out;
     this.normalTarget = normals;
@@ -477,9 +563,9 @@ export class PaletteSynth {
       this.boneData.set(frame.translations.subarray(3 * k, 3 * k + 3), 8 * k + 4);
     }
     this.bonesTex.needsUpdate = true;
-    if (this.xiTex) {
+    if (this.xiData) {
       this.xiData.set(frame.xi);
-      this.xiTex.needsUpdate = true;
+      if (this.xiTex) this.xiTex.needsUpdate = true;
     }
     const r = this.renderer;
     const previous = r.getRenderTarget();

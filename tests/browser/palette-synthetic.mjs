@@ -134,15 +134,24 @@ function normalise(q) {
 }
 
 /**
- * A synthetic palette stream: {header (MeshFrame bytes), frames: [MeshFrame bytes], decoded:
- * what the header decodes to (for the reference), bones (the exact transforms encoded),
- * vertexCount, bounds, steps}. `level` "base" or "detail"; `steps` Loop steps; `K`; `bones`;
- * `examples` N.
+ * A synthetic palette stream: {header (MeshFrame bytes), frames: [MeshFrame bytes], exact (the
+ * transforms and xi encoded), vertexCount, baseVertices, triangles, bounds, model (what the
+ * header holds, for the reference)}. `level` "base" or "detail"; `steps` Loop steps; `K`;
+ * `bones`; `examples` N; `odd` (base level): an open fan, a fan that does not chain and a
+ * vertex of no triangle.
  */
-export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, examples = 5, seed = 18, frames = 2 }) {
+export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, examples = 5, seed = 18, frames = 2, odd = false }) {
   await MeshoptEncoder.ready;
   const rand = rng(seed);
   const base = octahedron(0.2, [0.01, 0.08, -0.005]);
+  if (odd) {
+    // Base level only (Loop needs a closed manifold): an open fan (a triangle missing), a
+    // triangle of the other winding (a fan that does not chain) and a vertex of no triangle
+    // (its normal is zero).
+    if (level !== "base") throw new Error("odd meshes are for the base level");
+    base.triangles = [...base.triangles.slice(1), [base.triangles[5][0], base.triangles[5][2], base.triangles[5][1]]];
+    base.positions.push([0.05, 0.05, 0.05].map(f));
+  }
   const nb = base.positions.length;
   // Skin: K slots per vertex, the first few used, weights summing to 65535.
   const skinBones = [];

@@ -103,8 +103,18 @@ async function waitForCrease(page, what, pred, ms) {
 const overlay = (page) => page.evaluate(() => document.getElementById("stats").textContent);
 
 /** {header, frame, seq, readback} of the page's palette mode, in one go (the readback is of
- * that frame), as Buffers: base64 through a data: URL (the header is megabytes). */
+ * that frame), as base64 (through a data: URL: the header is megabytes); waits up to 10 s for
+ * a frame to be displayed (after a new header there is none until the next redraw). */
 async function paletteCapture(page) {
+  for (let tries = 0; tries < 100; tries++) {
+    const c = await paletteCaptureNow(page);
+    if (c) return c;
+    await sleep(100);
+  }
+  return null;
+}
+
+async function paletteCaptureNow(page) {
   return page.evaluate(async () => {
     const p = window.crease.palette;
     if (!p || !p.frame) return null;
@@ -313,10 +323,14 @@ try {
     const configs = [
       // Bones over 256 (u16 skin bones), 8 influences, buffers 7 texels wide (many rows).
       { level: "base", K: 8, bones: 300, width: 7 },
+      // Open and unchained fans, a vertex of no triangle (its normal zero).
+      { level: "base", K: 2, bones: 4, width: 5, odd: true },
       // Two Loop steps, N = 5 (D rows over two texels).
       { level: "detail", K: 4, bones: 3, steps: 2, examples: 5, width: 7 },
       // One step, N + 1 = 4 (one texel), one influence, the default width.
       { level: "detail", K: 1, bones: 2, steps: 1, examples: 3, width: 0 },
+      // N = 300: xi in a texture rather than a uniform array.
+      { level: "detail", K: 2, bones: 3, steps: 1, examples: 300, width: 64 },
     ];
     const lines = [];
     for (const cfg of configs) {
@@ -372,7 +386,7 @@ try {
         assert.ok(n.worst <= NORMAL_TOLERANCE, `${cfg.level} frame ${i}: normal error ${n.worst} at vertex ${n.vertex}`);
         if (i === got.frames.length - 1) {
           lines.push(
-            `${cfg.level} K=${cfg.K} B=${cfg.bones}${cfg.steps ? ` L=${cfg.steps} N=${cfg.examples}` : ""} ` +
+            `${cfg.level}${cfg.odd ? " (odd fans)" : ""} K=${cfg.K} B=${cfg.bones}${cfg.steps ? ` L=${cfg.steps} N=${cfg.examples}` : ""} ` +
               `W=${cfg.width || "default"}: ${s.vertexCount} vertices, position error ${p.worst.toExponential(2)} ` +
               `(${(p.worst / diagonal(s.bounds)).toExponential(1)} of the diagonal), normal ${n.worst.toExponential(1)}`,
           );

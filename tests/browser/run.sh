@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The browser viewer (web/) in a real headless Chromium, end to end: builds crease-server, starts
-# it on its embedded demo (free ports, a random publish token for room demo), then runs
-# tests/browser/viewer.test.mjs (playwright-core driving Debian's /usr/bin/chromium) against it.
+# The browser viewer (web/) in a real headless Chromium, end to end: builds crease-server and the
+# crease CLI, starts the server on its embedded demo (free ports, a random publish token for room
+# demo), then runs tests/browser/viewer.test.mjs and tests/browser/palette.test.mjs (palette
+# streams on the GPU against `crease decode-stream`; playwright-core driving Debian's
+# /usr/bin/chromium) against it.
 # Called by .ci/run; runs alone from anywhere:
 #   bash tests/browser/run.sh
 # Uses ${CARGO_TARGET_DIR:-target} for the build, the demo cache (demo-cache/, trained once,
@@ -43,16 +45,23 @@ echo "== npm ci (web/, tests/browser/)"
 (cd web && npm ci --no-audit --no-fund)
 (cd tests/browser && npm ci --no-audit --no-fund)
 
-echo "== build (crease-server)"
-cargo build --release --locked -p crease-demo
+echo "== build (crease-server, crease)"
+cargo build --release --locked -p crease-demo -p crease-cli
 
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 start_demo_server --demo-token "$token"
 
+# Both tests run even when the first fails; the script fails if either did.
+failed=0
 echo "== viewer in headless chromium"
 CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
-    node tests/browser/viewer.test.mjs
+    node tests/browser/viewer.test.mjs || failed=1
+
+echo "== palette streams in headless chromium"
+CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+    CREASE_BIN="$bin/crease" node tests/browser/palette.test.mjs || failed=1
 
 echo "== stop crease-server"
 stop_server
 echo "crease-server stopped cleanly on SIGTERM"
+exit "$failed"
