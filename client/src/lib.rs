@@ -11,6 +11,8 @@
 //! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
 //! - [`commands::watch`], [`commands::stream`], [`commands::room`], [`commands::retarget`]:
 //!   watching and publishing into rooms, managing them, marker recordings to control frames.
+//! - [`commands::decode_stream`]: `crease decode-stream` — a recorded stream decoded by the
+//!   core (the reference decoder other clients are checked against).
 //! - [`commands::bench_net`]: `crease bench-net` — the network load benchmark (its load,
 //!   server and report in submodules).
 //!
@@ -69,6 +71,9 @@ pub enum Command {
     Retarget(commands::retarget::RetargetArgs),
     /// Open, inspect or close rooms on a server.
     Room(commands::room::RoomArgs),
+    /// Decode a recorded mesh stream (`watch --record`; vertex or palette) with the Rust core
+    /// and write its last frame's mesh: the reference for other decoders.
+    DecodeStream(commands::decode_stream::DecodeStreamArgs),
     /// Network load benchmark (issue 6): rooms, publishers and subscribers on loopback;
     /// latency, server CPU and bytes per vertex per frame.
     BenchNet(commands::bench_net::BenchNetArgs),
@@ -90,6 +95,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Watch(args) => commands::watch::run(&args),
         Command::Stream(args) => commands::stream::run(&args),
         Command::Room(args) => commands::room::run(&args),
+        Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),
         Command::BenchNet(args) => commands::bench_net::run(&args),
     }

@@ -345,6 +345,22 @@ impl Predictor {
         Ok(())
     }
 
+    /// Rest vertex `v` skinned with the context's current transforms (LBS, FKY08 eq. 1): the
+    /// few vertices a caller needs without skinning the whole mesh (a palette stream's control
+    /// residual).
+    ///
+    /// # Panics
+    /// If `v` is not a rest vertex.
+    pub fn skin_vertex(&self, ctx: &FrameContext, v: usize) -> Vec3 {
+        let p = self.model.rig.rest.positions[v];
+        let (bones, weights) = self.model.rig.skin.vertex(v);
+        bones
+            .iter()
+            .zip(weights)
+            .map(|(&b, &w)| w * ctx.transforms[b as usize].transform_point(p))
+            .sum()
+    }
+
     /// The whole frame: controls -> transforms -> skinned vertices.
     pub fn predict<'c>(
         &self,
@@ -388,7 +404,63 @@ impl Predictor {
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
         let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
-        let nv = template.vertex_count();
+        let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
+        let frame = Self::detail_frame(
+            &mut ctx.detail,
+            &ctx.controls,
+            &ctx.rotations,
+            template,
+            regressor,
+            d_in,
+        );
+        regressor.predict(&frame.x, &mut frame.xi, &mut frame.h);
+        frame
+            .synth
+            .synthesize(&ctx.positions, &frame.h, &mut frame.out)?;
+        Ok(&frame.out)
+    }
+
+    /// The detail kernel vector `xi` of the context's last frame (after
+    /// [`Predictor::predict_transforms`]; HZY11 eq. 4): what a palette stream's detail frame
+    /// carries, without synthesising the detail layer. Allocates only on a context's first
+    /// detail frame.
+    ///
+    /// # Errors
+    /// [`PredictError::NoDetailLayer`] for a model without one; the regressor's
+    /// [`PredictError::DetailRegressor`] when it does not fit the model.
+    pub fn predict_detail_xi<'c>(
+        &self,
+        ctx: &'c mut FrameContext,
+    ) -> Result<&'c [f32], PredictError> {
+        let regressor = &self
+            .model
+            .detail
+            .as_ref()
+            .ok_or(PredictError::NoDetailLayer)?
+            .regressor;
+        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
+        let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
+        let frame = Self::detail_frame(
+            &mut ctx.detail,
+            &ctx.controls,
+            &ctx.rotations,
+            template,
+            regressor,
+            d_in,
+        );
+        let n = regressor.example_count();
+        regressor.kernel_vector(&frame.x, &mut frame.xi[..n]);
+        Ok(&frame.xi[..n])
+    }
+
+    /// The rest of [`Predictor::predict_detail_with`]'s checks: `regressor` fits the detailed
+    /// mesh (`nv` vertices) and the context's input; returns the input's dimension.
+    fn detail_input_len(
+        &self,
+        ctx: &FrameContext,
+        regressor: &DetailRegressor,
+        nv: usize,
+    ) -> Result<usize, PredictError> {
         if regressor.vertex_count() != nv {
             return Err(PredictError::DetailRegressor(format!(
                 "{} displacement rows, the detailed mesh has {nv} vertices",
@@ -406,7 +478,21 @@ impl Predictor {
                 regressor.input.name()
             )));
         }
-        let frame = ctx.detail.get_or_insert_with(|| {
+        Ok(d_in)
+    }
+
+    /// The context's detail buffers (made on its first detail frame) with the regressor's
+    /// input of the last frame filled in.
+    fn detail_frame<'c>(
+        detail: &'c mut Option<Box<DetailFrame>>,
+        controls: &[Vec3],
+        rotations: &[Quat],
+        template: &DetailSynth,
+        regressor: &DetailRegressor,
+        d_in: usize,
+    ) -> &'c mut DetailFrame {
+        let nv = template.vertex_count();
+        let frame = detail.get_or_insert_with(|| {
             Box::new(DetailFrame {
                 synth: template.clone(),
                 x: Vec::new(),
@@ -422,17 +508,13 @@ impl Predictor {
             .resize(regressor.example_count().max(frame.xi.len()), 0.0);
         match regressor.input {
             DetailInput::Controls => {
-                for (x, c) in frame.x.chunks_exact_mut(3).zip(&ctx.controls) {
+                for (x, c) in frame.x.chunks_exact_mut(3).zip(controls) {
                     x.copy_from_slice(&c.to_array());
                 }
             }
-            DetailInput::Rotations => rotations_input(&ctx.rotations, &mut frame.x),
+            DetailInput::Rotations => rotations_input(rotations, &mut frame.x),
         }
-        regressor.predict(&frame.x, &mut frame.xi, &mut frame.h);
         frame
-            .synth
-            .synthesize(&ctx.positions, &frame.h, &mut frame.out)?;
-        Ok(&frame.out)
     }
 }
 

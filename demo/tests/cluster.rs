@@ -256,6 +256,9 @@ fn watch(
                     }
                     *s.frames.entry(f.seq).or_default() += 1;
                 }
+                Some(v1::mesh_frame::Body::PaletteTopology(_)) => {
+                    panic!("a palette header on a vertex stream")
+                }
                 None => {}
             }
         }
@@ -275,6 +278,7 @@ async fn grpc_viewer(
         .subscribe(v1::SubscribeRequest {
             room: room.into(),
             level: level as i32,
+            ..Default::default()
         })
         .await
         .unwrap()

@@ -179,6 +179,7 @@ fn demo_trains_animates_and_serves() {
             .subscribe(v1::SubscribeRequest {
                 room: DEMO_ROOM.into(),
                 level: v1::Level::Base as i32,
+                ..Default::default()
             })
             .await
             .unwrap()

@@ -147,6 +147,71 @@ impl Level {
     }
 }
 
+/// How a stream carries its frames: the domain side of `crease.v1.Encoding` (issue 18).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// Every vertex, quantised (`core::codec`): today's frames, the default.
+    #[default]
+    Vertices,
+    /// The bone transforms and the detail kernel vector (`core::codec::palette`).
+    Palette,
+}
+
+impl Encoding {
+    /// Both encodings, vertices first (an index per encoding: `encoding as usize`).
+    pub const ALL: [Encoding; 2] = [Encoding::Vertices, Encoding::Palette];
+
+    /// The encoding of a request's `encoding` field (`ENCODING_UNSPECIFIED` is vertices) in
+    /// `message_type`.
+    ///
+    /// # Errors
+    /// [`WireError`] naming `{message_type}.encoding` for a value that is not an `Encoding`.
+    pub fn from_wire(message_type: &'static str, encoding: i32) -> Result<Encoding, WireError> {
+        match v1::Encoding::try_from(encoding) {
+            Ok(v1::Encoding::Unspecified | v1::Encoding::Vertices) => Ok(Encoding::Vertices),
+            Ok(v1::Encoding::Palette) => Ok(Encoding::Palette),
+            Err(_) => Err(WireError::new(
+                message_type,
+                "encoding",
+                format!("{encoding} is not an Encoding (0 unspecified, 1 vertices, 2 palette)"),
+            )),
+        }
+    }
+
+    /// The encoding's name, as `?encoding=` spells it: `vertices` or `palette`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::Vertices => "vertices",
+            Encoding::Palette => "palette",
+        }
+    }
+
+    /// The encoding of a WebSocket's `?encoding=` query (`vertices` when absent).
+    ///
+    /// # Errors
+    /// [`WireError`] naming `encoding` for anything but `vertices` or `palette`.
+    pub fn from_query(encoding: Option<&str>) -> Result<Encoding, WireError> {
+        match encoding {
+            None | Some("vertices") => Ok(Encoding::Vertices),
+            Some("palette") => Ok(Encoding::Palette),
+            Some(other) => Err(WireError::new(
+                "query",
+                "encoding",
+                format!("{other:?}, expected vertices or palette"),
+            )),
+        }
+    }
+}
+
+impl From<Encoding> for v1::Encoding {
+    fn from(e: Encoding) -> Self {
+        match e {
+            Encoding::Vertices => v1::Encoding::Vertices,
+            Encoding::Palette => v1::Encoding::Palette,
+        }
+    }
+}
+
 impl From<Level> for v1::Level {
     fn from(level: Level) -> Self {
         match level {
@@ -159,6 +224,32 @@ impl From<Level> for v1::Level {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn encodings_convert_both_ways_and_bad_ones_name_the_field() {
+        for e in Encoding::ALL {
+            assert_eq!(
+                Encoding::from_wire("SubscribeRequest", v1::Encoding::from(e) as i32),
+                Ok(e)
+            );
+            assert_eq!(Encoding::from_query(Some(e.name())), Ok(e));
+        }
+        assert_eq!(
+            Encoding::from_wire("SubscribeRequest", 0),
+            Ok(Encoding::Vertices)
+        );
+        assert_eq!(Encoding::from_query(None), Ok(Encoding::Vertices));
+        // The wire integers are the proto's: 1 vertices, 2 palette.
+        assert_eq!(v1::Encoding::from(Encoding::Palette) as i32, 2);
+        let e = Encoding::from_wire("SubscribeRequest", 9).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "SubscribeRequest.encoding: 9 is not an Encoding (0 unspecified, 1 vertices, 2 palette)"
+        );
+        let e = Encoding::from_query(Some("Palette")).unwrap_err();
+        assert_eq!(e.field, "encoding");
+        assert!(e.message.contains("expected vertices or palette"), "{e}");
+    }
 
     #[test]
     fn levels_convert_both_ways_and_bad_ones_name_the_field() {

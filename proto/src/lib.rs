@@ -12,8 +12,10 @@
 //!   ([`encode_valid_mask`], [`valid_bit`]).
 //! - [`mesh`]: the mesh stream a subscriber gets: [`topology_message`], [`frame_message`], and
 //!   [`read_topology`] / [`StreamTopology`] for clients.
+//! - [`palette`]: the palette stream's first message (issue 18): [`palette_topology_message`]
+//!   and [`read_palette_topology`] / [`StreamPalette`].
 //! - [`convert`]: the small wire <-> core conversions: points, boxes, the One Euro filter,
-//!   [`Level`], [`model_info`].
+//!   [`Level`], [`Encoding`], [`model_info`].
 //! - [`json`]: the JSON the WebSocket and `/api/rooms` speak: control frames in, acks out,
 //!   room documents, one serde mapping each.
 //! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
@@ -24,11 +26,13 @@ pub mod convert;
 pub mod errors;
 pub mod json;
 pub mod mesh;
+pub mod palette;
 
 pub use control::{control_frame, encode_valid_mask, read_control_frame, valid_bit};
-pub use convert::{Level, box3, model_info};
+pub use convert::{Encoding, Level, box3, model_info};
 pub use errors::WireError;
 pub use mesh::{StreamTopology, TopologyParts, frame_message, read_topology, topology_message};
+pub use palette::{PaletteParts, StreamPalette, palette_topology_message, read_palette_topology};
 
 /// The generated `crease.v1` package.
 #[allow(missing_docs, clippy::all, missing_debug_implementations)]

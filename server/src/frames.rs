@@ -193,7 +193,7 @@ impl FramePool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fanout::{Fanout, LocalFanout};
+    use crate::fanout::{Channel, Fanout, LocalFanout};
     use crease_proto::Level;
 
     #[test]
@@ -205,15 +205,15 @@ mod tests {
         )
         .unwrap();
         let fanout = LocalFanout::default();
-        let mut slow = fanout.subscribe(Level::Base);
-        let mut fast = fanout.subscribe(Level::Base);
+        let mut slow = fanout.subscribe(Channel::vertices(Level::Base));
+        let mut fast = fanout.subscribe(Channel::vertices(Level::Base));
         let mut pool = FramePool::default();
         // Frame `i`: its bytes are `i` repeated (a size that varies), its lanes `i` too.
         let encoded = |i: u64| vec![i as u8; 200 + (i as usize * 37) % 100];
         let lanes = |i: u64| vec![[i as u16, 1, 2, 0]; 64];
         let publish = |pool: &mut FramePool, i: u64| {
             let u = pool.fill(qbox, &encoded(i), &lanes(i), |u| u.seq = i);
-            fanout.publish(Level::Base, u);
+            fanout.publish(Channel::vertices(Level::Base), u);
         };
         for i in 0..4 {
             publish(&mut pool, i);

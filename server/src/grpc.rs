@@ -6,16 +6,22 @@ use std::sync::Arc;
 
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
-use crease_proto::{Level, v1};
+use crease_proto::{Encoding, Level, v1};
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::fanout::Channel;
 use crate::ingest;
 use crate::registry::LoadedModel;
 use crate::room::{Room, StreamSettings};
 use crate::{AddRoomError, AppState};
+
+/// The largest message the server sends: what it sends is its own (a limit on requests,
+/// `limits.message_bytes`, protects it from clients), and a detail palette header is one
+/// message of several MB (11.5 MB for the demo hand's 151K-vertex detail layer).
+pub const MAX_SENT_MESSAGE_BYTES: usize = 256 << 20;
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
 const STREAM_BUFFER: usize = 4;
@@ -47,7 +53,7 @@ pub fn router(
         .map_err(std::io::Error::other)?;
     let service = CreaseServer::new(CreaseService { state })
         .max_decoding_message_size(max)
-        .max_encoding_message_size(max);
+        .max_encoding_message_size(MAX_SENT_MESSAGE_BYTES);
     tokio::spawn(async move {
         reporter.set_serving::<CreaseServer<CreaseService>>().await;
     });
@@ -243,15 +249,17 @@ impl Crease for CreaseService {
     ) -> Result<Response<Self::SubscribeStream>, Status> {
         let r = req.into_inner();
         let level = Level::from_wire("SubscribeRequest", r.level)?;
+        let encoding = Encoding::from_wire("SubscribeRequest", r.encoding)?;
         let room = self.room(&r.room).await?;
         check_level(&room, level)?;
+        let channel = Channel::new(level, encoding);
         let subscription = room
-            .subscribe(level, self.state.config.limits.subscribers_per_room)
+            .subscribe(channel, self.state.config.limits.subscribers_per_room)
             .map_err(|e| Status::resource_exhausted(format!("room {:?}: {e}", room.id)))?;
         Ok(Response::new(Box::pin(crate::stream::subscribe(
             Arc::clone(&self.state),
             room,
-            level,
+            channel,
             subscription,
         ))))
     }

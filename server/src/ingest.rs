@@ -67,7 +67,9 @@ impl From<PipelineError> for PublishError {
         match e {
             PipelineError::Wire(e) => PublishError::Wire(e),
             e @ PipelineError::Predict(_) => PublishError::Predict(e.to_string()),
-            e @ PipelineError::Codec(_) => PublishError::Internal(e.to_string()),
+            e @ (PipelineError::Codec(_) | PipelineError::Palette(_)) => {
+                PublishError::Internal(e.to_string())
+            }
         }
     }
 }

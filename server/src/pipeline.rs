@@ -1,6 +1,20 @@
 //! A room's per-frame work: control points through the One Euro filter (mocap rooms), the
-//! predictor (and the detail layer while anyone subscribes to it), and one encoder per level,
-//! once per frame for every subscriber. Everything here is blocking: building a pipeline
+//! predictor, and one encoder per channel (`crate::fanout::Channel`: a level in an
+//! encoding), once per frame for every subscriber of that channel.
+//!
+//! What a frame computes depends on who watches (issue 18):
+//! - always the bone transforms (rotations, then the translation solve), and the base
+//!   palette frame (a few hundred bytes, so a palette viewer that joins gets the current pose
+//!   at once);
+//! - the detail palette frame (the kernel vector `xi`, no synthesis) while someone watches it;
+//! - the skinned base mesh and its vertex frame while someone watches vertex frames, or
+//!   nobody watches palette frames (a vertex viewer that joins an idle room then gets the
+//!   current pose at once, as before palettes existed);
+//! - the detail layer's synthesis and its vertex frame while someone watches it.
+//!
+//! So with palette viewers alone a frame is prediction and translation solve only: no
+//! skinning, no detail synthesis, no vertex encode. A channel the pipeline stops computing is
+//! cleared, so that a viewer who comes later waits for its next frame instead of an old pose. Everything here is blocking: building a pipeline
 //! factorises the predictor's sparse system, and [`Pipeline::process`] predicts and encodes a
 //! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
 //! executor.
@@ -12,17 +26,20 @@
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
+use crease_core::codec::palette::{
+    PaletteError, palette_lanes, palette_vertex_count, translation_box,
+};
 use crease_core::codec::{
-    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, QuantBox, encode_indices,
+    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameHeader, QuantBox, encode_indices,
 };
 use crease_core::glam::Vec3;
-use crease_core::model::ControlPoint;
+use crease_core::model::{ControlPoint, TrainedModel};
 use crease_core::predictor::{FrameContext, PredictError, Predictor};
 use crease_core::runtime::filter::{OneEuro, OneEuroParams};
-use crease_proto::{Level, WireError, read_control_frame, v1};
+use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
 
-use crate::fanout::Fanout;
+use crate::fanout::{Channel, Fanout};
 use crate::frames::FramePool;
 use crate::registry::LoadedModel;
 
@@ -105,6 +122,9 @@ pub enum PipelineError {
     /// A mesh could not be encoded (a server bug: the sizes are fixed at open).
     #[error("encoding: {0}")]
     Codec(#[from] CodecError),
+    /// A palette frame could not be encoded (a non-finite transform: a server bug).
+    #[error("palette encoding: {0}")]
+    Palette(#[from] PaletteError),
 }
 
 /// Errors of building a pipeline.
@@ -123,11 +143,20 @@ struct State {
     ctx: FrameContext,
     controls: Vec<Vec3>,
     valid: Vec<bool>,
-    encoders: [FrameEncoder; 2],
-    pools: [FramePool; 2],
-    /// A level's mesh in the streamed order, and its encoded bytes (reused per frame).
+    /// The encoders, per channel (a palette stream is a codec stream of lanes,
+    /// `core::codec::palette`).
+    encoders: [FrameEncoder; Channel::COUNT],
+    /// A palette frame's lanes (reused per frame).
+    lanes: Vec<[u16; 4]>,
+    /// The frame pools, per channel.
+    pools: [FramePool; Channel::COUNT],
+    /// Whether a channel holds a frame of the current pose (else it was cleared).
+    live: [bool; Channel::COUNT],
+    /// A level's mesh in the streamed order, and a frame's encoded bytes (reused per frame).
     streamed: Vec<Vec3>,
     encoded: Vec<u8>,
+    /// The last detail kernel vector (palette detail frames).
+    xi: Vec<f32>,
     /// One filter per control point (empty when the room does not filter).
     filters: Vec<OneEuro>,
     /// The previous frame's capture time and arrival, for the filter's time step.
@@ -138,7 +167,8 @@ struct State {
 pub struct Pipeline {
     model: Arc<LoadedModel>,
     predictor: Predictor,
-    qboxes: [QuantBox; 2],
+    /// Each channel's quantisation box (a palette channel's: its translations').
+    qboxes: [QuantBox; Channel::COUNT],
     /// Whether vertices stream in the model's spatial orders.
     spatial: bool,
     filter: Option<OneEuroParams>,
@@ -157,12 +187,53 @@ impl std::fmt::Debug for Pipeline {
     }
 }
 
+/// Vertices of `channel`'s frames for `model`: a level's mesh, or a palette frame's lane
+/// vertices (`core::codec::palette`).
+pub(crate) fn frame_vertices(model: &TrainedModel, channel: Channel) -> usize {
+    let xi = model
+        .detail
+        .as_ref()
+        .map_or(0, |d| d.regressor.example_count());
+    match (channel.level, channel.encoding) {
+        (Level::Base, Encoding::Vertices) => model.rig.rest.vertex_count(),
+        (Level::Detail, Encoding::Vertices) => model.detail_vertex_count().unwrap_or(0),
+        (Level::Base, Encoding::Palette) => palette_vertex_count(model.rig.bone_count, 0),
+        (Level::Detail, Encoding::Palette) => palette_vertex_count(model.rig.bone_count, xi),
+    }
+}
+
+/// Hands the frame just encoded on `channel` (its bytes in `state.encoded`, its lanes in the
+/// channel's encoder) to the fan-out through the channel's pool.
+fn hand_over(
+    state: &mut State,
+    channel: Channel,
+    header: &FrameHeader,
+    fanout: &dyn Fanout,
+    stamp: impl Fn(&mut crate::frames::MeshUpdate),
+) {
+    let encoder = &state.encoders[channel.index()];
+    let update =
+        state.pools[channel.index()].fill(*encoder.qbox(), &state.encoded, encoder.lanes(), |u| {
+            stamp(u);
+            u.set_codec_header(header);
+        });
+    fanout.publish(channel, update);
+    state.live[channel.index()] = true;
+}
+
+/// Drops `channel`'s frame once the pipeline stops computing it (module docs).
+fn clear(fanout: &dyn Fanout, live: &mut [bool; Channel::COUNT], channel: Channel) {
+    if std::mem::take(&mut live[channel.index()]) {
+        fanout.clear(channel);
+    }
+}
+
 /// RMS over the valid control points of the distance between the received point `i`
 /// (`x, y, z` in `targets`, the frame's wire positions) and the predicted position of control
-/// vertex `i`; 0 when none is valid.
+/// vertex `i` (`predicted(vertex)`); 0 when none is valid.
 fn control_residual(
     controls: &[ControlPoint],
-    predicted: &[Vec3],
+    predicted: impl Fn(usize) -> Vec3,
     targets: &[f32],
     valid: &[bool],
 ) -> f32 {
@@ -171,7 +242,7 @@ fn control_residual(
         .zip(targets.chunks_exact(3).zip(valid))
         .filter(|(_, (_, ok))| **ok)
         .fold((0.0f64, 0usize), |(s, n), (c, (t, _))| {
-            let d = predicted[c.vertex as usize].distance_squared(Vec3::new(t[0], t[1], t[2]));
+            let d = predicted(c.vertex as usize).distance_squared(Vec3::new(t[0], t[1], t[2]));
             (s + f64::from(d), n + 1)
         });
     if n == 0 {
@@ -209,21 +280,32 @@ impl Pipeline {
         let detail_qbox = QuantBox::from_bounds(lo, hi, BOX_MARGIN, settings.detail_bits)?;
         let encoder =
             |vertices, qbox| FrameEncoder::new(vertices, qbox, settings.keyframe_interval);
-        let base = encoder(model.model.rig.rest.vertex_count(), base_qbox)?;
-        let detail = encoder(model.model.detail_vertex_count().unwrap_or(0), detail_qbox)?;
+        let count = |c| frame_vertices(&model.model, c);
+        let base = encoder(count(Channel::vertices(Level::Base)), base_qbox)?;
+        let detail = encoder(count(Channel::vertices(Level::Detail)), detail_qbox)?;
+        let palette_qbox = translation_box(
+            base_qbox.min(),
+            base_qbox.max(),
+            &model.model.rig.rest.positions,
+        )?;
+        let base_palette = encoder(count(Channel::palette(Level::Base)), palette_qbox)?;
+        let detail_palette = encoder(count(Channel::palette(Level::Detail)), palette_qbox)?;
         Ok(Pipeline {
             predictor,
-            qboxes: [base_qbox, detail_qbox],
+            qboxes: [base_qbox, detail_qbox, palette_qbox, palette_qbox],
             spatial: settings.spatial_order,
             filter,
             state: Mutex::new(State {
                 ctx,
                 controls: vec![Vec3::ZERO; n],
                 valid: vec![true; n],
-                encoders: [base, detail],
-                pools: [FramePool::default(), FramePool::default()],
+                encoders: [base, detail, base_palette, detail_palette],
+                pools: std::array::from_fn(|_| FramePool::default()),
+                live: [false; Channel::COUNT],
                 streamed: Vec::new(),
                 encoded: Vec::new(),
+                xi: Vec::new(),
+                lanes: Vec::new(),
                 filters: filter.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]),
                 last_time: None,
             }),
@@ -244,7 +326,7 @@ impl Pipeline {
 
     /// The quantisation box of `level`'s frames.
     pub fn qbox(&self, level: Level) -> &QuantBox {
-        &self.qboxes[level as usize]
+        &self.qboxes[Channel::vertices(level).index()]
     }
 
     /// Whether the model has a detail layer.
@@ -338,17 +420,73 @@ impl Pipeline {
                 }
             }
         }
-        let predicted =
-            self.predictor
-                .predict(&mut state.ctx, &state.controls, Some(&state.valid))?;
-        let control_rms = control_residual(
-            &self.model.model.controls,
-            predicted,
-            &frame.positions,
-            &state.valid,
-        );
-        let mut send = |level: Level, mesh: &[Vec3]| -> Result<(), CodecError> {
+        self.predictor
+            .predict_transforms(&mut state.ctx, &state.controls, Some(&state.valid))?;
+        let watched = |level, encoding| fanout.interest(Channel::new(level, encoding));
+        let detail_vertices = self.has_detail() && watched(Level::Detail, Encoding::Vertices);
+        let detail_palette = self.has_detail() && watched(Level::Detail, Encoding::Palette);
+        let base_vertices = watched(Level::Base, Encoding::Vertices)
+            || !(watched(Level::Base, Encoding::Palette) || detail_palette);
+        let control_rms = if base_vertices || detail_vertices {
+            self.predictor.skin(&mut state.ctx)?;
+            let predicted = state.ctx.positions();
+            control_residual(
+                &self.model.model.controls,
+                |v| predicted[v],
+                &frame.positions,
+                &state.valid,
+            )
+        } else {
+            // Only the control vertices are skinned (a palette-only room skins nothing else).
+            let ctx = &state.ctx;
+            control_residual(
+                &self.model.model.controls,
+                |v| self.predictor.skin_vertex(ctx, v),
+                &frame.positions,
+                &state.valid,
+            )
+        };
+        let stamp = |u: &mut crate::frames::MeshUpdate| {
+            u.seq = frame.seq;
+            u.capture_time_us = frame.capture_time_us;
+            u.received = received;
+        };
+        // The palette frames: the bones (always), and `xi` while the detail channel is watched.
+        for level in Level::ALL {
+            let channel = Channel::palette(level);
+            let xi: &[f32] = match level {
+                Level::Base => &[],
+                Level::Detail if detail_palette => {
+                    let xi = self.predictor.predict_detail_xi(&mut state.ctx)?;
+                    state.xi.clear();
+                    state.xi.extend_from_slice(xi);
+                    &state.xi
+                }
+                Level::Detail => {
+                    clear(fanout, &mut state.live, channel);
+                    continue;
+                }
+            };
+            let qbox = &self.qboxes[channel.index()];
+            palette_lanes(state.ctx.transforms(), xi, qbox, &mut state.lanes)?;
+            let encoder = &mut state.encoders[channel.index()];
+            if fanout.wants_keyframe(channel) {
+                encoder.force_keyframe();
+            }
+            let lanes = &state.lanes;
+            let header =
+                encoder.encode_lanes(|l| l.extend_from_slice(lanes), &mut state.encoded)?;
+            hand_over(state, channel, &header, fanout, stamp);
+        }
+        // The vertex frames.
+        let send = |state: &mut State, level: Level, detail: bool| -> Result<(), CodecError> {
+            let channel = Channel::vertices(level);
             let order = self.vertex_order(level);
+            let mesh = if detail {
+                state.ctx.detail_positions()
+            } else {
+                state.ctx.positions()
+            };
             state.streamed.clear();
             if order.is_empty() {
                 state.streamed.extend_from_slice(mesh);
@@ -357,30 +495,27 @@ impl Pipeline {
                     .streamed
                     .extend(order.iter().map(|&m| mesh[m as usize]));
             }
-            let encoder = &mut state.encoders[level as usize];
-            if fanout.wants_keyframe(level) {
+            let encoder = &mut state.encoders[channel.index()];
+            if fanout.wants_keyframe(channel) {
                 encoder.force_keyframe();
             }
             let header = encoder.encode(&state.streamed, None, &mut state.encoded)?;
-            let qbox = *encoder.qbox();
-            let pool = &mut state.pools[level as usize];
-            let update = pool.fill(qbox, &state.encoded, encoder.lanes(), |u| {
-                u.seq = frame.seq;
-                u.capture_time_us = frame.capture_time_us;
-                u.received = received;
-                u.set_codec_header(&header);
-            });
-            fanout.publish(level, update);
+            hand_over(state, channel, &header, fanout, stamp);
             Ok(())
         };
-        send(Level::Base, predicted)?;
-        let mut detail = false;
-        if fanout.interest(Level::Detail)
-            && let Ok(mesh) = self.predictor.predict_detail(&mut state.ctx)
-        {
-            // `predict_detail` borrows the context the closure does not touch.
-            send(Level::Detail, mesh)?;
+        if base_vertices {
+            send(state, Level::Base, false)?;
+        }
+        let mut detail = detail_palette;
+        if detail_vertices && self.predictor.predict_detail(&mut state.ctx).is_ok() {
+            send(state, Level::Detail, true)?;
             detail = true;
+        }
+        if !base_vertices {
+            clear(fanout, &mut state.live, Channel::vertices(Level::Base));
+        }
+        if !detail_vertices {
+            clear(fanout, &mut state.live, Channel::vertices(Level::Detail));
         }
         Ok(Published {
             held: held as u32,

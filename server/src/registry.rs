@@ -7,12 +7,13 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock, RwLock};
 
+use crease_core::codec::palette::PaletteHeader;
 use crease_core::codec::spatial_order;
 use crease_core::glam::Vec3;
 use crease_core::mesh::subdivision::LoopSubdivision;
 use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{BonePalette, skin_lbs};
-use crease_proto::{model_info, v1};
+use crease_proto::{Level, PaletteParts, model_info, palette_topology_message, v1};
 
 /// One loaded model.
 #[derive(Debug)]
@@ -37,6 +38,9 @@ pub struct LoadedModel {
     /// The same for the detail layer's mesh (`None`: no detail layer, or its subdivision
     /// cannot be built, which the predictor then reports).
     detail_spatial: OnceLock<Option<SpatialStream>>,
+    /// The first message of a palette stream per level, built on first need and shared by
+    /// every room and subscriber on this model (its arrays are `Bytes`).
+    palette: [OnceLock<Result<v1::MeshFrame, String>>; 2],
 }
 
 /// A mesh (the base, or the detail layer's) in a spatial streaming order
@@ -111,6 +115,53 @@ impl LoadedModel {
                 ))
             })
             .as_ref()
+    }
+}
+
+impl LoadedModel {
+    /// The first message of a palette stream of `level` (issue 18): the rest mesh, the skin
+    /// and, at the detail level, the subdivision steps and the quantised detail regressor.
+    /// Built once (blocking: the detail level subdivides the mesh and quantises `D`; callers
+    /// run the first call on the blocking pool), then shared.
+    ///
+    /// # Errors
+    /// A message saying why the header cannot be built (no detail layer, a subdivision or a
+    /// regressor that does not fit the mesh).
+    pub fn palette_topology(&self, level: Level) -> Result<v1::MeshFrame, String> {
+        self.palette[level as usize]
+            .get_or_init(|| {
+                let m = &self.model;
+                let rest = &m.rig.rest;
+                let header = PaletteHeader::base(
+                    &rest.positions,
+                    &rest.triangles,
+                    &m.rig.skin,
+                    m.rig.bone_count,
+                )
+                .map_err(|e| e.to_string())?;
+                let header = match level {
+                    Level::Base => header,
+                    Level::Detail => {
+                        let layer = m
+                            .detail
+                            .as_ref()
+                            .ok_or_else(|| format!("model {:?} has no detail layer", self.name))?;
+                        let subdivision = LoopSubdivision::new(rest, layer.levels)
+                            .map_err(|e| format!("detail layer: {e}"))?;
+                        header
+                            .with_detail(&subdivision, &layer.regressor)
+                            .map_err(|e| e.to_string())?
+                    }
+                };
+                palette_topology_message(PaletteParts {
+                    model: &self.name,
+                    level,
+                    bounds: self.pose_bounds,
+                    header: &header,
+                })
+                .map_err(|e| format!("palette header: {e}"))
+            })
+            .clone()
     }
 }
 
@@ -206,6 +257,7 @@ impl ModelRegistry {
             sha256: OnceLock::new(),
             spatial: OnceLock::new(),
             detail_spatial: OnceLock::new(),
+            palette: [OnceLock::new(), OnceLock::new()],
             model: Arc::new(model),
         });
         self.write().insert(name.to_owned(), Arc::clone(&loaded));

@@ -9,10 +9,11 @@ use std::time::Instant;
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 
+pub use crate::fanout::Channel;
 pub use crate::frames::MeshUpdate;
 pub use crate::pipeline::{BuildError, Published, StreamSettings};
 pub use crate::session::{RoomFull, new_token, valid_room_id};
-pub use crease_proto::Level;
+pub use crease_proto::{Encoding, Level};
 
 use crate::fanout::{self, Fanout, LocalFanout};
 use crate::pipeline::{Pipeline, PipelineError};
@@ -201,16 +202,16 @@ impl Room {
         Ok(published)
     }
 
-    /// A subscription to `level` (the latest frame, then every frame as it comes, skipping what
-    /// the subscriber was too slow for), if fewer than `max` subscriptions are live. Detail
-    /// subscriptions switch the detail layer on while they live.
+    /// A subscription to `channel` (the latest frame, then every frame as it comes, skipping
+    /// what the subscriber was too slow for), if fewer than `max` subscriptions are live. A
+    /// subscription switches its channel's work on while it lives (`crate::pipeline`).
     ///
     /// # Errors
     /// [`RoomFull`] at `max` live subscriptions.
-    pub fn subscribe(&self, level: Level, max: usize) -> Result<Subscription, RoomFull> {
+    pub fn subscribe(&self, channel: Channel, max: usize) -> Result<Subscription, RoomFull> {
         let slot = self.session.take_slot(max)?;
         Ok(Subscription {
-            frames: self.fanout.subscribe(level),
+            frames: self.fanout.subscribe(channel),
             _slot: slot,
         })
     }

@@ -1,5 +1,7 @@
 //! Mesh streams: the topology message, then encoded frames (`core::codec`), for a live
-//! subscription or a batch.
+//! subscription or a batch; or for a palette subscription (issue 18) the palette header, then
+//! palette frames (`core::codec::palette`: codec frames of lanes, keyframes and deltas like
+//! vertex frames).
 //!
 //! A subscription's task waits on its level's fan-out receiver, so it always sends the newest
 //! frame and skips what it was too slow for (`Frame.skipped` counts them). Frames are encoded
@@ -21,12 +23,27 @@ use tonic::Status;
 
 use crate::AppState;
 use crate::ingest;
-use crate::room::{MeshUpdate, Room, Subscription};
+use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
 
-/// The first message of a mesh stream.
+/// The first message of a mesh stream on `channel`: a vertex stream's topology, or a palette
+/// stream's header (built once per model and level on the blocking pool, then shared).
+async fn first_message(room: &Arc<Room>, channel: Channel) -> Result<v1::MeshFrame, Status> {
+    match channel.encoding {
+        Encoding::Vertices => topology(room, channel.level),
+        Encoding::Palette => {
+            let (model, level) = (Arc::clone(&room.model), channel.level);
+            tokio::task::spawn_blocking(move || model.palette_topology(level))
+                .await
+                .map_err(|e| Status::internal(format!("palette header: {e}")))?
+                .map_err(Status::failed_precondition)
+        }
+    }
+}
+
+/// The first message of a vertex stream.
 fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
     let p = room.pipeline();
     let indices = p
@@ -60,12 +77,12 @@ async fn bytes_for(update: &Arc<MeshUpdate>, last_sent: &mut Option<u32>) -> Res
     Ok(bytes)
 }
 
-/// The live stream of a room at `level` through `sub`, a subscription taken from the room
+/// The live stream of a room's `channel` through `sub`, a subscription taken from the room
 /// (module docs).
 pub fn subscribe(
     state: Arc<AppState>,
     room: Arc<Room>,
-    level: Level,
+    channel: Channel,
     sub: Subscription,
 ) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
@@ -77,7 +94,7 @@ pub fn subscribe(
         // the subscriber slot would be given back at once).
         let mut sub = sub;
         let metrics = &state.metrics;
-        let first = topology(&room, level);
+        let first = first_message(&room, channel).await;
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
             return;
@@ -143,7 +160,7 @@ pub fn batch(
             return;
         }
         // A private room: nobody else subscribes.
-        let Ok(mut sub) = room.subscribe(level, 1) else {
+        let Ok(mut sub) = room.subscribe(Channel::vertices(level), 1) else {
             return;
         };
         let mut last_sent: Option<u32> = None;

@@ -2,7 +2,9 @@
 //!
 //! - **Subscribe**: every binary message the server sends is one protobuf `crease.v1.MeshFrame`
 //!   (the topology first, then frames), exactly as gRPC's `Subscribe` streams them.
-//!   `?level=detail` asks for the detail layer; `?subscribe=false` publishes only.
+//!   `?level=detail` asks for the detail layer, `?encoding=palette` for palette frames (the
+//!   bones, not the vertices; issue 18: a `PaletteTopology` first, then palette frames);
+//!   `?subscribe=false` publishes only.
 //! - **Publish**: a binary message is a protobuf `ControlFrame`, a text message the same as JSON
 //!   (`{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...], "valid": [true, ...]}`,
 //!   `valid` optional); the room is the path's. Publishing needs the room's token in
@@ -22,12 +24,13 @@ use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use crease_proto::json::{JsonAck, JsonControlFrame};
-use crease_proto::{Level, WireError, v1};
+use crease_proto::{Encoding, Level, WireError, v1};
 use futures_util::{SinkExt, StreamExt};
 use prost::Message as _;
 use tokio::sync::mpsc;
 
 use crate::AppState;
+use crate::fanout::Channel;
 use crate::ingest::{self, PublishError};
 use crate::room::{Room, Subscription};
 
@@ -40,6 +43,8 @@ pub struct Params {
     token: Option<String>,
     /// `false`: publish only, no mesh frames.
     subscribe: Option<bool>,
+    /// `vertices` (default) or `palette` (issue 18).
+    encoding: Option<String>,
 }
 
 /// `GET /ws/rooms/{id}`: upgrades to a session on the room (module docs).
@@ -64,11 +69,16 @@ pub async fn room_socket(
         Ok(level) => level,
         Err(e) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
     };
+    let encoding = match Encoding::from_query(params.encoding.as_deref()) {
+        Ok(encoding) => encoding,
+        Err(e) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+    };
+    let channel = Channel::new(level, encoding);
     // The subscriber slot is taken before the upgrade, so a full room is an HTTP error.
     let subscription = if params.subscribe == Some(false) {
         None
     } else {
-        match room.subscribe(level, state.config.limits.subscribers_per_room) {
+        match room.subscribe(channel, state.config.limits.subscribers_per_room) {
             Ok(s) => Some(s),
             Err(e) => {
                 return (
@@ -80,13 +90,13 @@ pub async fn room_socket(
         }
     };
     ws.max_message_size(state.config.limits.message_bytes)
-        .on_upgrade(move |socket| session(state, room, level, params.token, subscription, socket))
+        .on_upgrade(move |socket| session(state, room, channel, params.token, subscription, socket))
 }
 
 async fn session(
     state: Arc<AppState>,
     room: Arc<Room>,
-    level: Level,
+    channel: Channel,
     token: Option<String>,
     subscription: Option<Subscription>,
     socket: WebSocket,
@@ -104,7 +114,7 @@ async fn session(
     let frames = subscription.map(|subscription| {
         let out = out.clone();
         let frames =
-            crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), level, subscription);
+            crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), channel, subscription);
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {

@@ -102,6 +102,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         .subscribe(v1::SubscribeRequest {
             room: "r1".into(),
             level: v1::Level::Base as i32,
+            ..Default::default()
         })
         .await
         .unwrap()
@@ -323,6 +324,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         c.subscribe(v1::SubscribeRequest {
             room: "r1".into(),
             level: 0,
+            ..Default::default()
         })
         .await
         .unwrap()
@@ -479,6 +481,7 @@ async fn limits_refuse_and_the_room_goes_on() {
     let req = || v1::SubscribeRequest {
         room: "r".into(),
         level: 0,
+        ..Default::default()
     };
     let _first = client.subscribe(req()).await.unwrap().into_inner();
     let ws_url = format!("ws://{}/ws/rooms/r", running.http);
@@ -726,6 +729,7 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
         .subscribe(v1::SubscribeRequest {
             room: "d".into(),
             level: v1::Level::Detail as i32,
+            ..Default::default()
         })
         .await
         .unwrap()

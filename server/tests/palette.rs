@@ -1,64 +1,88 @@
-//! Palette frames against the predictor (issue 18, first part): a trained model's bone
-//! transforms for a frame, sent as a palette frame (`core::codec::palette`) and skinned on the
-//! receiving side, give the predictor's own base mesh within the palette's error bound, vertex
-//! by vertex. This is the CPU half of the issue's exactness check for the base level.
+//! Palette streams (issue 18) on the tube model with a pose-dependent detail layer: the
+//! palette stream decoded by `core` matches the same room's vertex stream and the predictor's
+//! own mesh, frame by frame, within both encodings' bounds, at the base and the detail level
+//! (`common::palette_check`).
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 mod common;
 
-use std::sync::Arc;
+use common::palette_check::compare_encodings;
+use common::{control_frame, model_with_detail};
+use crease_core::model::TrainedModel;
+use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
+use crease_core::runtime::kernel::Kernel;
+use crease_core::runtime::predict::LinearOperator;
+use crease_server::registry::ModelRegistry;
+use crease_server::{AppState, Config, Limits};
 
-use common::{control_frame, model};
-use crease_core::codec::palette::{
-    PaletteFrame, decode_palette_frame, encode_palette_frame, palette_frame_len, vertex_error_bound,
-};
-use crease_core::glam::Vec3;
-use crease_core::predictor::Predictor;
-use crease_core::runtime::skin::{BonePalette, skin_lbs};
+const ADMIN: &str = "admin-secret";
 
-#[test]
-fn a_decoded_palette_frame_skins_to_the_predicted_base_mesh_within_its_bound() {
-    let model = model();
-    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
-    let mut ctx = predictor.new_context();
-    let rest = &model.rig.rest.positions;
-    let bones = model.rig.examples[0].transforms.len();
-    let mut bytes = Vec::new();
-    let mut frame = PaletteFrame::default();
-    let mut skinned = vec![Vec3::ZERO; rest.len()];
-    let mut worst = 0.0f32;
-    for (seq, angle) in [0.0f32, 0.3, 0.7, 1.1, 1.4].into_iter().enumerate() {
-        let f = control_frame(&model, "p", seq as u64, angle);
-        let c: Vec<Vec3> = f
-            .positions
-            .chunks(3)
-            .map(|p| Vec3::new(p[0], p[1], p[2]))
-            .collect();
-        let predicted = predictor.predict(&mut ctx, &c, None).unwrap().to_vec();
-        bytes.clear();
-        encode_palette_frame(seq as u32, ctx.transforms(), &[], &mut bytes).unwrap();
-        assert_eq!(bytes.len(), palette_frame_len(bones, 0));
-        decode_palette_frame(&bytes, bones, 0, &mut frame).unwrap();
-        let palette = BonePalette::from_transforms(&frame.bones);
-        skin_lbs(rest, &model.rig.skin, &palette, &mut skinned).unwrap();
-        for (v, (p, s)) in predicted.iter().zip(&skinned).enumerate() {
-            let (idx, w) = model.rig.skin.vertex(v);
-            let weights: Vec<(u32, f32)> = idx.iter().copied().zip(w.iter().copied()).collect();
-            // f32 rounding of the two skinnings, relative to the mesh's size (~8 units).
-            let bound = vertex_error_bound(&frame, rest[v], &weights) + 1e-5;
-            let err = p.distance(*s);
-            assert!(err <= bound, "frame {seq}, vertex {v}: {err} over {bound}");
-            worst = worst.max(err);
-        }
+/// The tube with a detail layer whose displacements depend on the pose: `h = D xi + b` over
+/// three example control vectors (the tube bent by 0, 0.6 and 1.2 rad).
+fn tube_with_posed_detail() -> TrainedModel {
+    let mut model = model_with_detail();
+    let layer = model.detail.as_mut().unwrap();
+    let n = layer.regressor.vertex_count();
+    let examples: Vec<f32> = [0.0f32, 0.6, 1.2]
+        .iter()
+        .flat_map(|&a| control_frame(&model_ref(), "x", 0, a).positions)
+        .collect();
+    let d_in = layer.regressor.d_in;
+    let m: Vec<f32> = (0..n * 3)
+        .map(|i| 0.01 * (((i * 2654435761) % 97) as f32 / 48.5 - 1.0))
+        .collect();
+    layer.regressor = DetailRegressor {
+        input: DetailInput::Controls,
+        kernel: Kernel::Gaussian { sigma: 0.8 },
+        d_in,
+        examples,
+        operator: LinearOperator {
+            rows: n,
+            cols: 3,
+            m,
+            b: layer.regressor.operator.b.clone(),
+        },
+    };
+    layer.regressor.validate().unwrap();
+    model
+}
+
+fn model_ref() -> TrainedModel {
+    common::model()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn palette_streams_match_vertex_streams_at_both_levels() {
+    let model = tube_with_posed_detail();
+    let registry = ModelRegistry::default();
+    registry.insert("tube", model.clone());
+    let state = AppState::new(
+        registry,
+        Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            admin_token: Some(ADMIN.into()),
+            limits: Limits {
+                publish_hz: f64::INFINITY,
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    );
+    let running = crease_server::serve(state).await.unwrap();
+    let frames = (1..=12u64)
+        .map(|seq| control_frame(&model, "palette-check", seq, 0.1 * seq as f32))
+        .collect();
+    let url = format!("http://{}", running.grpc);
+    let r = compare_encodings(&url, ADMIN, "tube", &model, frames).await;
+    eprintln!("{r:#?}");
+    for li in 0..2 {
+        // Quantised: some error, and the bound is not vacuous.
+        assert!(r.palette_error[li] > 0.0, "level {li}: no error at all");
+        assert!(
+            r.worst_ratio[li] > 1e-3,
+            "level {li}: worst error / bound {}",
+            r.worst_ratio[li]
+        );
     }
-    eprintln!(
-        "{} bones: {} bytes per palette frame ({} vertices); worst vertex error {worst:.2e}",
-        bones,
-        palette_frame_len(bones, 0),
-        rest.len()
-    );
-    assert!(
-        worst > 0.0,
-        "the palette is quantised: some error is expected"
-    );
 }

@@ -1,15 +1,19 @@
 //! Reading mesh streams, the one way every command does it: a subscription to a room
 //! ([`subscribe`]: the `Subscribe` RPC, whose first message is the topology) and the decoding
 //! of its frames ([`MeshReader`]: the codec's [`FrameDecoder`] on the stream's topology,
-//! positions put back in the model's vertex order). `crease watch`, `stream --check` and
+//! positions put back in the model's vertex order). A palette stream (issue 18) starts with a
+//! palette header instead and its frames are skinned and detailed on the CPU
+//! ([`PaletteReader`], `core::codec::palette`'s reference decoder); [`StreamReader`] reads
+//! either. `crease watch`, `stream --check` and
 //! `bench-net` read subscriptions; `synth --server` reads `Synthesize` answers, which have the
 //! same shape.
 
 use anyhow::{Context, bail};
+use crease_core::codec::palette::{PaletteFrame, PaletteSynth, read_palette_lanes};
 use crease_core::codec::{CodecError, FrameDecoder, FrameHeader};
 use crease_core::glam::Vec3;
 use crease_proto::v1::crease_client::CreaseClient;
-use crease_proto::{StreamTopology, read_topology, v1};
+use crease_proto::{Encoding, StreamTopology, read_palette_topology, read_topology, v1};
 use tonic::transport::Channel;
 
 /// Decodes the frames of one stream: its topology (vertex count, spatial vertex order), the
@@ -67,11 +71,160 @@ impl MeshReader {
     }
 }
 
-/// A room's mesh stream: the topology it started with, then its frames.
+/// Decodes the frames of a palette stream on the CPU: its header's rest mesh, skin and detail
+/// layer, and the last frame's bones.
+#[derive(Debug)]
+pub struct PaletteReader {
+    synth: PaletteSynth,
+    decoder: FrameDecoder,
+    frame: PaletteFrame,
+    bones: usize,
+    xi: usize,
+    vertex_count: usize,
+    decoded: bool,
+}
+
+impl PaletteReader {
+    /// A reader of the frames that follow the palette header `t`.
+    ///
+    /// # Errors
+    /// A header that does not decode or hold together (the error names its field).
+    pub fn new(t: &v1::PaletteTopology) -> anyhow::Result<PaletteReader> {
+        let palette = read_palette_topology(t).context("reading the palette header")?;
+        let (bones, xi, vertex_count) = (
+            palette.header.bones,
+            palette.header.xi_len(),
+            palette.header.vertex_count(),
+        );
+        Ok(PaletteReader {
+            synth: PaletteSynth::new(palette.header).context("reading the palette header")?,
+            decoder: FrameDecoder::new(crease_core::codec::palette::palette_vertex_count(
+                bones, xi,
+            )),
+            frame: PaletteFrame::default(),
+            bones,
+            xi,
+            vertex_count,
+            decoded: false,
+        })
+    }
+
+    /// Decodes one palette frame (a codec frame of lanes, keyframe or delta) and synthesises
+    /// its mesh.
+    ///
+    /// # Errors
+    /// The codec's or the palette's, for a frame that is not valid on this stream.
+    pub fn decode(&mut self, data: &[u8]) -> anyhow::Result<()> {
+        let header = self.decoder.decode(data)?;
+        read_palette_lanes(
+            self.decoder.lanes(),
+            &header.qbox,
+            self.bones,
+            self.xi,
+            &mut self.frame,
+        )?;
+        self.synth.synthesize(&self.frame)?;
+        self.decoded = true;
+        Ok(())
+    }
+
+    /// The last decoded frame.
+    pub fn frame(&self) -> &PaletteFrame {
+        &self.frame
+    }
+
+    /// The CPU decoder (its skinned base mesh, subdivided mesh, displacements).
+    pub fn synth(&self) -> &PaletteSynth {
+        &self.synth
+    }
+
+    /// Vertices of the drawn mesh.
+    pub fn vertex_count(&self) -> usize {
+        self.vertex_count
+    }
+}
+
+/// Either kind of stream's reader, chosen by its first message.
+#[derive(Debug)]
+pub enum StreamReader {
+    /// A vertex stream.
+    Vertices(MeshReader),
+    /// A palette stream.
+    Palette(Box<PaletteReader>),
+}
+
+impl StreamReader {
+    /// The reader for the stream whose first message is `first`.
+    ///
+    /// # Errors
+    /// A first message that is neither a topology nor a palette header, or does not decode.
+    pub fn new(first: &v1::MeshFrame) -> anyhow::Result<StreamReader> {
+        match &first.body {
+            Some(v1::mesh_frame::Body::Topology(t)) => {
+                Ok(StreamReader::Vertices(MeshReader::new(t)?))
+            }
+            Some(v1::mesh_frame::Body::PaletteTopology(t)) => {
+                Ok(StreamReader::Palette(Box::new(PaletteReader::new(t)?)))
+            }
+            _ => bail!("the stream's first message is neither a topology nor a palette header"),
+        }
+    }
+
+    /// The stream's encoding.
+    pub fn encoding(&self) -> Encoding {
+        match self {
+            StreamReader::Vertices(_) => Encoding::Vertices,
+            StreamReader::Palette(_) => Encoding::Palette,
+        }
+    }
+
+    /// Vertices per frame.
+    pub fn vertex_count(&self) -> usize {
+        match self {
+            StreamReader::Vertices(r) => r.topology().vertex_count,
+            StreamReader::Palette(r) => r.vertex_count(),
+        }
+    }
+
+    /// The triangles in model vertex ids.
+    pub fn model_triangles(&self) -> Vec<[u32; 3]> {
+        match self {
+            StreamReader::Vertices(r) => r.topology().model_triangles(),
+            StreamReader::Palette(r) => r.synth().triangles().to_vec(),
+        }
+    }
+
+    /// Decodes one frame's data.
+    ///
+    /// # Errors
+    /// The codec's or the palette decoder's.
+    pub fn decode(&mut self, data: &[u8]) -> anyhow::Result<()> {
+        match self {
+            StreamReader::Vertices(r) => r.decode(data).map(|_| ()).map_err(Into::into),
+            StreamReader::Palette(r) => r.decode(data),
+        }
+    }
+
+    /// The last decoded frame's positions in model vertex order, into `out` (empty before the
+    /// first frame).
+    pub fn model_positions(&mut self, out: &mut Vec<Vec3>) {
+        match self {
+            StreamReader::Vertices(r) => r.model_positions(out),
+            StreamReader::Palette(r) => {
+                out.clear();
+                if r.decoded {
+                    out.extend_from_slice(r.synth.output());
+                }
+            }
+        }
+    }
+}
+
+/// A room's mesh stream: the message it started with, then its frames.
 #[derive(Debug)]
 pub struct Subscription {
-    /// The stream's first message.
-    pub topology: v1::Topology,
+    /// The stream's first message: a topology, or a palette header.
+    pub first: v1::MeshFrame,
     stream: tonic::Streaming<v1::MeshFrame>,
 }
 
@@ -91,16 +244,46 @@ impl Subscription {
         Ok(None)
     }
 
-    /// A reader of this stream's frames ([`MeshReader::new`] on its topology).
+    /// A reader of this vertex stream's frames ([`MeshReader::new`] on its topology).
     ///
     /// # Errors
-    /// A topology that does not decode.
+    /// A topology that does not decode, or a palette stream.
     pub fn reader(&self) -> anyhow::Result<MeshReader> {
-        MeshReader::new(&self.topology)
+        match &self.first.body {
+            Some(v1::mesh_frame::Body::Topology(t)) => MeshReader::new(t),
+            _ => bail!("not a vertex stream: the first message is not a topology"),
+        }
+    }
+
+    /// A reader of this stream's frames, whatever its encoding.
+    ///
+    /// # Errors
+    /// A first message that does not decode.
+    pub fn stream_reader(&self) -> anyhow::Result<StreamReader> {
+        StreamReader::new(&self.first)
+    }
+
+    /// Vertices per frame, as the stream's first message says.
+    pub fn vertex_count(&self) -> usize {
+        match &self.first.body {
+            Some(v1::mesh_frame::Body::Topology(t)) => t.vertex_count as usize,
+            Some(v1::mesh_frame::Body::PaletteTopology(t)) => t.vertex_count as usize,
+            _ => 0,
+        }
+    }
+
+    /// The model the stream's first message names.
+    pub fn model(&self) -> &str {
+        match &self.first.body {
+            Some(v1::mesh_frame::Body::Topology(t)) => &t.model,
+            Some(v1::mesh_frame::Body::PaletteTopology(t)) => &t.model,
+            _ => "",
+        }
     }
 }
 
-/// Subscribes to `room` at `level` and reads the stream's first message, the topology.
+/// Subscribes to `room` at `level` (vertex frames) and reads the stream's first message, the
+/// topology.
 ///
 /// # Errors
 /// The server's refusal, or a stream that ends or starts with something else.
@@ -109,10 +292,25 @@ pub async fn subscribe(
     room: &str,
     level: v1::Level,
 ) -> anyhow::Result<Subscription> {
+    subscribe_encoded(client, room, level, Encoding::Vertices).await
+}
+
+/// Subscribes to `room` at `level` in `encoding` and reads the stream's first message (a
+/// topology, or a palette header).
+///
+/// # Errors
+/// The server's refusal, or a stream that ends or starts with something else.
+pub async fn subscribe_encoded(
+    client: &mut CreaseClient<Channel>,
+    room: &str,
+    level: v1::Level,
+    encoding: Encoding,
+) -> anyhow::Result<Subscription> {
     let mut stream = client
         .subscribe(v1::SubscribeRequest {
             room: room.to_owned(),
             level: level as i32,
+            encoding: v1::Encoding::from(encoding) as i32,
         })
         .await
         .with_context(|| format!("subscribing to room {room:?}"))?
@@ -120,11 +318,17 @@ pub async fn subscribe(
     let first = stream
         .message()
         .await?
-        .context("the server closed the stream before the topology")?;
-    let Some(v1::mesh_frame::Body::Topology(topology)) = first.body else {
-        bail!("room {room:?}: the first message is not the topology");
+        .context("the server closed the stream before its first message")?;
+    let expected = match (&first.body, encoding) {
+        (Some(v1::mesh_frame::Body::Topology(_)), Encoding::Vertices)
+        | (Some(v1::mesh_frame::Body::PaletteTopology(_)), Encoding::Palette) => None,
+        (_, Encoding::Vertices) => Some("the topology"),
+        (_, Encoding::Palette) => Some("the palette header"),
     };
-    Ok(Subscription { topology, stream })
+    if let Some(what) = expected {
+        bail!("room {room:?}: the first message is not {what}");
+    }
+    Ok(Subscription { first, stream })
 }
 
 #[cfg(test)]

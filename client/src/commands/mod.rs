@@ -3,6 +3,7 @@
 pub mod bench_net;
 pub mod common;
 pub mod control_file;
+pub mod decode_stream;
 pub mod eval;
 pub mod fit;
 pub mod handgen;

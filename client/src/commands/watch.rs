@@ -9,6 +9,7 @@ use crease_core::mesh::Mesh;
 use crease_proto::v1;
 
 use super::common::percentile;
+use super::decode_stream::write_capture_message;
 use super::mesh_stream;
 
 /// Options of `crease watch`.
@@ -23,12 +24,21 @@ pub struct WatchArgs {
     /// Watch the detail layer instead of the base mesh.
     #[arg(long)]
     pub detail: bool,
+    /// How the frames travel: `vertices` (every vertex, quantised) or `palette` (the bone
+    /// transforms and the detail kernel vector; this command skins and synthesises the detail
+    /// layer on the CPU, as a viewer's GPU would).
+    #[arg(long, default_value = "vertices", value_parser = ["vertices", "palette"])]
+    pub encoding: String,
     /// Stop after this many frames and print a one-line summary.
     #[arg(long, value_name = "N")]
     pub frames: Option<u64>,
     /// Write every received frame as `DIR/frame_00000.obj`, ...
     #[arg(long, value_name = "DIR")]
     pub dump: Option<PathBuf>,
+    /// Record the stream as it arrives (its first message, then every frame) to FILE, the
+    /// capture `crease decode-stream` reads.
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
 }
 
 /// Runs `crease watch`.
@@ -50,20 +60,37 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     } else {
         v1::Level::Base
     };
-    let mut sub = mesh_stream::subscribe(&mut client, &args.room, level).await?;
-    let mut reader = sub.reader()?;
-    let n = reader.topology().vertex_count;
-    let triangles = reader.topology().model_triangles();
+    let encoding = crease_proto::Encoding::from_query(Some(&args.encoding))?;
+    let header_start = Instant::now();
+    let mut sub = mesh_stream::subscribe_encoded(&mut client, &args.room, level, encoding).await?;
+    let header_secs = header_start.elapsed().as_secs_f64();
+    let mut reader = sub.stream_reader()?;
+    let n = reader.vertex_count();
+    let triangles = reader.model_triangles();
     eprintln!(
-        "watching room {:?} (model {:?}, {} vertices, {} triangles)",
+        "watching room {:?} (model {:?}, {} vertices, {} triangles, {} encoding; first message {} bytes in {:.3} s)",
         args.room,
-        sub.topology.model,
+        sub.model(),
         n,
-        triangles.len()
+        triangles.len(),
+        encoding.name(),
+        prost::Message::encoded_len(&sub.first),
+        header_secs
     );
     if let Some(dir) = &args.dump {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    let mut record = match &args.record {
+        Some(path) => {
+            let file = std::fs::File::create(path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            let mut w = std::io::BufWriter::new(file);
+            write_capture_message(&mut w, &sub.first)
+                .with_context(|| format!("writing {}", path.display()))?;
+            Some((w, path))
+        }
+        None => None,
+    };
     // The dumped mesh, in model vertex order: the topology once, each frame's positions
     // decoded and put back in model order into it.
     let mut mesh = Mesh {
@@ -78,6 +105,13 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         reader
             .decode(&f.data)
             .with_context(|| format!("decoding frame {}", f.seq))?;
+        if let Some((w, path)) = &mut record {
+            let msg = v1::MeshFrame {
+                body: Some(v1::mesh_frame::Body::Frame(f.clone())),
+            };
+            write_capture_message(w, &msg)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
         frames += 1;
         bytes += f.data.len() as u64;
         skipped += u64::from(f.skipped);
@@ -104,6 +138,9 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         if args.frames.is_some_and(|limit| frames >= limit) {
             break;
         }
+    }
+    if let Some((mut w, path)) = record {
+        std::io::Write::flush(&mut w).with_context(|| format!("writing {}", path.display()))?;
     }
     latencies.sort_unstable();
     let secs = start.elapsed().as_secs_f64();

@@ -296,7 +296,38 @@ impl FrameEncoder {
     ) -> Result<FrameHeader, CodecError> {
         check_inputs(self.vertex_count, positions, normals)?;
         quantise_lanes(&self.qbox, positions, normals, &mut self.next);
-        let has_normals = normals.is_some();
+        self.encode_next(normals.is_some(), out)
+    }
+
+    /// Encodes the next frame from lanes the caller fills (`fill` gets the cleared lane buffer:
+    /// a stream whose lanes are not positions, e.g. `palette`'s bones), without normals.
+    ///
+    /// # Errors
+    /// [`CodecError::Length`] if `fill` did not push one lane vertex per vertex. On error the
+    /// encoder's state is unchanged.
+    pub fn encode_lanes(
+        &mut self,
+        fill: impl FnOnce(&mut Vec<[u16; 4]>),
+        out: &mut Vec<u8>,
+    ) -> Result<FrameHeader, CodecError> {
+        self.next.clear();
+        fill(&mut self.next);
+        if self.next.len() != self.vertex_count {
+            return Err(CodecError::Length {
+                what: "lanes",
+                expected: self.vertex_count,
+                found: self.next.len(),
+            });
+        }
+        self.encode_next(false, out)
+    }
+
+    /// Encodes `self.next` (keyframe or delta, module docs).
+    fn encode_next(
+        &mut self,
+        has_normals: bool,
+        out: &mut Vec<u8>,
+    ) -> Result<FrameHeader, CodecError> {
         let seq = self.next_seq;
         let base = match self.last {
             Some(last)

@@ -254,6 +254,101 @@ impl SparseMatrix {
     }
 }
 
+/// Why a sparse matrix given in CSR form ([`SparseMatrix::from_csr`]) was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CsrError {
+    /// `row_ptr` does not start at 0, decreases, or does not end at the entry count.
+    #[error("sparse matrix: row_ptr[{row}] = {value} is out of order (entries: {entries})")]
+    RowPtr {
+        /// The offending offset's position.
+        row: usize,
+        /// Its value.
+        value: u32,
+        /// The number of entries.
+        entries: usize,
+    },
+    /// `cols` and `vals` differ in length.
+    #[error("sparse matrix: {cols} column indices but {vals} weights")]
+    Lengths {
+        /// Column indices.
+        cols: usize,
+        /// Weights.
+        vals: usize,
+    },
+    /// A row's columns are not ascending and unique, or one is past the column count.
+    #[error("sparse matrix: row {row}: column {col} out of order or >= {columns}")]
+    Column {
+        /// The row.
+        row: usize,
+        /// The column index.
+        col: u32,
+        /// The column count.
+        columns: usize,
+    },
+    /// A weight that is not finite.
+    #[error("sparse matrix: weight {entry} is not finite")]
+    Weight {
+        /// The entry.
+        entry: usize,
+    },
+}
+
+impl SparseMatrix {
+    /// A matrix of `columns` columns from its CSR arrays (as [`SparseMatrix::row_ptr`],
+    /// [`SparseMatrix::cols`] and [`SparseMatrix::vals`] return them), checked: offsets from 0
+    /// to the entry count in order, each row's columns ascending, unique and in range, weights
+    /// finite.
+    ///
+    /// # Errors
+    /// [`CsrError`] naming the first offending entry.
+    pub fn from_csr(
+        columns: usize,
+        row_ptr: Vec<u32>,
+        cols: Vec<u32>,
+        vals: Vec<f32>,
+    ) -> Result<SparseMatrix, CsrError> {
+        if cols.len() != vals.len() {
+            return Err(CsrError::Lengths {
+                cols: cols.len(),
+                vals: vals.len(),
+            });
+        }
+        let entries = cols.len();
+        let bad_ptr = |row: usize, value: u32| CsrError::RowPtr {
+            row,
+            value,
+            entries,
+        };
+        match (row_ptr.first(), row_ptr.last()) {
+            (Some(&0), Some(&last)) if last as usize == entries => {}
+            (Some(&first), _) if first != 0 => return Err(bad_ptr(0, first)),
+            (Some(_), Some(&last)) => return Err(bad_ptr(row_ptr.len() - 1, last)),
+            _ => return Err(bad_ptr(0, 0)),
+        }
+        for (row, w) in row_ptr.windows(2).enumerate() {
+            if w[1] < w[0] {
+                return Err(bad_ptr(row + 1, w[1]));
+            }
+            let mut prev: Option<u32> = None;
+            for &col in &cols[w[0] as usize..w[1] as usize] {
+                if col as usize >= columns || prev.is_some_and(|p| p >= col) {
+                    return Err(CsrError::Column { row, col, columns });
+                }
+                prev = Some(col);
+            }
+        }
+        if let Some(entry) = vals.iter().position(|v| !v.is_finite()) {
+            return Err(CsrError::Weight { entry });
+        }
+        Ok(SparseMatrix {
+            columns,
+            row_ptr,
+            cols,
+            vals,
+        })
+    }
+}
+
 /// Loop subdivision of a fixed topology, `levels` times, as one sparse matrix (see the module
 /// docs for the rules and the vertex and triangle order).
 #[derive(Clone, Debug, PartialEq)]

@@ -126,14 +126,34 @@ impl DetailRegressor {
     /// # Panics
     /// If `x` is not `d_in` values, `xi` is too short or `out` is not one value per vertex.
     pub fn predict(&self, x: &[f32], xi: &mut [f32], out: &mut [f32]) {
-        assert_eq!(x.len(), self.d_in, "detail input length != d_in");
         assert_eq!(out.len(), self.vertex_count(), "h length != vertices");
         let n = self.example_count();
-        let xi = &mut xi[..n];
-        if n > 0 {
+        self.kernel_vector(x, &mut xi[..n]);
+        self.apply(&xi[..n], out);
+    }
+
+    /// The kernel vector `xi(x)` (HZY11 eq. 4) into `xi` ([`DetailRegressor::example_count`]
+    /// values): all a palette stream's detail frame carries. Allocates nothing.
+    ///
+    /// # Panics
+    /// If `x` is not `d_in` values or `xi` not one per example.
+    pub fn kernel_vector(&self, x: &[f32], xi: &mut [f32]) {
+        assert_eq!(x.len(), self.d_in, "detail input length != d_in");
+        assert_eq!(xi.len(), self.example_count(), "xi length != examples");
+        if !xi.is_empty() {
             self.kernel.kernel_vector(x, &self.examples, self.d_in, xi);
         }
-        let xi = &*xi;
+    }
+
+    /// `h = D xi + b` for a kernel vector `xi` into `out`. Rows split over the rayon pool with
+    /// the `parallel` feature. Allocates nothing.
+    ///
+    /// # Panics
+    /// If `xi` is not one value per example or `out` not one per vertex.
+    pub fn apply(&self, xi: &[f32], out: &mut [f32]) {
+        assert_eq!(out.len(), self.vertex_count(), "h length != vertices");
+        let n = self.example_count();
+        assert_eq!(xi.len(), n, "xi length != examples");
         let (m, b) = (&self.operator.m, &self.operator.b);
         fill_rows(out, ROWS_PER_TASK, |first, rows| {
             if n == 0 {

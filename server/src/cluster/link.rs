@@ -1,8 +1,9 @@
 //! A room's cluster side on one replica: [`RoomLink`], which is also the room's fan-out. On the
 //! owner it hands each level's frame to the local subscribers and, while another replica is
-//! interested, to NATS (`crease.frames.<room>.<level>`, one copy per frame however many relay
-//! it); it takes relays' interest and keyframe requests. On a relay it subscribes to the frames
-//! of the levels its local subscribers watch, decodes them (so that it holds the lanes a late
+//! interested, to NATS (`crease.frames.<room>.<channel>`, one copy per frame however many
+//! relay it; a channel is a level in an encoding, `crate::fanout::Channel`); it takes relays'
+//! interest and keyframe requests. On a relay it subscribes to the frames of the channels its
+//! local subscribers watch, decodes them (so that it holds the lanes a late
 //! viewer's keyframe is made from, `crate::frames`) and fans them out through the same local,
 //! latest-wins channel; it announces its interest so that the owner synthesises detail only
 //! while someone watches it.
@@ -13,14 +14,14 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use crease_core::codec::{CodecError, FrameDecoder};
-use crease_proto::{Level, frame_message, v1};
+use crease_proto::{Encoding, Level, frame_message, v1};
 use futures_util::StreamExt;
 use prost::Message as _;
 use tokio::sync::{Notify, mpsc};
 use tokio::task::JoinHandle;
 
 use super::{Cluster, subject};
-use crate::fanout::{Fanout, LocalFanout, Receiver};
+use crate::fanout::{Channel, Fanout, LocalFanout, Receiver};
 use crate::frames::{FramePool, MeshUpdate};
 
 /// How long an interest announcement holds; relays repeat theirs every [`ANNOUNCE`].
@@ -38,8 +39,8 @@ const INLINE_DECODE_BYTES: usize = 32 << 10;
 /// A relay asks the owner for a keyframe at most this often per level.
 const KEY_REQUEST_EVERY: Duration = Duration::from_millis(200);
 
-/// What a relay keeps per level: the decoder of the owner's stream and the pool its frames are
-/// republished from.
+/// What a relay keeps per channel: the decoder of the owner's stream (a palette stream is a
+/// codec stream of lanes too) and the pool its frames are republished from.
 #[derive(Debug)]
 struct RelayLevel {
     decoder: FrameDecoder,
@@ -62,11 +63,11 @@ pub struct RoomLink {
     revision: AtomicU64,
     /// The registry entry, as this replica last wrote or read it.
     entry: Mutex<v1::RoomEntry>,
-    /// Other replicas' interest per level: replica -> until when.
-    remote: Mutex<[HashMap<String, Instant>; 2]>,
-    key_wanted: [AtomicBool; 2],
-    out: mpsc::Sender<(Level, Arc<MeshUpdate>)>,
-    relay: [Mutex<RelayLevel>; 2],
+    /// Other replicas' interest per channel: replica -> until when.
+    remote: Mutex<[HashMap<String, Instant>; Channel::COUNT]>,
+    key_wanted: [AtomicBool; Channel::COUNT],
+    out: mpsc::Sender<(Channel, Arc<MeshUpdate>)>,
+    relay: [Mutex<RelayLevel>; Channel::COUNT],
     wake: Notify,
     /// The tasks of the room's cluster side: the frame sender and the relay loop (always), the
     /// owner's services (while it owns the room), a relay's subscriptions.
@@ -87,16 +88,17 @@ pub(crate) enum RelayError {
 }
 
 impl RoomLink {
-    /// The cluster side of room `room`, with `vertices` per level (base, detail), as `owner`
+    /// The cluster side of room `room`, with `vertices` per channel (its frames' vertex or lane
+    /// vertex count, `crate::pipeline::frame_vertices`), as `owner`
     /// or relay, at registry `revision`; its background tasks start with [`RoomLink::start`].
     pub(crate) fn new(
         cluster: &Arc<Cluster>,
         room: &str,
-        vertices: [usize; 2],
+        vertices: [usize; Channel::COUNT],
         entry: v1::RoomEntry,
         owner: bool,
         revision: u64,
-    ) -> (Arc<RoomLink>, mpsc::Receiver<(Level, Arc<MeshUpdate>)>) {
+    ) -> (Arc<RoomLink>, mpsc::Receiver<(Channel, Arc<MeshUpdate>)>) {
         let (out, rx) = mpsc::channel(OUT_QUEUE);
         let relay = vertices.map(|n| {
             Mutex::new(RelayLevel {
@@ -112,8 +114,8 @@ impl RoomLink {
             confirmed: AtomicBool::new(owner),
             revision: AtomicU64::new(revision),
             entry: Mutex::new(entry),
-            remote: Mutex::new([HashMap::new(), HashMap::new()]),
-            key_wanted: [AtomicBool::new(false), AtomicBool::new(false)],
+            remote: Mutex::new(std::array::from_fn(|_| HashMap::new())),
+            key_wanted: std::array::from_fn(|_| AtomicBool::new(false)),
             out,
             relay,
             wake: Notify::new(),
@@ -128,7 +130,7 @@ impl RoomLink {
     pub(crate) fn start(
         self: &Arc<Self>,
         state: &Arc<crate::AppState>,
-        rx: mpsc::Receiver<(Level, Arc<MeshUpdate>)>,
+        rx: mpsc::Receiver<(Channel, Arc<MeshUpdate>)>,
     ) {
         let sender = tokio::spawn(Arc::clone(self).send_frames(rx));
         let relay = tokio::spawn(Arc::clone(self).relay_loop());
@@ -215,10 +217,10 @@ impl RoomLink {
         }
     }
 
-    fn remote_interest(&self, level: Level) -> bool {
+    fn remote_interest(&self, channel: Channel) -> bool {
         let now = Instant::now();
         let mut remote = lock(&self.remote);
-        let map = &mut remote[level as usize];
+        let map = &mut remote[channel.index()];
         map.retain(|_, until| *until > now);
         !map.is_empty()
     }
@@ -245,11 +247,15 @@ impl RoomLink {
             let Ok(i) = v1::Interest::decode(msg.payload.as_ref()) else {
                 continue;
             };
-            let Ok(level) = Level::from_wire("Interest", i.level) else {
+            let (Ok(level), Ok(encoding)) = (
+                Level::from_wire("Interest", i.level),
+                Encoding::from_wire("Interest", i.encoding),
+            ) else {
                 continue;
             };
+            let channel = Channel::new(level, encoding);
             let ttl = Duration::from_millis(u64::from(i.ttl_ms)).min(INTEREST_TTL * 2);
-            lock(&self.remote)[level as usize].insert(i.replica, Instant::now() + ttl);
+            lock(&self.remote)[channel.index()].insert(i.replica, Instant::now() + ttl);
         }
     }
 
@@ -259,20 +265,18 @@ impl RoomLink {
             return;
         };
         while let Some(msg) = sub.next().await {
-            let level = if msg.subject.ends_with(".detail") {
-                Level::Detail
-            } else {
-                Level::Base
-            };
-            self.key_wanted[level as usize].store(true, Ordering::Release);
+            let name = msg.subject.rsplit('.').next().unwrap_or_default();
+            if let Some(c) = Channel::ALL.iter().find(|c| c.name() == name) {
+                self.key_wanted[c.index()].store(true, Ordering::Release);
+            }
         }
     }
 
     /// Owner: sends each frame handed over by [`Fanout::publish`] to NATS.
-    async fn send_frames(self: Arc<Self>, mut rx: mpsc::Receiver<(Level, Arc<MeshUpdate>)>) {
-        let subjects = Level::ALL.map(|l| subject::frames(&self.room, l));
+    async fn send_frames(self: Arc<Self>, mut rx: mpsc::Receiver<(Channel, Arc<MeshUpdate>)>) {
+        let subjects = Channel::ALL.map(|c| subject::frames(&self.room, c));
         let metrics = &self.cluster.metrics;
-        while let Some((level, update)) = rx.recv().await {
+        while let Some((channel, update)) = rx.recv().await {
             // Checked again here: a frame queued before NATS went away must not be sent after
             // it comes back (async-nats would buffer it), when this replica may have been
             // replaced.
@@ -294,7 +298,7 @@ impl RoomLink {
             if self
                 .cluster
                 .client
-                .publish(subjects[level as usize].clone(), payload.into())
+                .publish(subjects[channel.index()].clone(), payload.into())
                 .await
                 .is_err()
             {
@@ -303,12 +307,12 @@ impl RoomLink {
         }
     }
 
-    /// Relay: keeps a subscription to each level its local subscribers watch (ending it a
+    /// Relay: keeps a subscription to each channel its local subscribers watch (ending it a
     /// little after the last leaves), and announces that interest to the owner.
     async fn relay_loop(self: Arc<Self>) {
-        let mut relays: [Option<JoinHandle<()>>; 2] = [None, None];
-        let mut announced = [None::<Instant>; 2];
-        let mut watched = [None::<Instant>; 2];
+        let mut relays: [Option<JoinHandle<()>>; Channel::COUNT] = Default::default();
+        let mut announced = [None::<Instant>; Channel::COUNT];
+        let mut watched = [None::<Instant>; Channel::COUNT];
         let mut tick = tokio::time::interval(Duration::from_millis(250));
         loop {
             tokio::select! {
@@ -316,16 +320,16 @@ impl RoomLink {
                 () = self.wake.notified() => {}
             }
             let owner = self.is_owner();
-            for level in Level::ALL {
-                let i = level as usize;
+            for channel in Channel::ALL {
+                let i = channel.index();
                 let now = Instant::now();
-                let local = self.local.interest(level);
+                let local = self.local.interest(channel);
                 if local {
                     watched[i] = Some(now);
                 }
                 let wanted = !owner && watched[i].is_some_and(|t| now - t < RELAY_LINGER);
                 if wanted && relays[i].as_ref().is_none_or(JoinHandle::is_finished) {
-                    relays[i] = Some(tokio::spawn(Arc::clone(&self).relay_level(level)));
+                    relays[i] = Some(tokio::spawn(Arc::clone(&self).relay_channel(channel)));
                     announced[i] = None;
                 } else if !wanted && let Some(task) = relays[i].take() {
                     task.abort();
@@ -335,8 +339,9 @@ impl RoomLink {
                     announced[i] = Some(now);
                     let interest = v1::Interest {
                         replica: self.cluster.replica.clone(),
-                        level: v1::Level::from(level) as i32,
+                        level: v1::Level::from(channel.level) as i32,
                         ttl_ms: INTEREST_TTL.as_millis() as u32,
+                        encoding: v1::Encoding::from(channel.encoding) as i32,
                     };
                     let _ = self
                         .cluster
@@ -351,13 +356,13 @@ impl RoomLink {
         }
     }
 
-    /// Relay: the owner's frames of `level`, decoded and fanned out locally.
-    async fn relay_level(self: Arc<Self>, level: Level) {
+    /// Relay: the owner's frames of `channel`, decoded and fanned out locally.
+    async fn relay_channel(self: Arc<Self>, channel: Channel) {
         let client = &self.cluster.client;
-        let Ok(mut sub) = client.subscribe(subject::frames(&self.room, level)).await else {
+        let Ok(mut sub) = client.subscribe(subject::frames(&self.room, channel)).await else {
             return;
         };
-        let key_subject = subject::keyframe(&self.room, level.name());
+        let key_subject = subject::keyframe(&self.room, channel.name());
         let mut asked: Option<Instant> = None;
         // Joining mid-stream: the next frame is most likely a delta.
         let _ = client.publish(key_subject.clone(), "".into()).await;
@@ -367,10 +372,10 @@ impl RoomLink {
             // than a hand-off to the blocking pool costs in latency; a large one (a detail
             // frame) goes to the blocking pool.
             let relayed = if msg.payload.len() <= INLINE_DECODE_BYTES {
-                Ok(self.relay_frame(level, msg.payload))
+                Ok(self.relay_frame(channel, msg.payload))
             } else {
                 let link = Arc::clone(&self);
-                tokio::task::spawn_blocking(move || link.relay_frame(level, msg.payload)).await
+                tokio::task::spawn_blocking(move || link.relay_frame(channel, msg.payload)).await
             };
             match relayed {
                 Ok(Ok(())) => {
@@ -396,7 +401,7 @@ impl RoomLink {
     /// [`RelayError`]; nothing is fanned out then.
     pub(crate) fn relay_frame(
         &self,
-        level: Level,
+        channel: Channel,
         payload: prost::bytes::Bytes,
     ) -> Result<(), RelayError> {
         // Decoded from the message's own `Bytes`: `Frame.data` is a `Bytes` field, so it is a
@@ -405,14 +410,14 @@ impl RoomLink {
         let Some(v1::mesh_frame::Body::Frame(frame)) = msg.body else {
             return Err(RelayError::Message("not a frame".into()));
         };
-        let mut guard = lock(&self.relay[level as usize]);
+        let mut guard = lock(&self.relay[channel.index()]);
         let relay = &mut *guard;
-        let header = relay.decoder.decode(&frame.data)?;
         // The frame's age at the owner, carried on: a viewer here sees the owner's latency plus
         // the relay's.
         let received = Instant::now()
             .checked_sub(Duration::from_micros(u64::from(frame.server_latency_us)))
             .unwrap_or_else(Instant::now);
+        let header = relay.decoder.decode(&frame.data)?;
         let update = relay
             .pool
             .fill(header.qbox, &frame.data, relay.decoder.lanes(), |u| {
@@ -422,36 +427,40 @@ impl RoomLink {
                 u.set_codec_header(&header);
             });
         drop(guard);
-        self.local.publish(level, update);
+        self.local.publish(channel, update);
         Ok(())
     }
 }
 
 impl Fanout for RoomLink {
-    fn publish(&self, level: Level, frame: Arc<MeshUpdate>) {
+    fn publish(&self, channel: Channel, frame: Arc<MeshUpdate>) {
         if self.is_owner()
             && self.is_confirmed()
             && self.cluster.is_connected()
-            && self.remote_interest(level)
-            && self.out.try_send((level, Arc::clone(&frame))).is_err()
+            && self.remote_interest(channel)
+            && self.out.try_send((channel, Arc::clone(&frame))).is_err()
         {
             self.cluster.metrics.nats_frames_dropped.inc();
         }
-        self.local.publish(level, frame);
+        self.local.publish(channel, frame);
     }
 
-    fn subscribe(&self, level: Level) -> Receiver {
-        let r = self.local.subscribe(level);
+    fn clear(&self, channel: Channel) {
+        self.local.clear(channel);
+    }
+
+    fn subscribe(&self, channel: Channel) -> Receiver {
+        let r = self.local.subscribe(channel);
         self.wake.notify_one();
         r
     }
 
-    fn interest(&self, level: Level) -> bool {
-        self.local.interest(level) || (self.is_owner() && self.remote_interest(level))
+    fn interest(&self, channel: Channel) -> bool {
+        self.local.interest(channel) || (self.is_owner() && self.remote_interest(channel))
     }
 
-    fn wants_keyframe(&self, level: Level) -> bool {
-        self.key_wanted[level as usize].swap(false, Ordering::AcqRel)
+    fn wants_keyframe(&self, channel: Channel) -> bool {
+        self.key_wanted[channel.index()].swap(false, Ordering::AcqRel)
     }
 
     fn relays(&self) -> bool {

@@ -7,7 +7,7 @@
 //!   `OpenRoom`/`CloseRoom`/`GetRoom`, `/api/rooms` and the viewer's picker see the cluster's
 //!   rooms and owners.
 //! - **Frames** ([`link`]): the owner predicts and encodes once and publishes each level's frame
-//!   once to `crease.frames.<room>.<level>` while another replica wants it; relays decode and fan
+//!   once to `crease.frames.<room>.<channel>` while another replica wants it; relays decode and fan
 //!   out locally.
 //! - **Controls** ([`control`]): a relay checks the token's digest and forwards the frame to the
 //!   owner; the ack comes back.
@@ -45,7 +45,7 @@ pub use link::RoomLink;
 
 /// The frames a room link's owner side hands to its NATS sender.
 type LinkFrames =
-    tokio::sync::mpsc::Receiver<(crease_proto::Level, Arc<crate::frames::MeshUpdate>)>;
+    tokio::sync::mpsc::Receiver<(crate::fanout::Channel, Arc<crate::frames::MeshUpdate>)>;
 
 use crate::AppState;
 use crate::fanout::Fanout;
@@ -61,11 +61,11 @@ pub const DEFAULT_LEASE: Duration = Duration::from_secs(2);
 
 /// NATS subjects of a room (`cluster.proto` lists them).
 pub mod subject {
-    use crease_proto::Level;
+    use crate::fanout::Channel;
 
-    /// The encoded frames of `room` at `level`.
-    pub fn frames(room: &str, level: Level) -> String {
-        format!("crease.frames.{room}.{}", level.name())
+    /// The encoded frames of `room`'s `channel`.
+    pub fn frames(room: &str, channel: Channel) -> String {
+        format!("crease.frames.{room}.{}", channel.name())
     }
     /// Relays' interest in `room`.
     pub fn interest(room: &str) -> String {
@@ -75,9 +75,9 @@ pub mod subject {
     pub fn control(room: &str) -> String {
         format!("crease.control.{room}")
     }
-    /// Keyframe requests for `room` at `level` (`*`: any level).
-    pub fn keyframe(room: &str, level: &str) -> String {
-        format!("crease.keyframe.{room}.{level}")
+    /// Keyframe requests for `room`'s channel named `channel` (`*`: any channel).
+    pub fn keyframe(room: &str, channel: &str) -> String {
+        format!("crease.keyframe.{room}.{channel}")
     }
 }
 
@@ -801,12 +801,9 @@ impl Cluster {
     }
 }
 
-/// The vertex counts of a model's levels (base, detail).
-fn vertex_counts(model: &crate::registry::LoadedModel) -> [usize; 2] {
-    [
-        model.model.rig.rest.vertex_count(),
-        model.model.detail_vertex_count().unwrap_or(0),
-    ]
+/// The (lane) vertex counts of a model's channels' frames.
+fn vertex_counts(model: &crate::registry::LoadedModel) -> [usize; crate::fanout::Channel::COUNT] {
+    crate::fanout::Channel::ALL.map(|c| crate::pipeline::frame_vertices(&model.model, c))
 }
 
 impl Cluster {

@@ -4,6 +4,8 @@
 //! and metrics helpers.
 #![allow(dead_code, clippy::unwrap_used)] // each test binary uses some of these
 
+pub(crate) mod palette_check;
+
 use std::sync::Arc;
 
 use crease_core::codec::FrameDecoder;

@@ -145,7 +145,7 @@ async fn subscribe(url: String, room: String, check: bool) -> anyhow::Result<Sub
     };
     Ok(Subscribed {
         _client: client,
-        vertices: sub.topology.vertex_count as usize,
+        vertices: sub.vertex_count(),
         sub,
         reader,
     })

@@ -1,0 +1,263 @@
+//! The palette stream a subscriber gets with `Encoding::Palette` (issue 18): its first message,
+//! `PaletteTopology`, built from a [`PaletteHeader`] by [`palette_topology_message`] and read
+//! back by [`read_palette_topology`]; its frames are `Frame`s whose data is a palette frame
+//! (`crease_core::codec::palette`). The byte layouts are those `crease.proto` documents.
+
+use crease_core::codec::palette::{
+    PALETTE_VERSION, PaletteDetail, PaletteHeader, PaletteSkin, PaletteStep,
+};
+use crease_core::codec::{CodecError, decode_indices, encode_indices};
+use crease_core::glam::Vec3;
+use prost::bytes::Bytes;
+
+use crate::convert::{Level, box3};
+use crate::errors::WireError;
+use crate::v1;
+
+/// What a palette stream's first message says (see `PaletteTopology` in `crease.proto`).
+#[derive(Clone, Copy, Debug)]
+pub struct PaletteParts<'a> {
+    /// The model's name.
+    pub model: &'a str,
+    /// The stream's level.
+    pub level: Level,
+    /// The box of the model's poses.
+    pub bounds: (Vec3, Vec3),
+    /// The header.
+    pub header: &'a PaletteHeader,
+}
+
+/// A palette stream's first message, read back (see [`read_palette_topology`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StreamPalette {
+    /// The model's name.
+    pub model: String,
+    /// The stream's level.
+    pub level: Level,
+    /// The box of the model's poses.
+    pub bounds: (Vec3, Vec3),
+    /// The header, [validated](PaletteHeader::validate).
+    pub header: PaletteHeader,
+}
+
+fn le_bytes<T: Copy, const N: usize>(values: &[T], to: impl Fn(T) -> [u8; N]) -> Bytes {
+    let mut out = Vec::with_capacity(values.len() * N);
+    for &v in values {
+        out.extend_from_slice(&to(v));
+    }
+    Bytes::from(out)
+}
+
+/// The first message of a palette stream.
+///
+/// # Errors
+/// The index codec's, if a triangle indexes past the drawn mesh.
+pub fn palette_topology_message(p: PaletteParts<'_>) -> Result<v1::MeshFrame, CodecError> {
+    let h = p.header;
+    let mut indices = Vec::new();
+    encode_indices(&h.triangles, h.vertex_count(), &mut indices)?;
+    let narrow = h.bones <= 256;
+    let skin_bones = if narrow {
+        Bytes::from(h.skin.bones.iter().map(|&b| b as u8).collect::<Vec<u8>>())
+    } else {
+        le_bytes(&h.skin.bones, u16::to_le_bytes)
+    };
+    let rest: Vec<f32> = h.rest.iter().flat_map(|p| p.to_array()).collect();
+    let (subdivision, examples, detail_rows, detail_scales) = match &h.detail {
+        Some(d) => (
+            d.steps.iter().map(step_message).collect(),
+            d.examples as u32,
+            le_bytes(&d.rows, i16::to_le_bytes),
+            le_bytes(&d.scales, f32::to_le_bytes),
+        ),
+        None => (Vec::new(), 0, Bytes::new(), Bytes::new()),
+    };
+    Ok(v1::MeshFrame {
+        body: Some(v1::mesh_frame::Body::PaletteTopology(v1::PaletteTopology {
+            model: p.model.to_owned(),
+            level: v1::Level::from(p.level) as i32,
+            version: u32::from(PALETTE_VERSION),
+            vertex_count: h.vertex_count() as u32,
+            triangle_count: h.triangles.len() as u32,
+            indices: Bytes::from(indices),
+            bounds: Some(box3(p.bounds.0, p.bounds.1)),
+            bones: h.bones as u32,
+            base_vertices: h.rest.len() as u32,
+            rest_positions: le_bytes(&rest, f32::to_le_bytes),
+            influences: h.skin.influences as u32,
+            skin_bones,
+            skin_weights: le_bytes(&h.skin.weights, u16::to_le_bytes),
+            subdivision,
+            examples,
+            detail_rows,
+            detail_scales,
+        })),
+    })
+}
+
+fn step_message(s: &PaletteStep) -> v1::SubdivisionStep {
+    let weight_index = if s.weights.len() <= 256 {
+        Bytes::from(s.weight_index.iter().map(|&i| i as u8).collect::<Vec<u8>>())
+    } else {
+        le_bytes(&s.weight_index, u16::to_le_bytes)
+    };
+    v1::SubdivisionStep {
+        rows: s.rows() as u32,
+        columns: s.columns as u32,
+        row_ptr: le_bytes(&s.row_ptr, u32::to_le_bytes),
+        cols: le_bytes(&s.cols, u32::to_le_bytes),
+        weight_index,
+        weights: s.weights.clone(),
+    }
+}
+
+/// Reads `count` little-endian values of `N` bytes from field `field`.
+fn read_le<T, const N: usize>(
+    field: &str,
+    bytes: &[u8],
+    count: usize,
+    from: impl Fn([u8; N]) -> T,
+) -> Result<Vec<T>, WireError> {
+    let expected = count.checked_mul(N);
+    if expected != Some(bytes.len()) {
+        return Err(WireError::new(
+            "PaletteTopology",
+            field,
+            format!(
+                "{} bytes, expected {} ({count} values of {N} bytes)",
+                bytes.len(),
+                expected.map_or_else(|| "too many".to_owned(), |e| e.to_string())
+            ),
+        ));
+    }
+    Ok(bytes
+        .chunks_exact(N)
+        .map(|c| from(c.try_into().expect("chunks of N")))
+        .collect())
+}
+
+/// An index array stored as u8 when `narrow`, else u16.
+fn read_narrow(
+    field: &str,
+    bytes: &[u8],
+    count: usize,
+    narrow: bool,
+) -> Result<Vec<u16>, WireError> {
+    if narrow {
+        read_le(field, bytes, count, |[b]| u16::from(b))
+    } else {
+        read_le(field, bytes, count, u16::from_le_bytes)
+    }
+}
+
+/// Reads a `PaletteTopology`: decodes every array, and checks that they fit each other
+/// ([`PaletteHeader::validate`]) and the frame format version this build reads.
+///
+/// # Errors
+/// [`WireError`] naming the field (a length, an index out of range, a non-finite value, an
+/// unknown version).
+pub fn read_palette_topology(t: &v1::PaletteTopology) -> Result<StreamPalette, WireError> {
+    let err = |field: &str, message: String| WireError::new("PaletteTopology", field, message);
+    if t.version != u32::from(PALETTE_VERSION) {
+        return Err(err(
+            "version",
+            format!(
+                "{}, this decoder reads palette frames of version {PALETTE_VERSION}",
+                t.version
+            ),
+        ));
+    }
+    let level = Level::from_wire("PaletteTopology", t.level)?;
+    let nb = t.base_vertices as usize;
+    let k = t.influences as usize;
+    if !(1..=8).contains(&k) {
+        return Err(err("influences", format!("{k}, expected 1..=8")));
+    }
+    let rest = read_le(
+        "rest_positions",
+        &t.rest_positions,
+        nb.saturating_mul(3),
+        f32::from_le_bytes,
+    )?;
+    let slots = nb.saturating_mul(k);
+    let skin = PaletteSkin {
+        influences: k,
+        bones: read_narrow("skin_bones", &t.skin_bones, slots, t.bones <= 256)?,
+        weights: read_le("skin_weights", &t.skin_weights, slots, u16::from_le_bytes)?,
+    };
+    let detail = match level {
+        Level::Base => None,
+        Level::Detail => {
+            let mut steps = Vec::with_capacity(t.subdivision.len());
+            for (l, s) in t.subdivision.iter().enumerate() {
+                let field = |f: &str| format!("subdivision[{l}].{f}");
+                let rows = s.rows as usize;
+                let row_ptr = read_le(
+                    &field("row_ptr"),
+                    &s.row_ptr,
+                    rows.saturating_add(1),
+                    u32::from_le_bytes,
+                )?;
+                let entries = row_ptr.last().copied().unwrap_or(0) as usize;
+                let cols = read_le(&field("cols"), &s.cols, entries, u32::from_le_bytes)?;
+                let weight_index = read_narrow(
+                    &field("weight_index"),
+                    &s.weight_index,
+                    entries,
+                    s.weights.len() <= 256,
+                )?;
+                steps.push(PaletteStep {
+                    columns: s.columns as usize,
+                    row_ptr,
+                    cols,
+                    weight_index,
+                    weights: s.weights.clone(),
+                });
+            }
+            let nv = t.vertex_count as usize;
+            let n = t.examples as usize;
+            Some(PaletteDetail {
+                steps,
+                examples: n,
+                rows: read_le(
+                    "detail_rows",
+                    &t.detail_rows,
+                    nv.saturating_mul(n.saturating_add(1)),
+                    i16::from_le_bytes,
+                )?,
+                scales: read_le("detail_scales", &t.detail_scales, nv, f32::from_le_bytes)?,
+            })
+        }
+    };
+    let nv = t.vertex_count as usize;
+    let mut triangles = Vec::new();
+    decode_indices(&t.indices, t.triangle_count as usize, nv, &mut triangles)
+        .map_err(|e| err("indices", e.to_string()))?;
+    let header = PaletteHeader {
+        bones: t.bones as usize,
+        rest: rest.chunks_exact(3).map(Vec3::from_slice).collect(),
+        skin,
+        triangles,
+        detail,
+    };
+    if header.vertex_count() != nv {
+        return Err(err(
+            "vertex_count",
+            format!("{nv}, the header's arrays give {}", header.vertex_count()),
+        ));
+    }
+    header
+        .validate()
+        .map_err(|e| err("header", e.to_string()))?;
+    let bounds = t
+        .bounds
+        .as_ref()
+        .ok_or_else(|| err("bounds", "missing".into()))?;
+    let v = |p: &Option<v1::Vec3>| p.as_ref().map_or(Vec3::ZERO, |p| Vec3::new(p.x, p.y, p.z));
+    Ok(StreamPalette {
+        model: t.model.clone(),
+        level,
+        bounds: (v(&bounds.min), v(&bounds.max)),
+        header,
+    })
+}
