@@ -94,70 +94,52 @@ export function decodeIndices(bytes, triangleCount, vertexCount) {
 }
 
 // ---- Palette frames (issue 18): core/src/codec/palette (Rust) is the reference ----------------
+//
+// A palette frame is a codec frame (above: keyframe or delta) whose "vertices" are lanes of
+// bones and the detail kernel vector: lane vertex 2k is bone k's rotation [a, b, c, i]
+// (smallest three: i the index of the largest component of the unit quaternion, made positive
+// and dropped; a, b, c the others in order, (x sqrt 2 + 1) / 2 * 65535), lane vertex 2k + 1 its
+// translation [x, y, z, 0] in the frame's box (decoded as a position: min + q * step), then
+// xi two values per lane vertex [lo, hi, lo, hi] (the 16-bit halves of their f32 bits).
 
-export const PALETTE_HEADER_LEN = 44;
-export const PALETTE_BONE_LEN = 13;
-const PALETTE_MAGIC = [0x43, 0x52, 0x50, 0x46]; // "CRPF"
 const f = Math.fround;
 const FRAC_1_SQRT_2 = f(Math.SQRT1_2);
+const bits32 = new DataView(new ArrayBuffer(4));
+
+/** Lane vertices of a palette frame of `bones` bones and `xi` kernel values: 2B + ceil(N/2). */
+export function paletteVertexCount(bones, xi) {
+  return 2 * bones + Math.ceil(xi / 2);
+}
 
 /**
- * Decodes a palette frame ("CRPF" version 1, `decode_palette_frame` in
- * core/src/codec/palette): a 44-byte header (magic, version u8 @4, flags u8 @5, reserved u16 @6,
- * seq u32 @8, bones u32 @12, xi values u32 @16, translation box min f32x3 @20 and step f32x3
- * @32), then 13 bytes per bone (the largest component's index, the other three quaternion
- * components as u16, the translation as u16x3 in the box), then the xi values as f32. Checks
- * the counts against the receiver's `bones` and `xi` (its header's). Rotations come out as
- * unit quaternions (x, y, z, w) and translations as `min + q * step`, with the f32 arithmetic
- * of the Rust decoder (Math.fround after every operation). Throws an Error naming what is
- * wrong, as the Rust decoder refuses the same frames. `out`: {rotations, translations, xi}
- * buffers to reuse when their sizes fit.
+ * Reads a decoded palette frame (`read_palette_lanes` in core/src/codec/palette): `lanes` and
+ * `positions` as decodeFrame returns them. Rotations come out as unit quaternions (x, y, z, w)
+ * with the f32 arithmetic of the Rust decoder (Math.fround after every operation), translations
+ * as the decoded positions of their lane vertices (min + q * step, rounded once, as
+ * QuantBox::dequantise), xi from their bits. Throws an Error naming what is wrong (a lane count
+ * other than the stream's, a quaternion index above 3, an xi value that is not finite). `out`:
+ * {rotations, translations, xi} buffers to reuse when their sizes fit.
  */
-export function decodePaletteFrame(bytes, bones, xi, out) {
-  if (bytes.length < PALETTE_HEADER_LEN) {
-    throw new Error(`palette frame truncated: ${bytes.length} bytes, expected ${PALETTE_HEADER_LEN}`);
+export function readPaletteLanes(lanes, positions, bones, xi, out) {
+  const expected = paletteVertexCount(bones, xi);
+  const got = lanes.length / 4;
+  if (got !== expected) {
+    throw new Error(`palette frame: ${got} lane vertices, expected ${expected} (${bones} bones, ${xi} xi values)`);
   }
-  for (let i = 0; i < 4; i++) {
-    if (bytes[i] !== PALETTE_MAGIC[i]) throw new Error('palette frame: bad magic, expected "CRPF"');
-  }
-  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
-  const version = dv.getUint8(4);
-  if (version !== 1) throw new Error(`unsupported palette frame version ${version}, this decoder reads version 1`);
-  const flags = dv.getUint8(5);
-  const reserved = dv.getUint16(6, true);
-  if (flags !== 0 || reserved !== 0) {
-    throw new Error(`palette frame: flags ${flags} and reserved ${reserved}, expected zero`);
-  }
-  const seq = dv.getUint32(8, true);
-  const b = dv.getUint32(12, true);
-  const n = dv.getUint32(16, true);
-  if (b !== bones) throw new Error(`palette frame: bones ${b}, expected ${bones}`);
-  if (n !== xi) throw new Error(`palette frame: xi values ${n}, expected ${xi}`);
-  const expected = PALETTE_HEADER_LEN + b * PALETTE_BONE_LEN + 4 * n;
-  if (bytes.length < expected) throw new Error(`palette frame truncated: ${bytes.length} bytes, expected ${expected}`);
-  if (bytes.length > expected) {
-    throw new Error(`palette frame: ${bytes.length} bytes, the header's counts need exactly ${expected}`);
-  }
-  const min = [0, 1, 2].map((k) => dv.getFloat32(20 + 4 * k, true));
-  const step = [0, 1, 2].map((k) => dv.getFloat32(32 + 4 * k, true));
-  if (!min.every(Number.isFinite) || !step.every((s) => Number.isFinite(s) && s > 0)) {
-    throw new Error(`palette frame: translation box min ${min} step ${step} is not usable`);
-  }
-  const rotations = out && out.rotations && out.rotations.length === 4 * b ? out.rotations : new Float32Array(4 * b);
+  const rotations = out && out.rotations && out.rotations.length === 4 * bones ? out.rotations : new Float32Array(4 * bones);
   const translations =
-    out && out.translations && out.translations.length === 3 * b ? out.translations : new Float32Array(3 * b);
-  const xis = out && out.xi && out.xi.length === n ? out.xi : new Float32Array(n);
+    out && out.translations && out.translations.length === 3 * bones ? out.translations : new Float32Array(3 * bones);
+  const xis = out && out.xi && out.xi.length === xi ? out.xi : new Float32Array(xi);
   const c = [0, 0, 0, 0];
-  for (let k = 0; k < b; k++) {
-    const at = PALETTE_HEADER_LEN + k * PALETTE_BONE_LEN;
-    const index = bytes[at];
+  for (let k = 0; k < bones; k++) {
+    const at = 8 * k; // lane vertex 2k
+    const index = lanes[at + 3];
     if (index > 3) throw new Error(`palette frame: bone ${k}: quaternion index ${index}, expected 0..=3`);
     // from_smallest_three: the three stored components in order, skipping `index`.
     let sum = 0;
     for (let j = 0, slot = 0; j < 4; j++) {
       if (j === index) continue;
-      const v = dv.getUint16(at + 1 + 2 * slot++, true);
-      const x = f(f(f(f(v / 65535) * 2) - 1) * FRAC_1_SQRT_2);
+      const x = f(f(f(f(lanes[at + slot++] / 65535) * 2) - 1) * FRAC_1_SQRT_2);
       c[j] = x;
       sum = f(sum + f(x * x));
     }
@@ -167,15 +149,71 @@ export function decodePaletteFrame(bytes, bones, xi, out) {
     const len = f(Math.sqrt(f(f(sq(0) + sq(2)) + f(sq(1) + sq(3)))));
     const rcp = f(1 / len);
     for (let j = 0; j < 4; j++) rotations[4 * k + j] = f(c[j] * rcp);
-    for (let j = 0; j < 3; j++) {
-      translations[3 * k + j] = f(min[j] + f(dv.getUint16(at + 7 + 2 * j, true) * step[j]));
+    translations.set(positions.subarray(3 * (2 * k + 1), 3 * (2 * k + 1) + 3), 3 * k);
+  }
+  for (let j = 0; j < xi; j++) {
+    const at = 4 * (2 * bones + (j >> 1)) + 2 * (j & 1);
+    bits32.setUint32(0, (lanes[at] | (lanes[at + 1] << 16)) >>> 0, true);
+    const v = bits32.getFloat32(0, true);
+    if (!Number.isFinite(v)) throw new Error(`palette frame: xi ${j} is not finite`);
+    xis[j] = v;
+  }
+  return { rotations, translations, xi: xis };
+}
+
+/**
+ * A palette stream's frame decoder (FrameDecoder + read_palette_lanes in Rust): holds the last
+ * frame's lanes for the next delta. decode(bytes) returns {header, seq, rotations, translations,
+ * xi, min, step} or throws an Error naming what is wrong: the codec header's (parseHeader), a
+ * lane count other than the stream's, a delta on a frame it does not hold (no frame yet, another
+ * seq, another box), the payload's, the lanes'. A frame the codec refuses leaves the decoder as
+ * it was; one whose lanes are refused still becomes the base of the next delta (as in Rust).
+ */
+export class PaletteDecoder {
+  constructor(bones, xi) {
+    this.bones = bones;
+    this.xiCount = xi;
+    this.vertexCount = paletteVertexCount(bones, xi);
+    this.lanes = null;
+    this.last = null;
+    this.spare = null;
+    this.positions = null;
+  }
+
+  /** Forgets the held frame: the next must be a keyframe. */
+  reset() {
+    this.lanes = this.last = null;
+  }
+
+  decode(bytes, out) {
+    const h = parseHeader(bytes);
+    if (h.vertexCount !== this.vertexCount) {
+      throw new Error(
+        `palette frame ${h.seq}: ${h.vertexCount} lane vertices, expected ${this.vertexCount} ` +
+          `(${this.bones} bones, ${this.xiCount} xi values)`,
+      );
     }
+    if (h.kind === 1) {
+      if (!this.last) throw new Error(`palette frame ${h.seq}: a delta on frame ${h.baseSeq}, and no frame is held`);
+      if (this.last.seq !== h.baseSeq) {
+        throw new Error(`palette frame ${h.seq}: a delta on frame ${h.baseSeq}, the frame held is ${this.last.seq}`);
+      }
+      const same = (a, b) => a.every((v, k) => Object.is(v, b[k]));
+      if (!same(h.min, this.last.min) || !same(h.step, this.last.step)) {
+        throw new Error(`palette frame ${h.seq}: a delta in another quantisation box than its base's`);
+      }
+    }
+    let r;
+    try {
+      r = decodeFrame(bytes, this.lanes, { lanes: this.spare, positions: this.positions });
+    } catch (e) {
+      throw new Error(`palette frame ${h.seq}: ${e.message}`);
+    }
+    this.spare = this.lanes;
+    this.lanes = r.lanes;
+    this.positions = r.positions;
+    this.last = h;
+    const bones = readPaletteLanes(r.lanes, r.positions, this.bones, this.xiCount, out);
+    return { header: h, seq: h.seq, ...bones, min: h.min, step: h.step };
   }
-  const xiAt = PALETTE_HEADER_LEN + b * PALETTE_BONE_LEN;
-  for (let k = 0; k < n; k++) {
-    const v = dv.getFloat32(xiAt + 4 * k, true);
-    if (!Number.isFinite(v)) throw new Error(`palette frame: xi ${k} is not finite`);
-    xis[k] = v;
-  }
-  return { seq, rotations, translations, xi: xis, min, step };
 }

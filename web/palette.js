@@ -1,8 +1,9 @@
 // Palette streams on the GPU (issue 18): the server sends once a PaletteTopology (rest mesh,
 // skin, and at the detail level the Loop subdivision steps and the detail regressor D, b), then
-// per frame only the bones (and the detail kernel vector xi) as a "CRPF" palette frame
-// (core/src/codec/palette, the reference decoder). This module turns them into the drawn mesh
-// with WebGL2 float render targets, one full-screen pass per step:
+// per frame only the bones (and the detail kernel vector xi) as the lanes of a codec frame,
+// keyframe or delta (PaletteDecoder in codec.js; core/src/codec/palette is the reference). This
+// module turns them into the drawn mesh with WebGL2 float render targets, one full-screen pass
+// per step:
 //
 //   skin      base_v = sum_k w_vk (R_k rest_v + t_k)             (linear blend skinning, K <= 8)
 //   subdivide level_s = S_s level_(s-1), s = 1..L                (CSR gather, detail level only)
@@ -19,14 +20,14 @@
 //
 //   const synth = new PaletteSynth(renderer);
 //   synth.load(readPaletteTopology(bytes));   // throws an Error naming what is wrong
-//   synth.setFrame(crpfBytes);                 // decodes (throws on a malformed frame)
+//   synth.setFrame(frameData);                 // decodes the stream's next frame (throws if bad)
 //   synth.update();                            // runs the passes if a frame is pending
 //   synth.positions, synth.normals             // the render targets of the drawn mesh
 //   synth.readback()                           // Float32Array, x, y, z per drawn vertex
 //   synth.material(params), synth.geometry()   // what draws them (gl_VertexID fetches)
 
 import * as THREE from "three";
-import { decodeIndices, decodePaletteFrame } from "./codec.js";
+import { PaletteDecoder, decodeIndices } from "./codec.js";
 import { littleEndian } from "./wire.js";
 
 /** Whether this renderer can render into float targets (WebGL2 + EXT_color_buffer_float). */
@@ -54,7 +55,7 @@ function expectLength(what, got, expected) {
  * null}. Throws an Error naming the first thing that is wrong.
  */
 export function decodePaletteTopology(t) {
-  if (t.version !== 1) throw headerError(`palette frame version ${t.version}, this viewer reads version 1`);
+  if (t.version !== 1) throw headerError(`palette lane layout version ${t.version}, this viewer reads version 1`);
   const detailLevel = t.level === 2;
   const nb = t.baseVertices;
   const rest = littleEndian(t.restPositions, Float32Array, "rest_positions");
@@ -538,16 +539,19 @@ export class PaletteSynth {
     this.drawUniforms.creasePositions.value = out.texture;
     this.drawUniforms.creaseNormals.value = normals.texture;
     this.header = h;
+    this.decoder = new PaletteDecoder(h.bones, h.examples);
     this.pending = this.displayed = this.spare = null;
     return h;
   }
 
-  /** Decodes a palette frame for the next update(); throws an Error on a malformed frame (the
-   * frame shown and the one pending stay as they were). Returns the decoded frame. */
+  /** Decodes the stream's next frame (Frame.data: a codec frame of palette lanes, keyframe or
+   * delta on the frame before) for the next update(); throws an Error on a frame it cannot
+   * use (the frame shown and the one pending stay as they were). Returns the decoded frame
+   * ({header, seq, rotations, translations, xi, ...}). */
   setFrame(bytes) {
     if (!this.header) throw new Error("palette frame before the palette header");
     const spare = this.spare;
-    const frame = decodePaletteFrame(bytes, this.header.bones, this.header.examples, spare || undefined);
+    const frame = this.decoder.decode(bytes, spare || undefined);
     this.spare = this.pending && this.pending !== this.displayed ? this.pending : null;
     this.pending = frame;
     return frame;

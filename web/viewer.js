@@ -40,8 +40,9 @@ const state = {
   renderFps: 0, // of those, per second (over the last second)
 };
 window.crease = state;
-// Not enumerable, so JSON.stringify(window.crease) stays small: `palette` ({header, frame: the
-// raw MeshFrame messages, seq, readback()} in palette mode) and reconnect().
+// Not enumerable, so JSON.stringify(window.crease) stays small: `palette` (in palette mode
+// {header, frame: the raw MeshFrame messages of the header and the frame displayed, frames:
+// those from the last keyframe to it, seq, readback()}) and reconnect().
 const hidden = (name, value) =>
   Object.defineProperty(state, name, { value, enumerable: false, configurable: true, writable: true });
 hidden("palette", null);
@@ -109,6 +110,11 @@ let synth = null; // PaletteSynth, once a palette header came
 let paletteMaterial = null;
 let stream = null; // the current socket's encoding, from its first message
 let pendingMessage = null; // the palette frame message waiting for the GPU passes
+// The palette frame messages from the last keyframe on: what a decoder needs for the newest
+// (window.crease.palette.frames; deltas need their bases). At most MAX_CHAIN (the server's
+// keyframes come every 600 frames or fewer).
+let chain = null;
+const MAX_CHAIN = 4096;
 let fresh = false; // a new frame since the last redraw
 const handleGroup = new THREE.Group();
 scene.add(handleGroup);
@@ -295,26 +301,32 @@ function onPaletteTopology(t, bytes) {
   state.model = h.model;
   state.vertexCount = h.vertexCount;
   pendingMessage = null;
+  chain = null;
   if (!paletteMaterial) paletteMaterial = synth.material(materialParams);
   showMesh(synth.geometry(), paletteMaterial);
   // The shader places the vertices: the header's box is the bound, no culling needed.
   mesh.frustumCulled = false;
   mesh.visible = false; // until the first frame's passes ran
   streamIndex = null; // model vertex order
-  hidden("palette", { header: bytes, frame: null, seq: null, readback: () => synth.readback() });
+  hidden("palette", { header: bytes, frame: null, frames: null, seq: null, readback: () => synth.readback() });
   buildHandles();
 }
 
-// A palette frame: decoded now, synthesised on the GPU at the next redraw (latest wins).
+// A palette frame: decoded now (a codec frame of bone lanes, keyframe or delta), synthesised on
+// the GPU at the next redraw (latest wins).
 function onPaletteFrame(f, bytes) {
+  let decoded;
   try {
-    synth.setFrame(f.data || new Uint8Array(0));
+    decoded = synth.setFrame(f.data || new Uint8Array(0));
   } catch (err) {
     state.error = `frame ${f.seq}: ${err.message}`;
     showBanner("error", state.error);
     return;
   }
-  pendingMessage = { bytes, seq: f.seq };
+  if (decoded.header.kind === 0) chain = [bytes];
+  else if (chain && chain.length < MAX_CHAIN) chain.push(bytes);
+  else chain = null;
+  pendingMessage = { bytes, seq: f.seq, chain, length: chain ? chain.length : 0 };
   state.frames += 1;
   state.bytes += f.data.length;
   fpsWindow.frames += 1;
@@ -458,6 +470,7 @@ function render() {
   controls.update();
   if (stream === "palette" && synth.update()) {
     state.palette.frame = pendingMessage.bytes;
+    state.palette.frames = pendingMessage.chain && pendingMessage.chain.slice(0, pendingMessage.length);
     state.palette.seq = pendingMessage.seq;
     mesh.visible = true;
     if (!framed) frameCamera();

@@ -1,8 +1,9 @@
 // Synthetic palette streams for palette.test.mjs: a small closed mesh (an octahedron, Loop-
 // subdivided), a few bones, a skin, a detail regressor, encoded as the server would (protobuf
-// MeshFrame { palette_topology } and "CRPF" palette frames, core/src/codec/palette), and a
-// reference of what the viewer must draw, computed here in f64 from the decoded values
-// (web/codec.js's decodePaletteFrame, the header's q / 65535 and q * scale). Lets the GPU passes
+// MeshFrame { palette_topology }, then MeshFrame { frame } whose data are codec frames of
+// palette lanes, a keyframe then deltas: core/src/codec/palette), and a reference of what the
+// viewer must draw, computed here in f64 from the decoded values (web/codec.js's
+// PaletteDecoder, the header's q / 65535 and q * scale). Lets the GPU passes
 // of web/palette.js be checked without a server that streams palettes, on meshes small enough
 // to read, with every branch the real one has (several subdivision steps, K up to 8, bones
 // over 256, rows of D longer than one texel, buffers wider than the texture).
@@ -140,7 +141,17 @@ function normalise(q) {
  * `bones`; `examples` N; `odd` (base level): an open fan, a fan that does not chain and a
  * vertex of no triangle.
  */
-export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, examples = 5, seed = 18, frames = 2, odd = false }) {
+export async function syntheticStream({
+  level,
+  steps = 2,
+  K = 4,
+  bones = 3,
+  examples = 5,
+  seed = 18,
+  frames = 2,
+  odd = false,
+  keyframeInterval = 0,
+}) {
   await MeshoptEncoder.ready;
   const rand = rng(seed);
   const base = octahedron(0.2, [0.01, 0.08, -0.005]);
@@ -235,9 +246,12 @@ export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, exam
     topo.uint(15, N).bytes(16, le(Int16Array, detailRows)).bytes(17, le(Float32Array, detailScales));
   }
   const header = new Writer().message(3, topo).finish();
-  // Frames: random rotations (both signs of the quaternion) and translations.
+  // Frames: random rotations (both signs of the quaternion) and translations, a keyframe first
+  // (and every keyframeInterval frames), deltas between.
   const exact = [];
   const out = [];
+  const qbox = translationBox(0.06);
+  const encoder = new LaneEncoder(paletteLaneCount(bones, N), qbox);
   for (let s = 0; s < frames; s++) {
     const bs = [];
     for (let b = 0; b < bones; b++) {
@@ -248,7 +262,8 @@ export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, exam
     }
     const xi = Array.from({ length: N }, () => f(rand() * 2 - 1));
     exact.push({ bones: bs, xi });
-    const data = encodePaletteFrame(100 + s, bs, xi);
+    const key = s === 0 || (keyframeInterval > 0 && s % keyframeInterval === 0);
+    const data = encoder.encode(100 + s, paletteLanes(bs, xi, qbox), key);
     const frame = new Writer().uint(1, 100 + s).uint(3, 5).bytes(4, data);
     out.push(new Writer().message(2, frame).finish());
   }
@@ -274,43 +289,85 @@ export async function syntheticStream({ level, steps = 2, K = 4, bones = 3, exam
   };
 }
 
-/** A palette frame ("CRPF" v1) as encode_palette_frame writes it (core/src/codec/palette). */
-export function encodePaletteFrame(seq, bones, xi) {
+/** Lane vertices of a palette frame: 2B + ceil(N / 2). */
+export function paletteLaneCount(bones, xi) {
+  return 2 * bones + Math.ceil(xi / 2);
+}
+
+/** A 16-bit translation box: the cube [-r, r] (as core's translation_box). */
+export function translationBox(r) {
+  const min = [0, 1, 2].map(() => f(-r));
+  const step = [0, 1, 2].map(() => f((2 * r) / 65535));
+  return { min, step };
+}
+
+/** The palette lanes of `bones` ({q: [x, y, z, w], t: [x, y, z]}) and `xi` (palette_lanes in
+ * core/src/codec/palette): Uint16Array, 4 per lane vertex. */
+export function paletteLanes(bones, xi, qbox) {
   const B = bones.length;
-  const bytes = new Uint8Array(44 + 13 * B + 4 * xi.length);
-  const dv = new DataView(bytes.buffer);
-  bytes.set([0x43, 0x52, 0x50, 0x46], 0);
-  dv.setUint8(4, 1);
-  dv.setUint32(8, seq, true);
-  dv.setUint32(12, B, true);
-  dv.setUint32(16, xi.length, true);
-  const lo = [0, 1, 2].map((k) => f(Math.min(...bones.map((b) => f(b.t[k])))));
-  const hi = [0, 1, 2].map((k) => f(Math.max(...bones.map((b) => f(b.t[k])))));
-  const step = [0, 1, 2].map((k) => (hi[k] - lo[k] > 0 ? f(f(hi[k] - lo[k]) / 65535) : 1));
-  for (let k = 0; k < 3; k++) {
-    dv.setFloat32(20 + 4 * k, lo[k], true);
-    dv.setFloat32(32 + 4 * k, step[k], true);
-  }
-  bones.forEach((b, i) => {
-    const at = 44 + 13 * i;
+  const lanes = new Uint16Array(4 * paletteLaneCount(B, xi.length));
+  bones.forEach((b, k) => {
     const c = normalise(b.q);
     let index = 0;
-    for (let k = 1; k < 4; k++) if (Math.abs(c[k]) >= Math.abs(c[index])) index = k; // the last max
+    for (let j = 1; j < 4; j++) if (Math.abs(c[j]) >= Math.abs(c[index])) index = j; // the last max
     const sign = c[index] < 0 ? -1 : 1;
-    bytes[at] = index;
     let slot = 0;
-    for (let k = 0; k < 4; k++) {
-      if (k === index) continue;
-      const v = Math.min(1, Math.max(-1, sign * c[k] * Math.SQRT2));
-      dv.setUint16(at + 1 + 2 * slot++, Math.round((v + 1) * 0.5 * 65535), true);
+    for (let j = 0; j < 4; j++) {
+      if (j === index) continue;
+      const v = Math.min(1, Math.max(-1, sign * c[j] * Math.SQRT2));
+      lanes[8 * k + slot++] = Math.round((v + 1) * 0.5 * 65535);
     }
-    for (let k = 0; k < 3; k++) {
-      const q = Math.min(65535, Math.max(0, Math.round((f(b.t[k]) - lo[k]) / step[k])));
-      dv.setUint16(at + 7 + 2 * k, q, true);
+    lanes[8 * k + 3] = index;
+    for (let j = 0; j < 3; j++) {
+      const t = (f(b.t[j]) - qbox.min[j]) / qbox.step[j];
+      lanes[8 * k + 4 + j] = Math.floor(Math.min(65535, Math.max(0, t)) + 0.5);
     }
   });
-  xi.forEach((x, k) => dv.setFloat32(44 + 13 * B + 4 * k, x, true));
-  return bytes;
+  const dv = new DataView(new ArrayBuffer(4));
+  xi.forEach((x, j) => {
+    dv.setFloat32(0, x, true);
+    const bits = dv.getUint32(0, true);
+    const at = 4 * (2 * B + (j >> 1)) + 2 * (j & 1);
+    lanes[at] = bits & 0xffff;
+    lanes[at + 1] = bits >>> 16;
+  });
+  return lanes;
+}
+
+/** core::codec frames (FrameHeader::write in core/src/codec/frame.rs, then meshopt's vertex
+ * codec v1 of the lanes; a delta's lanes are the differences mod 2^16 from the frame before). */
+export class LaneEncoder {
+  constructor(vertexCount, qbox) {
+    this.n = vertexCount;
+    this.qbox = qbox;
+    this.prev = null;
+    this.prevSeq = 0;
+  }
+  encode(seq, lanes, key) {
+    const delta = !key && this.prev;
+    const body = delta ? lanes.map((v, i) => (v - this.prev[i]) & 0xffff) : lanes;
+    const payload = MeshoptEncoder.encodeVertexBufferLevel(new Uint8Array(body.buffer), this.n, 8, 2, 1);
+    const out = new Uint8Array(52 + payload.length);
+    const dv = new DataView(out.buffer);
+    out.set([0x43, 0x52, 0x53, 0x46], 0); // "CRSF"
+    out[4] = 1; // version
+    out[5] = delta ? 1 : 0;
+    out[6] = 0; // no normals
+    out[7] = 8; // vertex size
+    out[8] = 16; // bits
+    dv.setUint32(12, this.n, true);
+    dv.setUint32(16, seq, true);
+    dv.setUint32(20, delta ? this.prevSeq : seq, true);
+    for (let k = 0; k < 3; k++) {
+      dv.setFloat32(24 + 4 * k, this.qbox.min[k], true);
+      dv.setFloat32(36 + 4 * k, this.qbox.step[k], true);
+    }
+    dv.setUint32(48, payload.length, true);
+    out.set(payload, 52);
+    this.prev = Uint16Array.from(lanes);
+    this.prevSeq = seq;
+    return out;
+  }
 }
 
 // ---- the reference ---------------------------------------------------------------------------
@@ -338,8 +395,8 @@ export function vertexNormals(positions, triangles) {
 }
 
 /**
- * The drawn mesh of one decoded frame (`decoded`: decodePaletteFrame's {rotations,
- * translations, xi}), f64 from the header's decoded values: {positions: [[x, y, z]], normals}.
+ * The drawn mesh of one decoded frame (`decoded`: PaletteDecoder's {rotations, translations,
+ * xi}), f64 from the header's decoded values: {positions: [[x, y, z]], normals}.
  */
 export function referenceMesh(stream, decoded) {
   const m = stream.model;

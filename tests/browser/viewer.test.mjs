@@ -133,7 +133,10 @@ try {
     assert.equal(later.model, MODEL, "window.crease.model");
     assert.equal(later.level, "base", "window.crease.level");
     assert.equal(later.error, null, "window.crease.error");
-    return `${later.frames} frames, ${later.vertexCount} vertices, ${later.bytes} bytes, model ${later.model}`;
+    return (
+      `${later.frames} frames, ${later.vertexCount} vertices, ${later.bytes} bytes, model ${later.model}, ` +
+      `encoding ${later.encoding} (${later.paletteReason})`
+    );
   });
 
   await check("(b) the canvas is not blank", async () => {
