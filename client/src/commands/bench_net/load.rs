@@ -8,14 +8,14 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use crease_core::codec::{FrameKind, parse_frame};
-use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
+use crease_proto::{Encoding, v1};
 use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::Channel;
 
 use super::super::common::{authorized, connect, unix_us};
-use super::super::mesh_stream::{self, MeshReader, Subscription};
+use super::super::mesh_stream::{self, StreamReader, Subscription};
 use super::report::{Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread};
 use super::server::{Target, clock_ticks, cpu_seconds, random_token};
 use super::{BenchNetArgs, Scenario};
@@ -126,19 +126,26 @@ struct Subscribed {
     _client: CreaseClient<Channel>,
     sub: Subscription,
     /// The decoder of the subscriber that checks its room's frames.
-    reader: Option<MeshReader>,
+    reader: Option<StreamReader>,
     vertices: usize,
 }
 
-/// Connects on its own connection and subscribes to `room`'s base mesh; with `check`, reads
-/// the topology to decode the frames (the other subscribers only count bytes).
-async fn subscribe(url: String, room: String, check: bool) -> anyhow::Result<Subscribed> {
+/// Connects on its own connection and subscribes to `room`'s `level` in `encoding`; with
+/// `check`, reads the first message to decode the frames (the other subscribers only count
+/// bytes).
+async fn subscribe(
+    url: String,
+    room: String,
+    check: bool,
+    level: v1::Level,
+    encoding: Encoding,
+) -> anyhow::Result<Subscribed> {
     let mut client = connect(&url, None).await?;
-    let sub = mesh_stream::subscribe(&mut client, &room, v1::Level::Base).await?;
+    let sub = mesh_stream::subscribe_encoded(&mut client, &room, level, encoding).await?;
     let reader = if check {
         Some(
-            sub.reader()
-                .with_context(|| format!("room {room:?}: Topology"))?,
+            sub.stream_reader()
+                .with_context(|| format!("room {room:?}: first message"))?,
         )
     } else {
         None
@@ -279,13 +286,20 @@ async fn drive(
     let target = &targets[0];
     let spread = sc.spread.clamp(1, targets.len());
     let replica_of = |s: usize| s % spread;
+    let level = match args.level.as_str() {
+        "detail" => v1::Level::Detail,
+        _ => v1::Level::Base,
+    };
+    let encoding = Encoding::from_query(Some(&args.encoding))?;
     let mut connecting = JoinSet::new();
     for (r, (id, _)) in rooms.iter().enumerate() {
         for s in 0..sc.subscribers {
             let (url, id) = (targets[replica_of(s)].url.clone(), id.clone());
             // One checking (decoding) subscriber per room and replica.
             let check = s < spread;
-            connecting.spawn(async move { (r, s, subscribe(url, id, check).await) });
+            let (level, encoding) = (level, encoding);
+            connecting
+                .spawn(async move { (r, s, subscribe(url, id, check, level, encoding).await) });
         }
     }
     let mut subscribed = Vec::with_capacity(rooms.len() * sc.subscribers);

@@ -125,6 +125,13 @@ pub struct BenchNetArgs {
     /// Print one JSON object on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// The level the subscribers watch: `base` or `detail` (a model with a detail layer).
+    #[arg(long, default_value = "base", value_parser = ["base", "detail"])]
+    pub level: String,
+    /// How the subscribers receive frames: `vertices` or `palette` (issue 18: the bones and
+    /// the detail kernel vector; the checking subscriber decodes them on the CPU).
+    #[arg(long, default_value = "vertices", value_parser = ["vertices", "palette"])]
+    pub encoding: String,
     /// Bench a cluster instead: a local `nats-server` (JetStream) and this many `crease-server`
     /// replicas joined to it; one room, opened on the first replica (its owner), its
     /// --subscribers (default 300) spread over the replicas, and the same count / replicas
