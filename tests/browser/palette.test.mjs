@@ -656,7 +656,9 @@ async function serverChecks() {
           return l;
         };
         fs.writeFileSync(capture, Buffer.concat([len(header), header, ...frames.flatMap((m) => [len(m), m])]));
+        // Kept for a person: the capture and what the GPU made of it.
         fs.copyFileSync(capture, path.join(shots, `palette-${level}.capture`));
+        fs.writeFileSync(path.join(shots, `palette-${level}.gpu.f32`), Buffer.from(gpu.buffer, gpu.byteOffset, gpu.byteLength));
         const out = path.join(dir, `${level}.f32`);
         const stdout = execFileSync(creaseBin, ["decode-stream", capture, "--out", out], { encoding: "utf8", timeout: 120_000 });
         const line = stdout.trim().split("\n").filter((l) => l.startsWith("{")).at(-1);
@@ -670,12 +672,24 @@ async function serverChecks() {
         const core = floats(fs.readFileSync(out));
         const e = maxError(gpu, core);
         const tol = RELATIVE_TOLERANCE * diag;
+        // The largest differences sit where a vertex's normal sum nearly cancels (|sum| ~1e-8
+        // where most are ~2e-6: f32 rounding of the edges decides its direction, on both
+        // sides) and |h| is large; how many vertices come within a tenth of the bound.
+        let near = 0;
+        for (let i = 0; i < gpu.length; i += 3) {
+          const d = Math.max(Math.abs(gpu[i] - core[i]), Math.abs(gpu[i + 1] - core[i + 1]), Math.abs(gpu[i + 2] - core[i + 2]));
+          if (d > tol / 10) near++;
+        }
         figures.push(
           `${level}: max |gpu - core| ${e.worst.toExponential(3)} m (${(e.worst / diag).toExponential(2)} of the ` +
-            `bounds' diagonal ${diag.toFixed(4)} m; allowed ${tol.toExponential(2)}), ${info.vertex_count} vertices, seq ${c.seq}, ` +
-            `${frames.length} frames from the keyframe`,
+            `bounds' diagonal ${diag.toFixed(4)} m; allowed ${tol.toExponential(2)}) at vertex ${e.vertex}, ` +
+            `${near} vertices over a tenth of that; ${info.vertex_count} vertices, seq ${c.seq}, ${frames.length} frames from the keyframe`,
         );
-        assert.ok(e.worst <= tol, `max |gpu - core| ${e.worst} at vertex ${e.vertex} > ${tol}`);
+        assert.ok(
+          e.worst <= tol,
+          `max |gpu - core| ${e.worst} at vertex ${e.vertex} > ${tol} (${near} vertices over ${tol / 10}; the capture and ` +
+            `the GPU's positions are kept in ${shots} as palette-${level}.capture and palette-${level}.gpu.f32)`,
+        );
         return (
           `${info.vertex_count} vertices, max |gpu - core| ${e.worst.toExponential(3)} (${(e.worst / diag).toExponential(2)} ` +
           `of the diagonal), header ${header.length} B, ${frames.length} frames (${frame.length} B the last)`
