@@ -295,6 +295,66 @@ async fn grpc_viewer(
     (seen, task)
 }
 
+/// A gRPC viewer of `room`'s base level as palette frames on `replica`: each frame decoded
+/// by core's reference decoder and checked against the in-process prediction within the
+/// palette's bound (`common::palette_check::base_bound`).
+async fn palette_viewer(
+    replica: &Replica,
+    model: &Arc<TrainedModel>,
+    room: &'static str,
+) -> (Shared, tokio::task::JoinHandle<()>) {
+    use crease_core::codec::palette::{
+        PaletteFrame, PaletteSynth, palette_vertex_count, read_palette_lanes,
+    };
+    let mut stream = replica
+        .client()
+        .await
+        .subscribe(v1::SubscribeRequest {
+            room: room.into(),
+            level: v1::Level::Base as i32,
+            encoding: v1::Encoding::Palette as i32,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let seen = Shared::default();
+    let (model, out) = (Arc::clone(model), Arc::clone(&seen));
+    let task = tokio::spawn(async move {
+        let first = stream.message().await.unwrap().unwrap();
+        let Some(v1::mesh_frame::Body::PaletteTopology(t)) = first.body else {
+            panic!("a palette stream starts with its header");
+        };
+        let palette = crease_proto::read_palette_topology(&t).unwrap();
+        let bones = palette.header.bones;
+        let mut synth = PaletteSynth::new(palette.header).unwrap();
+        let mut decoder = FrameDecoder::new(palette_vertex_count(bones, 0));
+        let mut frame = PaletteFrame::default();
+        while let Ok(Some(msg)) = stream.message().await {
+            let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+                continue;
+            };
+            let mut s = out.lock().unwrap();
+            let Ok(h) = decoder.decode(&f.data) else {
+                s.decode_errors += 1;
+                continue;
+            };
+            read_palette_lanes(decoder.lanes(), &h.qbox, bones, 0, &mut frame).unwrap();
+            let got = synth.synthesize(&frame).unwrap().to_vec();
+            let want = predicted(&model, &control_frame(&model, room, f.seq, angle(f.seq)));
+            for (v, (g, w)) in got.iter().zip(&want).enumerate() {
+                let bound = common::palette_check::base_bound(&model, &synth, &frame, v, *g) + 1e-5;
+                assert!(
+                    g.distance(*w) <= bound,
+                    "palette frame {}: vertex {v}: {g} vs {w}",
+                    f.seq
+                );
+            }
+            *s.frames.entry(f.seq).or_default() += 1;
+        }
+    });
+    (seen, task)
+}
+
 /// A WebSocket viewer of `room` at `level` on `replica`.
 async fn ws_viewer(
     replica: &Replica,
@@ -493,6 +553,20 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
             || frames(&late_b) >= 10,
         )
         .await;
+    // A palette viewer on B (issue 18): B relays the owner's palette frames (codec frames of
+    // bone lanes) and they skin to the predicted mesh within the palette's bound.
+    let (palette_b, palette_task) = palette_viewer(&b, &model, "r").await;
+    publisher
+        .send_until(Duration::from_secs(5), "palette frames on B", || {
+            frames(&palette_b) >= 10
+        })
+        .await;
+    assert_eq!(palette_b.lock().unwrap().decode_errors, 0);
+    assert!(
+        !palette_task.is_finished(),
+        "the palette viewer's checks failed"
+    );
+    palette_task.abort();
     let detail_before = a.metric("crease_detail_frames_total").await;
     publisher.send(20).await;
     assert_eq!(

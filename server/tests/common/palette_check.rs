@@ -75,7 +75,7 @@ async fn frames_until(s: &mut tonic::Streaming<v1::MeshFrame>, last_seq: u64) ->
 /// The bound of one skinned vertex between the model's exact transforms and weights and the
 /// palette's decoded ones: the transforms' quantisation (`vertex_error_bound`) plus the
 /// weights' (`sum_k |dw_k| |T_k p - v|`, module docs of `core::codec::palette::header`).
-fn base_bound(
+pub(crate) fn base_bound(
     model: &TrainedModel,
     synth: &PaletteSynth,
     frame: &PaletteFrame,
