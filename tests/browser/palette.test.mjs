@@ -46,6 +46,7 @@ const shots = path.resolve(root, process.env.CREASE_SHOTS || path.join(target, "
 const creaseBin = path.resolve(root, process.env.CREASE_BIN || path.join(target, "release", "crease"));
 const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 const syntheticOnly = process.env.PALETTE_ONLY === "synthetic";
+const paletteVectorsPath = path.join(root, "tests/vectors/palette-v1.json");
 
 const VIEWPORT = { width: 1024, height: 768 };
 /** GPU vs reference: the largest coordinate error allowed, as a share of the bounds' diagonal
@@ -445,6 +446,236 @@ try {
     figures.push(...lines.map((l) => `synthetic ${l}`));
     return lines.join("; ");
   });
+  await check("(c2) palette test vectors (tests/vectors/palette-v1.json) decode and synthesise as core's in the page", async () => {
+    const v = JSON.parse(fs.readFileSync(paletteVectorsPath, "utf8"));
+    const headerBytes = Buffer.from(v.header_hex, "hex");
+    // The rewriter is exact: the message re-encoded unchanged is its own bytes.
+    assert.ok(withPaletteField(headerBytes, 16, (b) => b).equals(headerBytes), "re-encoding header_hex changes it");
+    const rows = Buffer.from(protoFields(protoFields(headerBytes).find((f) => f.field === 3).body).find((f) => f.field === 16).body);
+    const keyHex = v.frames[0].frame_hex;
+    const deltaHex = v.frames[1].frame_hex;
+    // Malformed variants: [what, header hex (null: the vector's), frames fed after it, the Error expected].
+    const malformed = [
+      ["the delta without its keyframe", null, [deltaHex], /palette frame 1: a delta on frame 0, and no frame is held/],
+      ["the delta twice", null, [keyHex, deltaHex, deltaHex], /palette frame 1: a delta on frame 0, the frame held is 1/],
+      ["the keyframe a byte short", null, [keyHex.slice(0, -2)], /frame: payload length \d+, but \d+ bytes follow the header/],
+      ["the delta a byte short", null, [keyHex, deltaHex.slice(0, -2)], /frame: payload length/],
+      ["detail_rows one value short", withPaletteField(headerBytes, 16, (b) => b.subarray(0, b.length - 2)).toString("hex"), [], /palette header: detail rows has 29 entries, expected 30/],
+      ["detail_rows an odd byte short", withPaletteField(headerBytes, 16, (b) => b.subarray(0, b.length - 1)).toString("hex"), [], /palette header: detail_rows is 59 bytes, not a multiple of 2/],
+      ["detail_rows one value long", withPaletteField(headerBytes, 16, (b) => Buffer.concat([b, b.subarray(0, 2)])).toString("hex"), [], /palette header: detail rows has 31 entries, expected 30/],
+      ["header_hex cut 10 bytes short", v.header_hex.slice(0, -20), [], /protobuf: truncated field/],
+    ];
+    assert.equal(rows.length, 2 * v.header.detail_rows.length, "detail_rows' bytes in header_hex");
+    const r = await synthPage.evaluate(
+      async ({ v, malformed }) => {
+        const THREE = await import("three");
+        const { PaletteSynth, decodePaletteTopology } = await import("/palette.js");
+        const { readMeshFrame, littleEndian } = await import("/wire.js");
+        const codec = await import("/codec.js");
+        await codec.ready;
+        const bad = [];
+        const counts = {};
+        const count = (what, n = 1) => (counts[what] = (counts[what] || 0) + n);
+        const hex = (s) => Uint8Array.from((s.match(/../g) || []).map((h) => parseInt(h, 16)));
+        // Floats are strings (as codec-v1.json): the shortest decimal of an f32.
+        const f32 = (s) => Math.fround(Number(s));
+        // Bit-exact for f32 values: Object.is tells -0 from 0 and NaN equals NaN.
+        const same = (a, e) => Object.is(Math.fround(a), typeof e === "string" ? f32(e) : Math.fround(e));
+        const cmp = (kind, eq) => (what, got, want) => {
+          const flat = want.flat(Infinity);
+          if (!got || got.length !== flat.length) {
+            bad.push(`${what}: length ${got && got.length}, expected ${flat.length}`);
+            return;
+          }
+          for (let i = 0; i < flat.length; i++) {
+            if (!eq(got[i], flat[i])) {
+              bad.push(`${what}[${i}]: ${got[i]}, expected ${flat[i]}`);
+              return;
+            }
+          }
+          count(kind, flat.length);
+        };
+        const cmpFloats = cmp("floats", same);
+        const cmpInts = cmp("integers", (a, e) => a === e);
+        const cmpValue = (what, got, want) => (got === want ? count("integers") : bad.push(`${what}: ${got}, expected ${want}`));
+        const want = v.header;
+
+        // 1. The header: wire.js's reader, then palette.js's checks and arrays (what the viewer does).
+        const t = readMeshFrame(hex(v.header_hex)).paletteTopology;
+        if (!t) return { bad: ["header_hex: readMeshFrame gave no paletteTopology"] };
+        cmpValue("model", t.model, "tetra");
+        cmpValue("level", t.level, 2);
+        cmpValue("version", t.version, v.version);
+        const h = decodePaletteTopology(t);
+        cmpValue("decoded level", h.level, "detail");
+        cmpValue("bones", h.bones, want.bones);
+        cmpValue("baseVertices", h.baseVertices, want.rest.length);
+        cmpValue("influences", h.influences, want.influences);
+        cmpValue("examples", h.examples, want.examples);
+        cmpValue("vertexCount", h.vertexCount, want.detail_scales.length);
+        cmpValue("triangleCount", h.triangleCount, want.triangles.length);
+        cmpFloats("bounds.min", h.bounds.min, ["-1.0", "-1.0", "-1.0"]);
+        cmpFloats("bounds.max", h.bounds.max, ["2.0", "2.0", "2.0"]);
+        cmpFloats("rest", h.rest, want.rest);
+        cmpInts("skinBones", h.skinBones, want.skin_bones);
+        // The 16-bit weights as sent, and as the JS exposes them (q / 65535 in f32).
+        cmpInts("skin_weights (u16)", littleEndian(t.skinWeights, Uint16Array, "skin_weights"), want.skin_weights);
+        cmpFloats("skinWeights", h.skinWeights, want.skin_weights.map((q) => Math.fround(q / 65535)));
+        // Triangles: the index codec may rotate a triangle's corners (its winding kept).
+        const tri = h.triangles;
+        let rotated = 0;
+        if (tri.length !== 3 * want.triangles.length) bad.push(`triangles: ${tri.length / 3}, expected ${want.triangles.length}`);
+        else {
+          want.triangles.forEach(([a, b, c], i) => {
+            const g = [tri[3 * i], tri[3 * i + 1], tri[3 * i + 2]];
+            const rot = [0, 1, 2].find((k) => g[k] === a && g[(k + 1) % 3] === b && g[(k + 2) % 3] === c);
+            if (rot === undefined) bad.push(`triangle ${i}: [${g}], expected [${a},${b},${c}] or a rotation of it`);
+            else if (rot !== 0) rotated++;
+          });
+          count("triangles", want.triangles.length);
+        }
+        cmpValue("steps", h.steps.length, want.steps.length);
+        want.steps.forEach((ws, l) => {
+          const s = h.steps[l];
+          const raw = t.subdivision[l];
+          if (!s) return;
+          cmpValue(`steps[${l}].rows`, s.rows, ws.row_ptr.length - 1);
+          cmpValue(`steps[${l}].columns`, s.columns, ws.columns);
+          cmpInts(`steps[${l}].rowPtr`, s.rowPtr, ws.row_ptr);
+          cmpInts(`steps[${l}].cols`, s.cols, ws.cols);
+          // As sent (the table and its indices), and as the JS expands them (one weight per entry).
+          cmpInts(`steps[${l}] weight_index`, littleEndian(raw.weightIndex, raw.weights.length <= 256 ? Uint8Array : Uint16Array, "weight_index"), ws.weight_index);
+          cmpFloats(`steps[${l}] weights table`, raw.weights, ws.weights);
+          cmpFloats(`steps[${l}].weights`, s.weights, ws.weight_index.map((i) => ws.weights[i]));
+        });
+        const N = want.examples;
+        cmpInts("detail_rows (i16)", littleEndian(t.detailRows, Int16Array, "detail_rows"), want.detail_rows);
+        cmpFloats("detail_scales", littleEndian(t.detailScales, Float32Array, "detail_scales"), want.detail_scales);
+        cmpFloats("detail (q * scale)", h.detail, want.detail_rows.map((q, i) => Math.fround(q * f32(want.detail_scales[Math.floor(i / (N + 1))]))));
+
+        // 2. The frames in order: PaletteDecoder (the viewer's, through PaletteSynth), and
+        // decodeFrame + readPaletteLanes on their own.
+        const dec = new codec.PaletteDecoder(h.bones, h.examples);
+        let prev = null;
+        const cmpFrame = (what, d, f) => {
+          cmpFloats(`${what} rotations`, d.rotations, f.decoded_bones.map((b) => b.rotation_xyzw));
+          cmpFloats(`${what} translations`, d.translations, f.decoded_bones.map((b) => b.translation));
+          cmpFloats(`${what} xi`, d.xi, f.decoded_xi);
+        };
+        v.frames.forEach((f, i) => {
+          const what = `frame ${i} (${f.kind})`;
+          try {
+            const d = dec.decode(hex(f.frame_hex));
+            cmpValue(`${what} kind`, d.header.kind, f.kind === "Key" ? 0 : 1);
+            cmpValue(`${what} seq`, d.seq, i);
+            cmpInts(`${what} lanes (PaletteDecoder)`, dec.lanes, f.lanes);
+            cmpFrame(`${what} PaletteDecoder`, d, f);
+            const r = codec.decodeFrame(hex(f.frame_hex), prev);
+            cmpInts(`${what} lanes (decodeFrame)`, r.lanes, f.lanes);
+            cmpFrame(`${what} readPaletteLanes`, codec.readPaletteLanes(r.lanes, r.positions, h.bones, h.examples), f);
+            prev = r.lanes;
+            count("frames");
+          } catch (e) {
+            bad.push(`${what}: threw ${e.message}`);
+          }
+        });
+
+        // 3. The GPU synthesis (the viewer's PaletteSynth), at the default buffer width and 3
+        // texels wide (every buffer over several rows).
+        const canvas = document.createElement("canvas");
+        canvas.width = canvas.height = 16;
+        const renderer = new THREE.WebGLRenderer({ canvas });
+        const gpu = {};
+        for (const width of [0, 3]) {
+          const synth = new PaletteSynth(renderer, width ? { width } : {});
+          synth.load(readMeshFrame(hex(v.header_hex)).paletteTopology);
+          gpu[width ? `${width} texels wide` : "default width"] = v.frames.map((f, i) => {
+            const d = synth.setFrame(hex(f.frame_hex));
+            cmpFrame(`W=${width} frame ${i} setFrame`, d, f);
+            const ran = synth.update();
+            return { ran, positions: Array.from(synth.readback()) };
+          });
+          synth.dispose();
+        }
+
+        // 4. Malformed variants: each an Error with a message, through the decoder and the
+        // synthesiser alike; a refused one leaves the synthesiser able to take the stream again.
+        const refusals = [];
+        const synth = new PaletteSynth(renderer);
+        for (const [what, headerHex, frames] of malformed) {
+          const tried = [];
+          for (const via of ["PaletteDecoder", "PaletteSynth"]) {
+            let error = null;
+            try {
+              const top = readMeshFrame(hex(headerHex || v.header_hex)).paletteTopology;
+              if (via === "PaletteSynth") {
+                synth.load(top);
+                for (const f of frames) synth.setFrame(hex(f));
+              } else {
+                const hh = decodePaletteTopology(top);
+                const d = new codec.PaletteDecoder(hh.bones, hh.examples);
+                for (const f of frames) d.decode(hex(f));
+              }
+            } catch (e) {
+              error = { isError: e instanceof Error, message: String(e && e.message) };
+            }
+            tried.push({ via, error });
+          }
+          refusals.push({ what, tried });
+        }
+        synth.load(readMeshFrame(hex(v.header_hex)).paletteTopology);
+        const after = v.frames.map((f) => {
+          synth.setFrame(hex(f.frame_hex));
+          synth.update();
+          return Array.from(synth.readback());
+        });
+        synth.dispose();
+        renderer.dispose();
+        return { bad, counts, rotated, gpu, refusals, after };
+      },
+      { v, malformed: malformed.map(([what, header, frames]) => [what, header, frames]) },
+    );
+    assert.deepEqual(r.bad, [], `mismatches:\n    ${r.bad.join("\n    ")}`);
+    const diag = diagonal([[-1, -1, -1], [2, 2, 2]]);
+    const tol = RELATIVE_TOLERANCE * diag;
+    const errs = [];
+    for (const [width, frames] of Object.entries(r.gpu)) {
+      frames.forEach((g, i) => {
+        assert.ok(g.ran, `${width}, frame ${i}: update() did not run`);
+        const e = maxError(g.positions, v.frames[i].synthesized.flat().map((x) => Math.fround(Number(x))));
+        errs.push(e.worst);
+        figures.push(
+          `palette-v1.json, ${width}, frame ${i} (${v.frames[i].kind}): max |gpu - core| ${e.worst.toExponential(3)} ` +
+            `(${(e.worst / diag).toExponential(2)} of the bounds' diagonal ${diag.toFixed(4)}; allowed ${tol.toExponential(2)}) at vertex ${e.vertex}`,
+        );
+        assert.ok(e.worst <= tol, `${width}, frame ${i}: max |gpu - core| ${e.worst} at vertex ${e.vertex} > ${tol}`);
+      });
+    }
+    r.after.forEach((p, i) => {
+      const e = maxError(p, r.gpu["default width"][i].positions);
+      assert.equal(e.worst, 0, `frame ${i} after the refusals: differs from before by ${e.worst} at vertex ${e.vertex}`);
+    });
+    for (const { what, tried } of r.refusals) {
+      const re = malformed.find((m) => m[0] === what)[3];
+      for (const { via, error } of tried) {
+        assert.ok(error, `${what} (${via}): not refused`);
+        assert.ok(error.isError, `${what} (${via}): threw a non-Error ${error.message}`);
+        assert.match(error.message, re, `${what} (${via})`);
+      }
+    }
+    if (r.rotated) {
+      notes.push(
+        `palette-v1.json: ${r.rotated} of ${v.header.triangles.length} triangles decode with their corners rotated ` +
+          `(winding kept): header.triangles is the encoder's input, not the index codec's output`,
+      );
+    }
+    return (
+      `header: ${r.counts.integers} integers and ${r.counts.floats} floats bit-exact, ${r.counts.triangles} triangles ` +
+      `(${r.rotated} rotated); ${r.counts.frames} frames' lanes, bones and xi bit-exact; GPU vs core max ` +
+      `${Math.max(...errs).toExponential(2)} (allowed ${tol.toExponential(2)}); ${malformed.length} malformed variants ` +
+      `refused by PaletteDecoder and PaletteSynth`
+    );
+  });
   await synthPage.close();
 
   await check("(d) the viewer on a mocked palette socket: overlay, window.crease.palette, bad frames, reconnects", async () => {
@@ -615,6 +846,53 @@ function varint(v) {
     out.push(b);
   } while (v > 0);
   return Buffer.from(out);
+}
+
+/** The fields of a protobuf message, in order: {field, wire, raw (key and value bytes), body
+ * (a length-delimited field's bytes)}. */
+function protoFields(bytes) {
+  const out = [];
+  let pos = 0;
+  const read = () => {
+    let v = 0;
+    let scale = 1;
+    let b;
+    do {
+      b = bytes[pos++];
+      v += (b & 0x7f) * scale;
+      scale *= 128;
+    } while (b & 0x80);
+    return v;
+  };
+  while (pos < bytes.length) {
+    const start = pos;
+    const key = read();
+    const wire = key & 7;
+    let body = null;
+    if (wire === 0) read();
+    else if (wire === 1) pos += 8;
+    else if (wire === 5) pos += 4;
+    else if (wire === 2) {
+      const len = read();
+      body = bytes.subarray(pos, pos + len);
+      pos += len;
+    } else throw new Error(`protobuf: wire type ${wire}`);
+    out.push({ field: Math.floor(key / 8), wire, raw: bytes.subarray(start, pos), body });
+  }
+  return out;
+}
+
+/** A length-delimited field, key and length in front. */
+function lengthDelimited(field, body) {
+  return Buffer.concat([varint(field * 8 + 2), varint(body.length), Buffer.from(body)]);
+}
+
+/** A MeshFrame of a PaletteTopology (field 3) with the topology's length-delimited field
+ * `field` replaced by fn(its bytes), re-encoded (the lengths around it follow). */
+function withPaletteField(meshFrame, field, fn) {
+  const rewrite = (body) =>
+    Buffer.concat(protoFields(body).map((g) => (g.field === field && g.wire === 2 ? lengthDelimited(field, fn(g.body)) : Buffer.from(g.raw))));
+  return Buffer.concat(protoFields(meshFrame).map((f) => (f.field === 3 && f.wire === 2 ? lengthDelimited(3, rewrite(f.body)) : Buffer.from(f.raw))));
 }
 
 // ---------------------------------------------------------------------------------------------
