@@ -383,13 +383,37 @@ impl Predictor {
         &self,
         ctx: &'c mut FrameContext,
     ) -> Result<&'c [Vec3], PredictError> {
-        let regressor = &self
+        self.predict_detail_with(ctx, self.detail_regressor()?)
+    }
+
+    /// The model's detail regressor.
+    fn detail_regressor(&self) -> Result<&DetailRegressor, PredictError> {
+        Ok(&self
             .model
             .detail
             .as_ref()
             .ok_or(PredictError::NoDetailLayer)?
-            .regressor;
-        self.predict_detail_with(ctx, regressor)
+            .regressor)
+    }
+
+    /// The context's detail buffers for `regressor`, checked against the model and filled
+    /// with the regressor's input of the last frame, and the synthesis they clone.
+    fn prepare_detail<'c>(
+        &self,
+        ctx: &'c mut FrameContext,
+        regressor: &DetailRegressor,
+    ) -> Result<(&'c mut DetailFrame, &'c [Vec3]), PredictError> {
+        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
+        let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
+        let frame = Self::detail_frame(
+            &mut ctx.detail,
+            &ctx.controls,
+            &ctx.rotations,
+            template,
+            regressor,
+            d_in,
+        );
+        Ok((frame, &ctx.positions))
     }
 
     /// [`Predictor::predict_detail`] with another regressor of the same layer (the evaluation's
@@ -403,20 +427,9 @@ impl Predictor {
         ctx: &'c mut FrameContext,
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
-        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
-        let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
-        let frame = Self::detail_frame(
-            &mut ctx.detail,
-            &ctx.controls,
-            &ctx.rotations,
-            template,
-            regressor,
-            d_in,
-        );
+        let (frame, base) = self.prepare_detail(ctx, regressor)?;
         regressor.predict(&frame.x, &mut frame.xi, &mut frame.h);
-        frame
-            .synth
-            .synthesize(&ctx.positions, &frame.h, &mut frame.out)?;
+        frame.synth.synthesize(base, &frame.h, &mut frame.out)?;
         Ok(&frame.out)
     }
 
@@ -432,22 +445,8 @@ impl Predictor {
         &self,
         ctx: &'c mut FrameContext,
     ) -> Result<&'c [f32], PredictError> {
-        let regressor = &self
-            .model
-            .detail
-            .as_ref()
-            .ok_or(PredictError::NoDetailLayer)?
-            .regressor;
-        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
-        let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
-        let frame = Self::detail_frame(
-            &mut ctx.detail,
-            &ctx.controls,
-            &ctx.rotations,
-            template,
-            regressor,
-            d_in,
-        );
+        let regressor = self.detail_regressor()?;
+        let (frame, _) = self.prepare_detail(ctx, regressor)?;
         let n = regressor.example_count();
         regressor.kernel_vector(&frame.x, &mut frame.xi[..n]);
         Ok(&frame.xi[..n])

@@ -15,30 +15,13 @@ use common::palette_check::{PaletteReport, compare_encodings};
 use crease_core::mesh::ExampleSet;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 
 const ADMIN: &str = "admin-secret";
 
 async fn check(name: &str, model: &TrainedModel, frames: Vec<v1::ControlFrame>) -> PaletteReport {
-    let registry = ModelRegistry::default();
-    registry.insert(name, model.clone());
-    let state = AppState::new(
-        registry,
-        Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits: Limits {
-                publish_hz: f64::INFINITY,
-                ..Limits::default()
-            },
-            ..Config::default()
-        },
-    );
-    let running = crease_server::serve(state).await.unwrap();
+    let running = common::serve_model(name, model, ADMIN).await;
     let url = format!("http://{}", running.grpc);
     let r = compare_encodings(&url, ADMIN, name, model, frames).await;
     let levels = if model.detail.is_some() { 2 } else { 1 };

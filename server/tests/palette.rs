@@ -12,8 +12,6 @@ use crease_core::model::TrainedModel;
 use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
 use crease_core::runtime::kernel::Kernel;
 use crease_core::runtime::predict::LinearOperator;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
 
 const ADMIN: &str = "admin-secret";
 
@@ -54,22 +52,7 @@ fn model_ref() -> TrainedModel {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn palette_streams_match_vertex_streams_at_both_levels() {
     let model = tube_with_posed_detail();
-    let registry = ModelRegistry::default();
-    registry.insert("tube", model.clone());
-    let state = AppState::new(
-        registry,
-        Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits: Limits {
-                publish_hz: f64::INFINITY,
-                ..Limits::default()
-            },
-            ..Config::default()
-        },
-    );
-    let running = crease_server::serve(state).await.unwrap();
+    let running = common::serve_model("tube", &model, ADMIN).await;
     let frames = (1..=12u64)
         .map(|seq| control_frame(&model, "palette-check", seq, 0.1 * seq as f32))
         .collect();

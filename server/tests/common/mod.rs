@@ -152,6 +152,31 @@ pub(crate) fn check_decoded(
     header.qbox.bits()
 }
 
+/// A server on free loopback ports hosting `model` as `name`, with admin token `admin` and no
+/// publish rate limit (the tests publish as fast as the room predicts).
+pub(crate) async fn serve_model(
+    name: &str,
+    model: &TrainedModel,
+    admin: &str,
+) -> crease_server::Running {
+    let registry = crease_server::registry::ModelRegistry::default();
+    registry.insert(name, model.clone());
+    let state = crease_server::AppState::new(
+        registry,
+        crease_server::Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            admin_token: Some(admin.into()),
+            limits: crease_server::Limits {
+                publish_hz: f64::INFINITY,
+                ..crease_server::Limits::default()
+            },
+            ..crease_server::Config::default()
+        },
+    );
+    crease_server::serve(state).await.unwrap()
+}
+
 pub(crate) fn authed<T>(msg: T, token: &str) -> Request<T> {
     let mut r = Request::new(msg);
     r.metadata_mut()
