@@ -156,6 +156,11 @@ fn build_vectors() -> Value {
     })
     .unwrap();
     let d = h.detail.as_ref().unwrap();
+    // What the index codec gives back (it may rotate a triangle's corners, winding kept).
+    let Some(v1::mesh_frame::Body::PaletteTopology(t)) = &msg.body else {
+        unreachable!("a palette topology message");
+    };
+    let decoded_triangles = read_palette_topology(t).unwrap().header.triangles;
     let steps: Vec<Value> = d
         .steps
         .iter()
@@ -181,6 +186,7 @@ fn build_vectors() -> Value {
             "skin_bones": h.skin.bones,
             "skin_weights": h.skin.weights,
             "triangles": h.triangles,
+            "decoded_triangles": decoded_triangles,
             "steps": steps,
             "examples": d.examples,
             "detail_rows": d.rows,
@@ -223,8 +229,17 @@ fn test_vectors_match() {
     assert_eq!(json!(d.rows), want["detail_rows"]);
     assert_eq!(jfs(&d.scales), want["detail_scales"]);
     assert_eq!(json!(d.steps[0].cols), want["steps"][0]["cols"]);
-    // (The index codec may rotate a triangle's corners; the decoded order is the file's.)
-    assert_eq!(json!(read.header.triangles).as_array().unwrap().len(), 16);
+    assert_eq!(json!(read.header.triangles), want["decoded_triangles"]);
+    // The index codec may rotate a triangle's corners but keeps each one and its winding.
+    let rotations = |t: [u32; 3]| [t, [t[1], t[2], t[0]], [t[2], t[0], t[1]]];
+    let input: Vec<[u32; 3]> = serde_json::from_value(want["triangles"].clone()).unwrap();
+    assert_eq!(input.len(), 16);
+    for (got, t) in read.header.triangles.iter().zip(&input) {
+        assert!(
+            rotations(*t).contains(got),
+            "{got:?} is not a rotation of {t:?}"
+        );
+    }
     // ... and the frames, in order.
     let mut dec = FrameDecoder::new(palette_vertex_count(2, 2));
     let mut frame = PaletteFrame::default();
