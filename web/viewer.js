@@ -35,6 +35,8 @@ const state = {
   encoding: null, // "palette" or "vertices": what the viewer asks for and draws
   paletteReason: null, // why
   headers: 0, // stream headers received (one per socket)
+  headerMs: null, // the last palette header: ms from opening its socket to the header read
+  headerBytes: null, // ... and its size
   sockets: 0, // sockets opened
   rendered: 0, // requestAnimationFrame redraws that showed a new frame
   renderFps: 0, // of those, per second (over the last second)
@@ -157,10 +159,13 @@ let spare = null;
 let positionsBuf = null;
 let fpsWindow = { t: performance.now(), frames: 0, bytes: 0, latency: 0, fps: 0, bpf: 0, lat: 0 };
 
+let socketOpened = 0;
+
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   const q = new URLSearchParams({ level, encoding: state.encoding });
   if (tokenInput.value) q.set("token", tokenInput.value);
+  socketOpened = performance.now();
   ws = new WebSocket(`${scheme}://${location.host}/ws/rooms/${encodeURIComponent(roomId)}?${q}`);
   ws.binaryType = "arraybuffer";
   ws.onopen = () => {
@@ -297,6 +302,8 @@ function onPaletteTopology(t, bytes) {
   }
   stream = "palette";
   state.headers += 1;
+  state.headerMs = Math.round(performance.now() - socketOpened);
+  state.headerBytes = bytes.length;
   state.encoding = "palette";
   state.model = h.model;
   state.vertexCount = h.vertexCount;

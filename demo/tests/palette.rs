@@ -27,13 +27,14 @@ async fn check(name: &str, model: &TrainedModel, frames: Vec<v1::ControlFrame>) 
     let levels = if model.detail.is_some() { 2 } else { 1 };
     for (li, level) in ["base", "detail"].iter().enumerate().take(levels) {
         eprintln!(
-            "{name} {level}: {} frames; palette {:.0} B/frame vs vertices {:.0} B/frame (1/{:.0}); header {} B; \
+            "{name} {level}: {} frames; palette {:.0} B/frame vs vertices {:.0} B/frame (1/{:.0}); header {} B in {:.0} ms; \
              max |palette - exact| {:.2e}, |palette - vertices| {:.2e}, worst error/bound {:.2}",
             r.frames[li],
             r.palette_bytes[li],
             r.vertex_bytes[li],
             r.vertex_bytes[li] / r.palette_bytes[li],
             r.header_bytes[li],
+            r.header_ms[li],
             r.palette_error[li],
             r.palette_vs_vertex[li],
             r.worst_ratio[li]
@@ -41,6 +42,13 @@ async fn check(name: &str, model: &TrainedModel, frames: Vec<v1::ControlFrame>) 
         assert!(
             r.palette_error[li] > 0.0 && r.worst_ratio[li] > 1e-3,
             "{name} {level}: {r:?}"
+        );
+        // The header (11.5 MB for the hand's detail level) streams in a bounded time on
+        // loopback, its first build included.
+        assert!(
+            r.header_ms[li] < 30_000.0,
+            "{name} {level}: header in {} ms",
+            r.header_ms[li]
         );
     }
     r

@@ -52,6 +52,8 @@ const VIEWPORT = { width: 1024, height: 768 };
 /** GPU vs reference: the largest coordinate error allowed, as a share of the bounds' diagonal
  * (f32 rounding of the passes: ~1e-7 of the coordinates per pass). */
 const RELATIVE_TOLERANCE = 1e-5;
+/** The most a palette header may take to reach the page on loopback (the detail one: 11.5 MB). */
+const HEADER_LIMIT_MS = 30_000;
 /** Unit normals, GPU vs f64 reference (f32 cross products of short edges). */
 const NORMAL_TOLERANCE = 1e-4;
 /** A quaternion's stored error bound, core::codec::palette::ROTATION_ERROR (4 half steps). */
@@ -970,9 +972,17 @@ async function serverChecks() {
           `max |gpu - core| ${e.worst} at vertex ${e.vertex} > ${tol} (${near} vertices over ${tol / 10}; the capture and ` +
             `the GPU's positions are kept in ${shots} as palette-${level}.capture and palette-${level}.gpu.f32)`,
         );
+        // The header reached the page in a bounded time (loopback; the GPU set-up after it not
+        // counted).
+        assert.ok(
+          Number.isFinite(state.headerMs) && state.headerMs <= HEADER_LIMIT_MS,
+          `the ${level} header took ${state.headerMs} ms (limit ${HEADER_LIMIT_MS})`,
+        );
+        assert.equal(state.headerBytes, header.length, "window.crease.headerBytes");
+        figures.push(`${level}: the palette header, ${header.length} B, read ${state.headerMs} ms after the socket opened`);
         return (
           `${info.vertex_count} vertices, max |gpu - core| ${e.worst.toExponential(3)} (${(e.worst / diag).toExponential(2)} ` +
-          `of the diagonal), header ${header.length} B, ${frames.length} frames (${frame.length} B the last)`
+          `of the diagonal), header ${header.length} B in ${state.headerMs} ms, ${frames.length} frames (${frame.length} B the last)`
         );
       } finally {
         fs.rmSync(dir, { recursive: true, force: true });

@@ -35,6 +35,8 @@ pub(crate) struct PaletteReport {
     pub vertex_bytes: [f64; 2],
     /// The palette headers' sizes per level.
     pub header_bytes: [usize; 2],
+    /// Milliseconds from the palette subscription to its header read, per level.
+    pub header_ms: [f64; 2],
 }
 
 async fn open_stream(
@@ -157,13 +159,15 @@ pub(crate) async fn compare_encodings(
         vec![v1::Level::Base]
     };
     let mut streams = Vec::new();
-    for &level in &levels {
+    let mut header_ms = [0.0; 2];
+    for (li, &level) in levels.iter().enumerate() {
         for encoding in [v1::Encoding::Vertices, v1::Encoding::Palette] {
-            streams.push((
-                level,
-                encoding,
-                open_stream(&mut client, room, level, encoding).await,
-            ));
+            let started = std::time::Instant::now();
+            let opened = open_stream(&mut client, room, level, encoding).await;
+            if encoding == v1::Encoding::Palette {
+                header_ms[li] = started.elapsed().as_secs_f64() * 1e3;
+            }
+            streams.push((level, encoding, opened));
         }
     }
     let last_seq = frames.last().unwrap().seq;
@@ -217,7 +221,10 @@ pub(crate) async fn compare_encodings(
         exact.insert(f.seq, (base, detail));
     }
 
-    let mut report = PaletteReport::default();
+    let mut report = PaletteReport {
+        header_ms,
+        ..PaletteReport::default()
+    };
     for (li, &level) in levels.iter().enumerate() {
         let (vi, pi) = (2 * li, 2 * li + 1);
         let Some(v1::mesh_frame::Body::Topology(topo)) = &readers[vi].2.body else {
