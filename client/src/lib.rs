@@ -71,6 +71,8 @@ pub enum Command {
     Retarget(commands::retarget::RetargetArgs),
     /// Open, inspect or close rooms on a server.
     Room(commands::room::RoomArgs),
+    /// Publish a live capture source (VMC over OSC, OptiTrack NatNet) into a retargeting room.
+    Bridge(commands::bridge::BridgeArgs),
     /// Decode a recorded mesh stream (`watch --record`; vertex or palette) with the Rust core
     /// and write its last frame's mesh: the reference for other decoders.
     DecodeStream(commands::decode_stream::DecodeStreamArgs),
@@ -95,6 +97,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Watch(args) => commands::watch::run(&args),
         Command::Stream(args) => commands::stream::run(&args),
         Command::Room(args) => commands::room::run(&args),
+        Command::Bridge(args) => commands::bridge::run(&args),
         Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),
         Command::BenchNet(args) => commands::bench_net::run(&args),

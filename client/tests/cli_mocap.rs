@@ -210,6 +210,7 @@ fn mocap_room(model: &Path) -> Room {
                 beta: 10.0,
                 d_cutoff_hz: 1.0,
             }),
+            ..Default::default()
         };
         let token = open_room(addr, "admin", open).await;
         (addr, token)

@@ -26,6 +26,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
             model: "tube".into(),
             beta: 0.0,
             filter: None,
+            ..Default::default()
         };
         (addr, open_room(addr, "admin", open).await)
     });
@@ -157,6 +158,7 @@ fn async_frames(rest: Mesh) -> impl tokio_stream::Stream<Item = v1::ControlFrame
                     .flat_map(|&c| pose.positions[c].to_array())
                     .collect(),
                 valid: Vec::new(),
+                ..Default::default()
             };
             if tx.send(frame).await.is_err() {
                 break;

@@ -141,6 +141,7 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
             capture_time_us: now_us(),
             positions: std::mem::take(&mut positions),
             valid: Vec::new(),
+            ..Default::default()
         };
         let outcome = crease_server::ingest::publish(&state, Some(&token), frame).await;
         ours = room.published();

@@ -506,6 +506,7 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         model: "tube".into(),
         beta: 0.0,
         filter: None,
+        ..Default::default()
     };
     let token = a
         .client()
@@ -686,6 +687,7 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
                 model: model_name.into(),
                 beta: 0.0,
                 filter: None,
+                ..Default::default()
             },
             ADMIN,
         ))
@@ -820,6 +822,7 @@ async fn a_partitioned_owner_serves_its_own_clients_then_yields_to_the_adopter()
         model: "tube".into(),
         beta: 0.0,
         filter: None,
+        ..Default::default()
     };
     let token = d
         .client()

@@ -118,6 +118,7 @@ pub fn control_frame(
             })
             .collect(),
         valid: mask,
+        ..Default::default()
     }
 }
 
@@ -132,6 +133,7 @@ mod tests {
             capture_time_us: 0,
             positions,
             valid,
+            ..Default::default()
         }
     }
 

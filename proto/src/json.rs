@@ -70,6 +70,7 @@ impl JsonControlFrame {
             capture_time_us: self.capture_time_us,
             positions: self.positions,
             valid,
+            ..Default::default()
         })
     }
 }
@@ -248,6 +249,7 @@ mod tests {
             held_controls: 2,
             error: None,
             control_residual: 0.002,
+            ..Default::default()
         };
         assert_eq!(
             JsonAck::from(ok).to_text(),

@@ -200,6 +200,7 @@ impl Crease for CreaseService {
             published: room.published(),
             owner,
             replica,
+            ..Default::default()
         }))
     }
 

@@ -262,6 +262,7 @@ pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAc
             held_controls: p.held,
             error: None,
             control_residual: p.control_rms,
+            ..Default::default()
         },
         Err(e) => error_ack(seq, e.frame_error()),
     }

@@ -87,6 +87,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         model: "tube".into(),
         beta: 0.0,
         filter: None,
+        ..Default::default()
     };
     let err = client.open_room(open.clone()).await.unwrap_err();
     assert_eq!(err.code(), tonic::Code::Unauthenticated);
@@ -464,6 +465,7 @@ async fn limits_refuse_and_the_room_goes_on() {
                 model: "tube".into(),
                 beta: 0.0,
                 filter: None,
+                ..Default::default()
             },
             ADMIN,
         )
@@ -591,6 +593,7 @@ async fn filtered_rooms_lag_a_step_and_acks_report_the_control_residual() {
                 model: "tube".into(),
                 beta: 0.0,
                 filter,
+                ..Default::default()
             },
             ADMIN,
         )
@@ -718,6 +721,7 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
         model: "tube".into(),
         beta: 0.0,
         filter: None,
+        ..Default::default()
     };
     let token = client
         .open_room(authed(open, ADMIN))

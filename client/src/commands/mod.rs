@@ -1,6 +1,7 @@
 //! One module per subcommand, plus the pieces they share.
 
 pub mod bench_net;
+pub mod bridge;
 pub mod common;
 pub mod control_file;
 pub mod decode_stream;

@@ -166,6 +166,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         model: args.model.clone(),
         beta: beta.unwrap_or(0.0),
         filter: filter.map(v1::MarkerFilter::from),
+        ..Default::default()
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)

@@ -201,6 +201,7 @@ pub(crate) fn control_frame(
             .flat_map(|c| p[c.vertex as usize].to_array())
             .collect(),
         valid: Vec::new(),
+        ..Default::default()
     }
 }
 

@@ -236,6 +236,7 @@ pub(super) async fn run_scenario(
             model: target.model.clone(),
             beta: 0.0,
             filter: None,
+            ..Default::default()
         };
         let opened = admin
             .open_room(authorized(open, &target.admin_token)?)
