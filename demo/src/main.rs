@@ -23,6 +23,10 @@ struct Args {
     /// Also run the demo (model `demo-hand`, room `demo`) next to --models.
     #[arg(long)]
     demo: bool,
+    /// Folder of marker maps (`NAME.toml`, the format of bench/mocap/) that retargeting rooms
+    /// may name (`crease room open --map-name NAME`) instead of sending the map.
+    #[arg(long, value_name = "DIR")]
+    maps: Option<PathBuf>,
     /// Where the demo model is cached. Default: $CREASE_CACHE_DIR, else $XDG_CACHE_HOME/crease,
     /// else ~/.cache/crease.
     #[arg(long, value_name = "DIR")]
@@ -94,6 +98,7 @@ impl From<Args> for Config {
                     message_bytes: args.max_message_bytes,
                 },
                 web: args.web.or_else(launch::source_tree_web),
+                maps: args.maps,
                 tls: args
                     .tls_cert
                     .zip(args.tls_key)

@@ -22,13 +22,89 @@ pub fn encode_valid_mask(valid: &[bool], out: &mut Vec<u8>) {
     }
 }
 
+/// Reads a retargeting room's marker frame (`ControlFrame.markers` / `markers_valid`, issue 19)
+/// into `positions` and `valid`, one per marker the room declared (`Retarget.markers`).
+///
+/// # Errors
+/// A [`WireError`] naming `positions` (a frame of control points, not markers), `markers`
+/// (count), `markers[i]` (a non-finite coordinate of a valid marker) or `markers_valid` (mask
+/// length). Nothing is written on error.
+pub fn read_marker_frame(
+    frame: &v1::ControlFrame,
+    positions: &mut [Vec3],
+    valid: &mut [bool],
+) -> Result<(), WireError> {
+    let n = positions.len();
+    assert_eq!(valid.len(), n, "one validity flag per marker");
+    if !frame.positions.is_empty() {
+        return Err(WireError::new(
+            "ControlFrame",
+            "positions",
+            format!(
+                "{} values: a retargeting room takes the capture's markers (ControlFrame.markers), not control points",
+                frame.positions.len()
+            ),
+        ));
+    }
+    if frame.markers.len() != 3 * n {
+        return Err(WireError::new(
+            "ControlFrame",
+            "markers",
+            format!(
+                "{} values, expected {} (x, y, z of the room's {n} markers, Retarget.markers)",
+                frame.markers.len(),
+                3 * n
+            ),
+        ));
+    }
+    let mask = &frame.markers_valid;
+    if !mask.is_empty() && mask.len() != n.div_ceil(8) {
+        return Err(WireError::new(
+            "ControlFrame",
+            "markers_valid",
+            format!(
+                "{} bytes, expected {} (one bit per marker, {n} markers) or none",
+                mask.len(),
+                n.div_ceil(8)
+            ),
+        ));
+    }
+    for (i, c) in frame.markers.chunks_exact(3).enumerate() {
+        if valid_bit(mask, i) && !c.iter().all(|v| v.is_finite()) {
+            return Err(WireError::new(
+                "ControlFrame",
+                format!("markers[{i}]"),
+                format!(
+                    "({}, {}, {}) is not finite; mark the marker invalid in `markers_valid` instead",
+                    c[0], c[1], c[2]
+                ),
+            ));
+        }
+    }
+    for (i, (c, (p, ok))) in frame
+        .markers
+        .chunks_exact(3)
+        .zip(positions.iter_mut().zip(valid.iter_mut()))
+        .enumerate()
+    {
+        *ok = valid_bit(mask, i);
+        *p = if *ok {
+            Vec3::new(c[0], c[1], c[2])
+        } else {
+            Vec3::ZERO
+        };
+    }
+    Ok(())
+}
+
 /// Reads a control frame for a model with `positions.len()` control points into `positions`
 /// and `valid`, and returns how many points are invalid. A point marked invalid may carry any
 /// value (it is held at its last valid position by the predictor); a valid one must be finite.
 ///
 /// # Errors
 /// A [`WireError`] naming `positions` (count), `positions[i]` (non-finite coordinate of a valid
-/// point) or `valid` (mask length). Nothing is written on error.
+/// point), `valid` (mask length), or `markers` (a control frame that carries markers: only a
+/// retargeting room reads them). Nothing is written on error.
 pub fn read_control_frame(
     frame: &v1::ControlFrame,
     positions: &mut [Vec3],
@@ -36,6 +112,16 @@ pub fn read_control_frame(
 ) -> Result<usize, WireError> {
     let n = positions.len();
     assert_eq!(valid.len(), n, "one validity flag per control point");
+    if !frame.markers.is_empty() {
+        return Err(WireError::new(
+            "ControlFrame",
+            "markers",
+            format!(
+                "{} values: this room takes control points; markers need a room opened with a Retarget",
+                frame.markers.len()
+            ),
+        ));
+    }
     if frame.positions.len() != 3 * n {
         return Err(WireError::new(
             "ControlFrame",

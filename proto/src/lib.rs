@@ -28,7 +28,9 @@ pub mod json;
 pub mod mesh;
 pub mod palette;
 
-pub use control::{control_frame, encode_valid_mask, read_control_frame, valid_bit};
+pub use control::{
+    control_frame, encode_valid_mask, read_control_frame, read_marker_frame, valid_bit,
+};
 pub use convert::{Encoding, Level, box3, model_info};
 pub use errors::WireError;
 pub use mesh::{StreamTopology, TopologyParts, frame_message, read_topology, topology_message};

@@ -155,6 +155,25 @@ impl Crease for CreaseService {
                 f.min_cutoff_hz, f.beta, f.d_cutoff_hz
             )));
         }
+        let capture = match r.retarget {
+            None => None,
+            Some(_) if self.state.cluster().is_some() => {
+                return Err(Status::unimplemented(
+                    "retarget: retargeting rooms are not replicated across a cluster yet; open it on a single server",
+                ));
+            }
+            Some(spec) => {
+                let maps = self.state.config.maps.clone();
+                let m = Arc::clone(&model);
+                let spec = tokio::task::spawn_blocking(move || {
+                    crate::capture::CaptureSpec::new(spec, maps.as_deref(), &m.model)
+                })
+                .await
+                .map_err(|e| Status::internal(format!("retarget: {e}")))?
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+                Some(Arc::new(spec))
+            }
+        };
         let room = match self.state.cluster() {
             Some(cluster) => {
                 Arc::clone(cluster)
@@ -165,6 +184,10 @@ impl Crease for CreaseService {
                 let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
                     .await
                     .map_err(|e| e.status())?;
+                let room = match capture {
+                    Some(spec) => room.with_capture(spec),
+                    None => room,
+                };
                 self.state.add_room(room).map_err(|e| match e {
                     AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
                     AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
@@ -200,7 +223,7 @@ impl Crease for CreaseService {
             published: room.published(),
             owner,
             replica,
-            ..Default::default()
+            retarget: room.pipeline().capture().map(|c| c.wire().clone()),
         }))
     }
 

@@ -187,6 +187,7 @@ async fn publish_inner(
                 control_rms: ack.control_residual,
                 // The owner synthesised (or not) the detail layer: not this replica's work.
                 detail: false,
+                control_rms_capture: ack.control_residual_capture,
             }),
         };
     }
@@ -262,7 +263,7 @@ pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAc
             held_controls: p.held,
             error: None,
             control_residual: p.control_rms,
-            ..Default::default()
+            control_residual_capture: p.control_rms_capture,
         },
         Err(e) => error_ack(seq, e.frame_error()),
     }
@@ -342,8 +343,10 @@ mod tests {
                 latency_us: 30,
                 control_rms: 0.5,
                 detail: false,
+                control_rms_capture: 2.5,
             }),
         );
+        assert_eq!(ok.control_residual_capture, 2.5);
         assert_eq!(
             (
                 ok.seq,

@@ -25,6 +25,7 @@
 //! `crease-proto`'s. Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the
 //! embedded demo and the `crease-server` binary are in `crease-demo`.
 
+pub mod capture;
 pub mod cluster;
 pub mod fanout;
 pub mod frames;
@@ -90,6 +91,8 @@ pub struct Config {
     pub web: Option<std::path::PathBuf>,
     /// Serve gRPC and HTTP (and so WebSocket) over TLS with this certificate and key.
     pub tls: Option<TlsFiles>,
+    /// Folder of marker maps (`*.toml`) a retargeting room may name (`Retarget.map_name`).
+    pub maps: Option<std::path::PathBuf>,
 }
 
 /// A TLS certificate chain and its private key, PEM files.
@@ -149,6 +152,7 @@ impl Default for Config {
             stream: room::StreamSettings::default(),
             web: None,
             tls: None,
+            maps: None,
         }
     }
 }

@@ -39,6 +39,7 @@ use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
 
+use crate::capture::{Capture, CaptureSpec};
 use crate::fanout::{Channel, Fanout};
 use crate::frames::FramePool;
 use crate::registry::LoadedModel;
@@ -108,6 +109,9 @@ pub struct Published {
     /// Whether the detail layer was synthesised (someone, here or on another replica,
     /// watches it).
     pub detail: bool,
+    /// A retargeting room's `control_rms` in the capture's units (0 before its scale is known,
+    /// and in other rooms).
+    pub control_rms_capture: f32,
 }
 
 /// Why a frame was not published (the room is unchanged but for the encoders' state).
@@ -157,6 +161,9 @@ struct State {
     encoded: Vec<u8>,
     /// The last detail kernel vector (palette detail frames).
     xi: Vec<f32>,
+    /// A retargeting room's capture state (issue 19), and the frame's retargeted points.
+    capture: Option<Capture>,
+    targets: Vec<Vec3>,
     /// One filter per control point (empty when the room does not filter).
     filters: Vec<OneEuro>,
     /// The previous frame's capture time and arrival, for the filter's time step.
@@ -175,6 +182,8 @@ pub struct Pipeline {
     state: Mutex<State>,
     /// Each level's index buffer, meshopt-encoded once on first need.
     indices: [OnceLock<Result<Bytes, CodecError>>; 2],
+    /// A retargeting room's map and markers (issue 19).
+    capture: Option<Arc<CaptureSpec>>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -228,21 +237,22 @@ fn clear(fanout: &dyn Fanout, live: &mut [bool; Channel::COUNT], channel: Channe
     }
 }
 
-/// RMS over the valid control points of the distance between the received point `i`
-/// (`x, y, z` in `targets`, the frame's wire positions) and the predicted position of control
-/// vertex `i` (`predicted(vertex)`); 0 when none is valid.
+/// RMS over the valid control points of the distance between the target of point `i`
+/// (`target(i)`: the frame's wire position, or a retargeting room's retargeted point) and the
+/// predicted position of control vertex `i` (`predicted(vertex)`); 0 when none is valid.
 fn control_residual(
     controls: &[ControlPoint],
     predicted: impl Fn(usize) -> Vec3,
-    targets: &[f32],
+    target: impl Fn(usize) -> Vec3,
     valid: &[bool],
 ) -> f32 {
     let (sum, n) = controls
         .iter()
-        .zip(targets.chunks_exact(3).zip(valid))
+        .zip(valid)
+        .enumerate()
         .filter(|(_, (_, ok))| **ok)
-        .fold((0.0f64, 0usize), |(s, n), (c, (t, _))| {
-            let d = predicted(c.vertex as usize).distance_squared(Vec3::new(t[0], t[1], t[2]));
+        .fold((0.0f64, 0usize), |(s, n), (i, (c, _))| {
+            let d = predicted(c.vertex as usize).distance_squared(target(i));
             (s + f64::from(d), n + 1)
         });
     if n == 0 {
@@ -306,12 +316,27 @@ impl Pipeline {
                 encoded: Vec::new(),
                 xi: Vec::new(),
                 lanes: Vec::new(),
+                capture: None,
+                targets: Vec::new(),
                 filters: filter.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]),
                 last_time: None,
             }),
             model,
             indices: [OnceLock::new(), OnceLock::new()],
+            capture: None,
         })
+    }
+
+    /// Makes this a retargeting room (issue 19): its frames carry `spec`'s markers.
+    pub(crate) fn set_capture(&mut self, spec: Arc<CaptureSpec>) {
+        let state = self.state.get_mut().unwrap_or_else(|e| e.into_inner());
+        state.capture = Some(Capture::new(&spec));
+        self.capture = Some(spec);
+    }
+
+    /// A retargeting room's map and markers.
+    pub fn capture(&self) -> Option<&CaptureSpec> {
+        self.capture.as_deref()
     }
 
     /// The control-point filter.
@@ -395,7 +420,16 @@ impl Pipeline {
     ) -> Result<Published, PipelineError> {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let state = &mut *guard;
-        let held = read_control_frame(frame, &mut state.controls, &mut state.valid)?;
+        let held = match &mut state.capture {
+            Some(capture) => {
+                let held = capture.read(frame, &mut state.controls, &mut state.valid)?;
+                // The retargeted points, before the filter: what the residual measures.
+                state.targets.clear();
+                state.targets.extend_from_slice(&state.controls);
+                held
+            }
+            None => read_control_frame(frame, &mut state.controls, &mut state.valid)?,
+        };
         if !state.filters.is_empty() {
             // The time step: capture times when the publisher sends increasing ones, else
             // arrival times.
@@ -427,13 +461,18 @@ impl Pipeline {
         let detail_palette = self.has_detail() && watched(Level::Detail, Encoding::Palette);
         let base_vertices = watched(Level::Base, Encoding::Vertices)
             || !(watched(Level::Base, Encoding::Palette) || detail_palette);
+        let targets = &state.targets;
+        let target = |i: usize| match state.capture {
+            Some(_) => targets[i],
+            None => Vec3::from_slice(&frame.positions[3 * i..3 * i + 3]),
+        };
         let control_rms = if base_vertices || detail_vertices {
             self.predictor.skin(&mut state.ctx)?;
             let predicted = state.ctx.positions();
             control_residual(
                 &self.model.model.controls,
                 |v| predicted[v],
-                &frame.positions,
+                target,
                 &state.valid,
             )
         } else {
@@ -442,10 +481,17 @@ impl Pipeline {
             control_residual(
                 &self.model.model.controls,
                 |v| self.predictor.skin_vertex(ctx, v),
-                &frame.positions,
+                target,
                 &state.valid,
             )
         };
+        // In the capture's units: model units divided by the capture-to-model scale.
+        let control_rms_capture = state
+            .capture
+            .as_ref()
+            .and_then(Capture::scale)
+            .filter(|s| *s > 0.0)
+            .map_or(0.0, |s| control_rms / s);
         let stamp = |u: &mut crate::frames::MeshUpdate| {
             u.seq = frame.seq;
             u.capture_time_us = frame.capture_time_us;
@@ -522,6 +568,7 @@ impl Pipeline {
             latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
             control_rms,
             detail,
+            control_rms_capture,
         })
     }
 }

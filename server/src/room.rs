@@ -138,6 +138,13 @@ impl Room {
         self
     }
 
+    /// Makes this a retargeting room (issue 19): its publishers send `spec`'s markers, which
+    /// the pipeline retargets to control points (`crate::capture`).
+    pub fn with_capture(mut self, spec: Arc<crate::capture::CaptureSpec>) -> Self {
+        self.pipeline.set_capture(spec);
+        self
+    }
+
     /// Replaces the publish token (an operator's fixed token, e.g. `--demo-token`).
     pub fn with_token(mut self, token: &str) -> Self {
         self.session.set_token(token);
