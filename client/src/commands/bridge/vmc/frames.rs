@@ -1,0 +1,528 @@
+//! From datagrams to control frames: the bridge's state (latest bone poses, root, trackers),
+//! when a frame is complete, what each of the room's declared markers reads, and the UDP
+//! receive loop that feeds a channel (the Publish stream, or a test).
+//!
+//! **Frames.** A bundle is one VMC frame (senders send one bundle per rendered frame): every
+//! bundle that carries a bone of the bridged hand (the hand or a finger) yields one control
+//! frame, built after the whole bundle (nested bundles included) is applied. Messages sent
+//! loose, outside any bundle, accumulate until a loose `/VMC/Ext/OK`, which closes them into
+//! a frame the same way. A marker is valid in a frame when it was received in it: a bone (tips:
+//! their distal bone; the chain above the hand may be older) or a tracker (`/VMC/Ext/Tra/Pos`,
+//! named by its serial). `capture_time_us` is the wall clock when the datagram arrived.
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::bail;
+use crease_proto::{encode_valid_mask, v1};
+
+use super::osc::{Datagram, Vmc, decode};
+use super::skeleton::{Hand, Joints, Pose, Skeleton, TipLengths, is_humanoid_name};
+
+/// Where a declared marker's position comes from.
+#[derive(Clone, Debug, PartialEq)]
+enum Source {
+    /// A skeleton joint, by [`Skeleton::names`] index.
+    Joint(usize),
+    /// A tracker, by serial.
+    Tracker(String),
+}
+
+/// The bridge's state between datagrams.
+#[derive(Debug)]
+pub struct Bridge {
+    room: String,
+    hand: Hand,
+    skeleton: Skeleton,
+    locals: Vec<Option<Pose>>,
+    fresh: Vec<bool>,
+    root: Option<Pose>,
+    trackers: BTreeMap<String, Pose>,
+    fresh_trackers: BTreeSet<String>,
+    /// Loose messages since the last frame carried a hand bone.
+    loose_hand: bool,
+    declared: Vec<String>,
+    sources: Vec<Source>,
+    seq: u64,
+    /// Every bone name received (for the no-hand warning).
+    bones_seen: BTreeSet<String>,
+    /// The latest joints (for tests and the summary).
+    last: Joints,
+}
+
+/// What one datagram did.
+#[derive(Debug, Default, PartialEq)]
+pub struct Applied {
+    /// The control frame it completed, if any.
+    pub frame: Option<v1::ControlFrame>,
+    /// Whether it was a bundle.
+    pub bundle: bool,
+}
+
+impl Bridge {
+    /// A bridge of `hand` publishing `declared` markers (the room's `Retarget.markers`, in
+    /// order) into `room`.
+    ///
+    /// # Errors
+    /// A declared name that is a humanoid bone or tip the stream does not carry (the other
+    /// hand's, a leg's), naming it and listing what the stream carries. Other names are taken
+    /// for tracker serials ([`Bridge::missing_trackers`]).
+    pub fn new(
+        room: &str,
+        hand: Hand,
+        tips: TipLengths,
+        declared: &[String],
+    ) -> anyhow::Result<Bridge> {
+        let skeleton = Skeleton::new(hand, tips);
+        let mut sources = Vec::with_capacity(declared.len());
+        for name in declared {
+            match skeleton.names().iter().position(|n| n == name) {
+                Some(i) => sources.push(Source::Joint(i)),
+                None if is_humanoid_name(name) => bail!(
+                    "room {room:?} declares marker {name:?}, which a VMC stream of the {} hand does not carry{}; it carries {}, and trackers by serial",
+                    hand.prefix().to_lowercase(),
+                    if name.starts_with(if hand == Hand::Right { "Left" } else { "Right" }) {
+                        " (see --hand)"
+                    } else {
+                        ""
+                    },
+                    skeleton.names().join(", ")
+                ),
+                None => sources.push(Source::Tracker(name.clone())),
+            }
+        }
+        let n = skeleton.names().len();
+        Ok(Bridge {
+            room: room.to_owned(),
+            hand,
+            skeleton,
+            locals: vec![None; n],
+            fresh: vec![false; n],
+            root: None,
+            trackers: BTreeMap::new(),
+            fresh_trackers: BTreeSet::new(),
+            loose_hand: false,
+            declared: declared.to_vec(),
+            sources,
+            seq: 0,
+            bones_seen: BTreeSet::new(),
+            last: Joints::default(),
+        })
+    }
+
+    /// The skeleton's marker names (joints and tips).
+    pub fn joint_names(&self) -> &[String] {
+        self.skeleton.names()
+    }
+
+    /// The latest frame's joints, in [`Bridge::joint_names`] order.
+    pub fn joints(&self) -> &Joints {
+        &self.last
+    }
+
+    /// Declared markers taken for trackers whose serial has not been received.
+    pub fn missing_trackers(&self) -> Vec<&str> {
+        self.sources
+            .iter()
+            .filter_map(|s| match s {
+                Source::Tracker(t) if !self.trackers.contains_key(t) => Some(t.as_str()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// What the stream carries: the skeleton's names and the trackers received so far.
+    pub fn carried(&self) -> String {
+        let trackers: Vec<&str> = self.trackers.keys().map(String::as_str).collect();
+        format!(
+            "{}; trackers: {}",
+            self.skeleton.names().join(", "),
+            if trackers.is_empty() {
+                "none received".to_owned()
+            } else {
+                trackers.join(", ")
+            }
+        )
+    }
+
+    /// Every bone name received so far.
+    pub fn bones_seen(&self) -> &BTreeSet<String> {
+        &self.bones_seen
+    }
+
+    /// The bridged hand.
+    pub fn hand(&self) -> Hand {
+        self.hand
+    }
+
+    /// Applies one decoded datagram received at `capture_time_us`; returns the frame it
+    /// completes (module docs).
+    pub fn apply(&mut self, d: &Datagram, capture_time_us: i64) -> Applied {
+        if d.bundle {
+            self.clear_fresh();
+        }
+        let mut hand = false;
+        let mut ok = false;
+        for m in &d.messages {
+            match m {
+                Vmc::Bone { name, pose } => {
+                    if !self.bones_seen.contains(name) {
+                        self.bones_seen.insert(name.clone());
+                    }
+                    if let Some(i) = self.skeleton.bone_index(name) {
+                        self.locals[i] = Some(*pose);
+                        self.fresh[i] = true;
+                        hand |= self.skeleton.is_hand_bone(i);
+                    }
+                }
+                Vmc::Root { pose } => self.root = Some(*pose),
+                Vmc::Tracker { serial, pose } => {
+                    self.trackers.insert(serial.clone(), *pose);
+                    self.fresh_trackers.insert(serial.clone());
+                }
+                Vmc::Ok => ok = true,
+                Vmc::Time(_) => {}
+            }
+        }
+        let complete = if d.bundle {
+            hand
+        } else {
+            self.loose_hand |= hand;
+            ok && std::mem::take(&mut self.loose_hand)
+        };
+        let frame = complete.then(|| self.frame(capture_time_us));
+        if frame.is_some() || (!d.bundle && ok) {
+            self.clear_fresh();
+        }
+        Applied {
+            frame,
+            bundle: d.bundle,
+        }
+    }
+
+    fn clear_fresh(&mut self) {
+        self.fresh.iter_mut().for_each(|f| *f = false);
+        self.fresh_trackers.clear();
+    }
+
+    fn frame(&mut self, capture_time_us: i64) -> v1::ControlFrame {
+        self.last = self.skeleton.solve(&self.locals, &self.fresh, self.root);
+        let mut markers = Vec::with_capacity(3 * self.sources.len());
+        let mut valid = Vec::with_capacity(self.sources.len());
+        for s in &self.sources {
+            let p = match s {
+                Source::Joint(i) => self.last.valid[*i].then(|| self.last.positions[*i]),
+                Source::Tracker(t) => self
+                    .fresh_trackers
+                    .contains(t)
+                    .then(|| self.trackers[t].position),
+            };
+            match p.filter(|p| p.is_finite()) {
+                Some(p) => {
+                    markers.extend_from_slice(&p.to_array());
+                    valid.push(true);
+                }
+                None => {
+                    markers.extend_from_slice(&[0.0; 3]);
+                    valid.push(false);
+                }
+            }
+        }
+        let mut mask = Vec::new();
+        if valid.iter().any(|v| !v) {
+            encode_valid_mask(&valid, &mut mask);
+        }
+        let seq = self.seq;
+        self.seq += 1;
+        v1::ControlFrame {
+            room: self.room.clone(),
+            seq,
+            capture_time_us,
+            markers,
+            markers_valid: mask,
+            ..Default::default()
+        }
+    }
+
+    /// The declared markers, in order.
+    pub fn declared(&self) -> &[String] {
+        &self.declared
+    }
+}
+
+/// Counters of a running bridge, shared by the receive loop, the publisher and the summary.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// Datagrams received.
+    pub datagrams: AtomicU64,
+    /// Of them, bundles.
+    pub bundles: AtomicU64,
+    /// Malformed datagrams, dropped.
+    pub dropped: AtomicU64,
+    /// Control frames built.
+    pub frames: AtomicU64,
+    /// Frames handed to the publisher.
+    pub published: AtomicU64,
+    /// Frames dropped because the publisher was behind (a full channel).
+    pub behind: AtomicU64,
+    /// Acknowledged frames.
+    pub acked: AtomicU64,
+    /// Refused frames.
+    pub refused: AtomicU64,
+    /// The first malformed datagrams' reasons (a few, for the log).
+    pub reasons: Mutex<Vec<String>>,
+    /// Frames sent, by seq, with when their datagram arrived (for source-to-ack latency).
+    pub sent_at: Mutex<VecDeque<(u64, Instant)>>,
+    /// Source-to-ack latencies since the last summary, microseconds.
+    pub latency_period: Mutex<Vec<u64>>,
+    /// All source-to-ack latencies (the first million), microseconds.
+    pub latency_all: Mutex<Vec<u64>>,
+}
+
+/// Malformed datagrams whose reason is logged; the rest are counted.
+const SHOWN_REASONS: usize = 5;
+/// Sent frames remembered for latency (older ones are forgotten unacked).
+const SENT_MEMORY: usize = 4096;
+/// Latency samples kept for the final percentiles.
+const LATENCY_MEMORY: usize = 1_000_000;
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+impl Stats {
+    fn count(c: &AtomicU64) -> u64 {
+        c.load(Ordering::Relaxed)
+    }
+
+    /// Records an ack of `seq`: its source-to-ack latency, if the frame is remembered.
+    pub fn ack(&self, seq: u64, refused: bool) {
+        if refused {
+            self.refused.fetch_add(1, Ordering::Relaxed);
+        } else {
+            self.acked.fetch_add(1, Ordering::Relaxed);
+        }
+        let at = {
+            let mut q = lock(&self.sent_at);
+            let mut found = None;
+            while let Some((s, at)) = q.pop_front() {
+                if s == seq {
+                    found = Some(at);
+                    break;
+                }
+                if s > seq {
+                    q.push_front((s, at));
+                    break;
+                }
+            }
+            found
+        };
+        if let Some(at) = at {
+            let us = at.elapsed().as_micros() as u64;
+            lock(&self.latency_period).push(us);
+            let mut all = lock(&self.latency_all);
+            if all.len() < LATENCY_MEMORY {
+                all.push(us);
+            }
+        }
+    }
+
+    /// The one-line summary; `period` takes (and clears) the latencies since the last one.
+    pub fn summary(&self, period: bool) -> String {
+        let mut l = if period {
+            std::mem::take(&mut *lock(&self.latency_period))
+        } else {
+            lock(&self.latency_all).clone()
+        };
+        l.sort_unstable();
+        let latency = if l.is_empty() {
+            "no acks".to_owned()
+        } else {
+            format!(
+                "p50 {:.1} ms p99 {:.1} ms",
+                crate::commands::common::percentile(&l, 50.0) as f64 / 1e3,
+                crate::commands::common::percentile(&l, 99.0) as f64 / 1e3
+            )
+        };
+        format!(
+            "vmc: {} datagrams ({} bundles) in, {} frames built, {} published ({} acked, {} refused, {} dropped: publisher behind), {} malformed datagrams dropped; source-to-ack latency {latency}",
+            Self::count(&self.datagrams),
+            Self::count(&self.bundles),
+            Self::count(&self.frames),
+            Self::count(&self.published),
+            Self::count(&self.acked),
+            Self::count(&self.refused),
+            Self::count(&self.behind),
+            Self::count(&self.dropped),
+        )
+    }
+}
+
+/// How the receive loop runs.
+#[derive(Clone, Debug)]
+pub struct LoopOptions {
+    /// Warn when no bone of the hand arrived for this long; declared trackers not received
+    /// by then are an error.
+    pub warn_after: Duration,
+    /// Return once the stream has been silent this long after its first datagram.
+    pub idle_exit: Option<Duration>,
+    /// Print [`Stats::summary`] this often.
+    pub summary_every: Option<Duration>,
+    /// Where the loop listens (for messages).
+    pub listen: String,
+}
+
+/// Receives datagrams on `socket`, decodes them, and sends each completed frame to `out`
+/// (without waiting: a full channel drops the frame, counted in [`Stats::behind`]). Returns
+/// when `out` is closed, or after [`LoopOptions::idle_exit`] of silence.
+///
+/// # Errors
+/// The socket failing, or declared trackers that never arrived ([`LoopOptions::warn_after`]
+/// after the first datagram), naming them and listing what the stream carries.
+pub async fn receive_loop(
+    socket: tokio::net::UdpSocket,
+    mut bridge: Bridge,
+    out: tokio::sync::mpsc::Sender<v1::ControlFrame>,
+    stats: &Stats,
+    opts: &LoopOptions,
+) -> anyhow::Result<Bridge> {
+    let mut buf = vec![0u8; 65536];
+    let start = Instant::now();
+    let mut first: Option<Instant> = None;
+    let mut last_datagram = start;
+    let mut last_hand = start;
+    let mut warned = false;
+    let mut trackers_checked = false;
+    let mut next_summary = opts.summary_every.map(|d| start + d);
+    let mut tick = tokio::time::interval(Duration::from_millis(250));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    loop {
+        tokio::select! {
+            r = socket.recv(&mut buf) => {
+                let n = r.map_err(|e| anyhow::anyhow!("receiving on {}: {e}", opts.listen))?;
+                let now = Instant::now();
+                let capture = crate::commands::common::unix_us();
+                first.get_or_insert(now);
+                last_datagram = now;
+                stats.datagrams.fetch_add(1, Ordering::Relaxed);
+                let d = match decode(&buf[..n]) {
+                    Ok(d) => d,
+                    Err(why) => {
+                        let k = stats.dropped.fetch_add(1, Ordering::Relaxed);
+                        if (k as usize) < SHOWN_REASONS {
+                            eprintln!("vmc: dropped a malformed datagram ({n} bytes): {why}");
+                            lock(&stats.reasons).push(why);
+                        } else if k as usize == SHOWN_REASONS {
+                            eprintln!("vmc: further malformed datagrams are counted in the summary");
+                        }
+                        continue;
+                    }
+                };
+                let applied = bridge.apply(&d, capture);
+                if applied.bundle {
+                    stats.bundles.fetch_add(1, Ordering::Relaxed);
+                }
+                let Some(frame) = applied.frame else { continue };
+                last_hand = now;
+                warned = false;
+                stats.frames.fetch_add(1, Ordering::Relaxed);
+                let seq = frame.seq;
+                {
+                    let mut q = lock(&stats.sent_at);
+                    q.push_back((seq, now));
+                    if q.len() > SENT_MEMORY {
+                        q.pop_front();
+                    }
+                }
+                match out.try_send(frame) {
+                    Ok(()) => {
+                        stats.published.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => {
+                        stats.behind.fetch_add(1, Ordering::Relaxed);
+                    }
+                    Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => return Ok(bridge),
+                }
+            }
+            _ = tick.tick() => {
+                let now = Instant::now();
+                if out.is_closed() {
+                    return Ok(bridge);
+                }
+                if let (Some(idle), Some(_)) = (opts.idle_exit, first)
+                    && now - last_datagram >= idle
+                {
+                    return Ok(bridge);
+                }
+                if !warned && now - last_hand >= opts.warn_after {
+                    warned = true;
+                    eprintln!("{}", no_hand_warning(&bridge, stats, opts, now - last_hand));
+                }
+                if let Some(f) = first
+                    && !trackers_checked
+                    && now - f >= opts.warn_after
+                {
+                    trackers_checked = true;
+                    let missing = bridge.missing_trackers();
+                    if !missing.is_empty() {
+                        bail!(
+                            "the room declares marker{} {} that the VMC stream did not carry in {:.0} s (names that are not Unity bones are taken for tracker serials); it carries {}",
+                            if missing.len() > 1 { "s" } else { "" },
+                            missing.iter().map(|m| format!("{m:?}")).collect::<Vec<_>>().join(", "),
+                            opts.warn_after.as_secs_f64(),
+                            bridge.carried()
+                        );
+                    }
+                }
+                if let (Some(at), Some(every)) = (next_summary, opts.summary_every)
+                    && now >= at
+                {
+                    eprintln!("{}", stats.summary(true));
+                    next_summary = Some(at + every);
+                }
+            }
+        }
+    }
+}
+
+fn no_hand_warning(bridge: &Bridge, stats: &Stats, opts: &LoopOptions, silent: Duration) -> String {
+    let side = bridge.hand().prefix();
+    let datagrams = stats.datagrams.load(Ordering::Relaxed);
+    if datagrams == 0 {
+        return format!(
+            "vmc: WARNING: no datagram received on {} in {:.0} s: is the VMC sender (VSeeFace, VirtualMotionCapture, Warudo, ...) sending to this machine and port?",
+            opts.listen,
+            silent.as_secs_f64()
+        );
+    }
+    let seen = bridge.bones_seen();
+    let other = if side == "Right" { "Left" } else { "Right" };
+    let hint = if seen.iter().any(|b| b.starts_with(&format!("{other}Hand"))) {
+        format!(
+            " ({other}Hand arrives: try --hand {})",
+            other.to_lowercase()
+        )
+    } else if seen.is_empty() {
+        " (no /VMC/Ext/Bone/Pos at all: is the sender's bone output on?)".to_owned()
+    } else {
+        " (is the sender tracking hands?)".to_owned()
+    };
+    let shown: Vec<&str> = seen.iter().take(12).map(String::as_str).collect();
+    format!(
+        "vmc: WARNING: no {side}Hand or {side} finger bone in the last {:.0} s of the VMC stream{hint}: {datagrams} datagrams so far, {} malformed; bones seen: {}{}",
+        silent.as_secs_f64(),
+        stats.dropped.load(Ordering::Relaxed),
+        if shown.is_empty() {
+            "none".to_owned()
+        } else {
+            shown.join(", ")
+        },
+        if seen.len() > shown.len() {
+            ", ..."
+        } else {
+            ""
+        }
+    )
+}

@@ -1,0 +1,510 @@
+//! `crease bridge vmc` up to the ControlFrames it publishes: OSC decoding (datagrams built by
+//! `rosc` here, and by a third-party sender, python-osc, in `tests/python/vmc_sender.py`),
+//! forward kinematics against a chain computed by hand, the fingertips, the left- to
+//! right-handed mirror, validity, and the UDP receive loop surviving junk. The loop runs
+//! against a channel instead of the Publish RPC.
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
+
+use std::f32::consts::FRAC_1_SQRT_2 as H;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use crease_cli::commands::bridge::vmc::frames::{Bridge, LoopOptions, Stats, receive_loop};
+use crease_cli::commands::bridge::vmc::osc::decode;
+use crease_cli::commands::bridge::vmc::skeleton::{Hand, TipLengths};
+use crease_proto::{v1, valid_bit};
+use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+
+const ID: [f32; 4] = [0.0, 0.0, 0.0, 1.0];
+/// 90 degrees about Unity's Y and Z.
+const RY90: [f32; 4] = [0.0, H, 0.0, H];
+const RZ90: [f32; 4] = [0.0, 0.0, H, H];
+
+fn pose_msg(addr: &str, name: &str, p: [f32; 3], q: [f32; 4]) -> OscPacket {
+    let mut args = vec![OscType::String(name.into())];
+    args.extend(p.iter().chain(q.iter()).map(|v| OscType::Float(*v)));
+    OscPacket::Message(OscMessage {
+        addr: addr.into(),
+        args,
+    })
+}
+
+fn bone(name: &str, p: [f32; 3], q: [f32; 4]) -> OscPacket {
+    pose_msg("/VMC/Ext/Bone/Pos", name, p, q)
+}
+
+fn ok() -> OscPacket {
+    OscPacket::Message(OscMessage {
+        addr: "/VMC/Ext/OK".into(),
+        args: vec![OscType::Int(1)],
+    })
+}
+
+fn bundle(content: Vec<OscPacket>) -> Vec<u8> {
+    rosc::encoder::encode(&OscPacket::Bundle(OscBundle {
+        timetag: OscTime::from((0, 1)),
+        content,
+    }))
+    .unwrap()
+}
+
+fn names(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| (*s).to_owned()).collect()
+}
+
+/// The frame's marker `i`, or `None` when invalid.
+fn marker(f: &v1::ControlFrame, i: usize) -> Option<[f32; 3]> {
+    valid_bit(&f.markers_valid, i)
+        .then(|| [f.markers[3 * i], f.markers[3 * i + 1], f.markers[3 * i + 2]])
+}
+
+fn assert_near(got: Option<[f32; 3]>, want: [f32; 3], what: &str) {
+    let got = got.unwrap_or_else(|| panic!("{what}: invalid, expected {want:?}"));
+    let d = (0..3)
+        .map(|k| (got[k] - want[k]).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        d < 1e-5,
+        "{what}: got {got:?}, expected {want:?} (off by {d})"
+    );
+}
+
+/// The chain, computed by hand in Unity's frame (left-handed; quaternions rotate vectors by
+/// the usual formula, so Ry(90) takes +X to -Z and Rz(90) takes +X to +Y):
+/// - Hips at (0, 1, 0), identity;
+/// - RightUpperArm at (0.2, 0.4, 0) local, Ry(90): global (0.2, 1.4, 0), rotation Ry(90);
+/// - (RightShoulder, RightLowerArm not sent: the chain skips them)
+/// - RightHand at (0.3, 0, 0) local: global (0.2, 1.4, 0) + Ry(90) (0.3, 0, 0) = (0.2, 1.4, -0.3);
+/// - RightIndexProximal at (0.1, 0, 0), Rz(90): (0.2, 1.4, -0.4), rotation Ry(90) Rz(90);
+/// - RightIndexIntermediate at (0.04, 0, 0), Rz(90): + Ry(90) Rz(90) (0.04, 0, 0) = + (0, 0.04, 0)
+///   -> (0.2, 1.44, -0.4), rotation Ry(90) Rz(180);
+/// - RightIndexDistal at (0.03, 0, 0), identity: + Ry(90) Rz(180) (0.03, 0, 0) = + (0, 0, 0.03)
+///   -> (0.2, 1.44, -0.37), rotation Ry(90) Rz(180);
+/// - RightIndexTip: + Ry(90) Rz(180) (0.8 x 0.03, 0, 0) = + (0, 0, 0.024) -> (0.2, 1.44, -0.346).
+///
+/// Right-handed (Z negated): hand (0.2, 1.4, 0.3), proximal (0.2, 1.4, 0.4), intermediate
+/// (0.2, 1.44, 0.4), distal (0.2, 1.44, 0.37), tip (0.2, 1.44, 0.346).
+fn analytic_chain(extra: Vec<OscPacket>) -> Vec<u8> {
+    let mut content = vec![
+        bone("Hips", [0.0, 1.0, 0.0], ID),
+        bone("RightUpperArm", [0.2, 0.4, 0.0], RY90),
+        bone("RightHand", [0.3, 0.0, 0.0], ID),
+        bone("RightIndexProximal", [0.1, 0.0, 0.0], RZ90),
+        bone("RightIndexIntermediate", [0.04, 0.0, 0.0], RZ90),
+        bone("RightIndexDistal", [0.03, 0.0, 0.0], ID),
+    ];
+    content.extend(extra);
+    bundle(content)
+}
+
+const DECLARED: [&str; 7] = [
+    "RightHand",
+    "RightIndexProximal",
+    "RightIndexIntermediate",
+    "RightIndexDistal",
+    "RightIndexTip",
+    "RightThumbTip",
+    "Hips",
+];
+
+#[test]
+fn forward_kinematics_matches_a_chain_computed_by_hand() {
+    let mut b = Bridge::new("r", Hand::Right, TipLengths::default(), &names(&DECLARED)).unwrap();
+    let d = decode(&analytic_chain(vec![ok()])).unwrap();
+    let f = b
+        .apply(&d, 42)
+        .frame
+        .expect("a bundle with hand bones is a frame");
+    assert_eq!((f.room.as_str(), f.seq, f.capture_time_us), ("r", 0, 42));
+    assert!(f.positions.is_empty() && f.markers.len() == 3 * DECLARED.len());
+    assert_near(marker(&f, 0), [0.2, 1.4, 0.3], "RightHand");
+    assert_near(marker(&f, 1), [0.2, 1.4, 0.4], "RightIndexProximal");
+    assert_near(marker(&f, 2), [0.2, 1.44, 0.4], "RightIndexIntermediate");
+    assert_near(marker(&f, 3), [0.2, 1.44, 0.37], "RightIndexDistal");
+    assert_near(marker(&f, 4), [0.2, 1.44, 0.346], "RightIndexTip");
+    assert_eq!(marker(&f, 5), None, "the thumb was not sent");
+    assert_near(marker(&f, 6), [0.0, 1.0, 0.0], "Hips");
+
+    // A root pose moves everything; a tip length from --bones replaces the ratio.
+    let tips = TipLengths::parse("[tip_length]\nIndex = 0.01\n").unwrap();
+    let mut b = Bridge::new("r", Hand::Right, tips, &names(&DECLARED)).unwrap();
+    let root = pose_msg("/VMC/Ext/Root/Pos", "root", [1.0, 0.0, 2.0], ID);
+    let mut with_root = vec![root];
+    with_root.extend(decode_content(&analytic_chain(vec![])));
+    let f = b
+        .apply(&decode(&bundle(with_root)).unwrap(), 0)
+        .frame
+        .unwrap();
+    assert_near(marker(&f, 0), [1.2, 1.4, -1.7], "RightHand under the root");
+    assert_near(marker(&f, 4), [1.2, 1.44, -1.64], "RightIndexTip, 1 cm");
+
+    // The next bundle without the distal: the distal and its tip are invalid, the rest
+    // follows the new hand pose.
+    let next = bundle(vec![
+        bone("RightHand", [0.3, 0.1, 0.0], ID),
+        bone("RightIndexProximal", [0.1, 0.0, 0.0], RZ90),
+        bone("RightIndexIntermediate", [0.04, 0.0, 0.0], RZ90),
+    ]);
+    let f = b.apply(&decode(&next).unwrap(), 1).frame.unwrap();
+    assert_eq!(f.seq, 1);
+    assert_near(marker(&f, 0), [1.2, 1.5, -1.7], "RightHand moved");
+    assert_eq!(marker(&f, 3), None, "the distal was not in this bundle");
+    assert_eq!(marker(&f, 4), None, "nor its tip");
+    assert_eq!(marker(&f, 6), None, "nor the hips");
+}
+
+fn decode_content(bytes: &[u8]) -> Vec<OscPacket> {
+    match rosc::decoder::decode_udp(bytes).unwrap().1 {
+        OscPacket::Bundle(b) => b.content,
+        p => vec![p],
+    }
+}
+
+#[test]
+fn a_hand_subtree_alone_makes_the_hand_the_root_and_left_hands_mirror() {
+    let declared = names(&["LeftHand", "LeftIndexProximal", "LeftIndexTip"]);
+    let mut b = Bridge::new("r", Hand::Left, TipLengths::default(), &declared).unwrap();
+    let d = bundle(vec![
+        bone("LeftHand", [0.0, 0.0, 0.5], RY90),
+        bone("LeftIndexProximal", [-0.1, 0.0, 0.0], ID),
+        bone("LeftIndexIntermediate", [-0.04, 0.0, 0.0], ID),
+        bone("LeftIndexDistal", [-0.03, 0.0, 0.0], ID),
+    ]);
+    let f = b.apply(&decode(&d).unwrap(), 0).frame.unwrap();
+    // Unity: hand (0, 0, 0.5); Ry(90) takes -X to +Z: proximal (0, 0, 0.6), tip
+    // (0, 0, 0.6 + 0.04 + 0.03 + 0.024). Mirrored: z negated.
+    assert_near(marker(&f, 0), [0.0, 0.0, -0.5], "LeftHand");
+    assert_near(marker(&f, 1), [0.0, 0.0, -0.6], "LeftIndexProximal");
+    assert_near(marker(&f, 2), [0.0, 0.0, -0.694], "LeftIndexTip");
+}
+
+#[test]
+fn loose_messages_make_a_frame_at_ok_and_bundles_without_hand_bones_make_none() {
+    let declared = names(&["RightHand", "tracker-7"]);
+    let mut b = Bridge::new("r", Hand::Right, TipLengths::default(), &declared).unwrap();
+    assert_eq!(b.missing_trackers(), vec!["tracker-7"]);
+    let enc = |p: &OscPacket| rosc::encoder::encode(p).unwrap();
+    let hand = enc(&bone("RightHand", [0.1, 0.2, 0.3], ID));
+    assert!(b.apply(&decode(&hand).unwrap(), 0).frame.is_none());
+    let tra = enc(&pose_msg(
+        "/VMC/Ext/Tra/Pos",
+        "tracker-7",
+        [1.0, 2.0, 3.0],
+        ID,
+    ));
+    assert!(b.apply(&decode(&tra).unwrap(), 0).frame.is_none());
+    let f = b
+        .apply(&decode(&enc(&ok())).unwrap(), 5)
+        .frame
+        .expect("OK closes the loose frame");
+    assert_near(marker(&f, 0), [0.1, 0.2, -0.3], "RightHand");
+    assert_near(marker(&f, 1), [1.0, 2.0, -3.0], "tracker-7");
+    assert!(b.missing_trackers().is_empty());
+    // OK alone again: nothing new.
+    assert!(b.apply(&decode(&enc(&ok())).unwrap(), 6).frame.is_none());
+    // A bundle of body bones and a tracker only: no frame.
+    let body = bundle(vec![
+        bone("Hips", [0.0, 1.0, 0.0], ID),
+        pose_msg("/VMC/Ext/Tra/Pos", "tracker-7", [0.0; 3], ID),
+    ]);
+    assert!(b.apply(&decode(&body).unwrap(), 7).frame.is_none());
+    // The next hand bundle: the tracker of the bundle before is not fresh.
+    let f = b
+        .apply(
+            &decode(&bundle(vec![bone("RightHand", [0.0; 3], ID)])).unwrap(),
+            8,
+        )
+        .frame
+        .unwrap();
+    assert_eq!(f.seq, 1);
+    assert_eq!(marker(&f, 1), None);
+}
+
+#[test]
+fn declared_names_the_stream_cannot_carry_are_errors_naming_them() {
+    let e = Bridge::new(
+        "r",
+        Hand::Right,
+        TipLengths::default(),
+        &names(&["LeftIndexTip"]),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("\"LeftIndexTip\"") && e.contains("--hand"),
+        "{e}"
+    );
+    assert!(
+        e.contains("RightIndexTip") && e.contains("RightLittleDistal"),
+        "lists what it carries: {e}"
+    );
+    let e = Bridge::new(
+        "r",
+        Hand::Right,
+        TipLengths::default(),
+        &names(&["LeftFoot"]),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("\"LeftFoot\""), "{e}");
+}
+
+/// Runs the receive loop on a loopback socket while `send` sends to its port; returns the
+/// frames, the loop's stats and the bridge.
+fn run_loop(
+    declared: &[String],
+    warn_after: Duration,
+    send: impl FnOnce(u16) + Send + 'static,
+) -> (anyhow::Result<Bridge>, Vec<v1::ControlFrame>, Stats) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let stats = Stats::default();
+    let bridge = Bridge::new("r", Hand::Right, TipLengths::default(), declared).unwrap();
+    let (tx, mut rx) = tokio::sync::mpsc::channel(100_000);
+    let result = rt.block_on(async {
+        let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let port = socket.local_addr().unwrap().port();
+        let sender = std::thread::spawn(move || send(port));
+        let opts = LoopOptions {
+            warn_after,
+            idle_exit: Some(Duration::from_millis(1500)),
+            summary_every: Some(Duration::from_secs(1)),
+            listen: format!("127.0.0.1:{port}"),
+        };
+        let r = tokio::time::timeout(
+            Duration::from_secs(60),
+            receive_loop(socket, bridge, tx, &stats, &opts),
+        )
+        .await
+        .expect("the loop ends within 60 s");
+        sender.join().unwrap();
+        r
+    });
+    let mut frames = Vec::new();
+    while let Ok(f) = rx.try_recv() {
+        frames.push(f);
+    }
+    (result, frames, stats)
+}
+
+fn count(c: &std::sync::atomic::AtomicU64) -> u64 {
+    c.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+#[test]
+fn the_receive_loop_counts_and_survives_junk() {
+    let declared = names(&["RightHand", "RightIndexTip"]);
+    let (r, frames, stats) = run_loop(&declared, Duration::from_secs(30), |port| {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let to = ("127.0.0.1", port);
+        for k in 0..20 {
+            s.send_to(&analytic_chain(vec![ok()]), to).unwrap();
+            if k % 4 == 0 {
+                s.send_to(b"junk", to).unwrap();
+                s.send_to(
+                    &bundle(vec![bone("RightHand", [f32::INFINITY, 0.0, 0.0], ID)]),
+                    to,
+                )
+                .unwrap();
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    });
+    r.unwrap();
+    assert_eq!(frames.len(), 20, "{}", stats.summary(false));
+    assert_eq!(count(&stats.dropped), 10);
+    assert_eq!(
+        count(&stats.bundles),
+        20,
+        "malformed bundles are not counted as bundles"
+    );
+    assert_eq!(count(&stats.published), 20);
+    assert!(frames.iter().enumerate().all(|(i, f)| f.seq == i as u64));
+    assert_near(marker(&frames[19], 1), [0.2, 1.44, 0.346], "RightIndexTip");
+}
+
+#[test]
+fn a_declared_tracker_that_never_comes_is_an_error_listing_the_stream() {
+    let declared = names(&["RightHand", "LHR-MISSING"]);
+    let (r, _, _) = run_loop(&declared, Duration::from_millis(300), |port| {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        for _ in 0..60 {
+            s.send_to(&analytic_chain(vec![]), ("127.0.0.1", port))
+                .unwrap();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    });
+    let e = r.unwrap_err().to_string();
+    assert!(
+        e.contains("\"LHR-MISSING\"") && e.contains("RightHand") && e.contains("trackers: none"),
+        "{e}"
+    );
+}
+
+// ---- The third-party sender (python-osc) ----
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+/// python-osc in a venv under target/ (made once); `Err` says why not.
+fn python_osc() -> Result<PathBuf, String> {
+    let venv = repo().join("target/vmc-venv");
+    let python = venv.join("bin/python");
+    let ok = |py: &Path| {
+        Command::new(py)
+            .args([
+                "-c",
+                "import importlib.metadata as m; assert m.version('python-osc') == '1.10.2'",
+            ])
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    if ok(&python) {
+        return Ok(python);
+    }
+    let run = |cmd: &mut Command| -> Result<(), String> {
+        let out = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "{cmd:?}: {}",
+                String::from_utf8_lossy(&out.stderr).trim()
+            ))
+        }
+    };
+    run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
+    run(Command::new(venv.join("bin/pip"))
+        .args(["install", "-q", "-r"])
+        .arg(repo().join("tests/python/requirements-vmc.txt")))?;
+    if ok(&python) {
+        Ok(python)
+    } else {
+        Err("python-osc 1.10.2 is not importable after installing it".into())
+    }
+}
+
+/// The sender's motion (tests/python/vmc_sender.py's docstring), recomputed: Unity positions of
+/// a finger's joints and tip at curl `theta`, hand at `hand`.
+fn curled(hand: [f32; 3], base: [f32; 3], seg: [f32; 2], theta: f32) -> [[f32; 3]; 4] {
+    let p = [hand[0] + base[0], hand[1] + base[1], hand[2] + base[2]];
+    let step = |from: [f32; 3], len: f32, angle: f32| {
+        [
+            from[0] + len * angle.cos(),
+            from[1] + len * angle.sin(),
+            from[2],
+        ]
+    };
+    let i = step(p, seg[0], theta);
+    let d = step(i, seg[1], 2.0 * theta);
+    let t = step(d, 0.8 * seg[1], 3.0 * theta);
+    [p, i, d, t]
+}
+
+#[test]
+fn python_osc_bundles_each_make_a_frame_that_follows_the_curl() {
+    let python = match python_osc() {
+        Ok(p) => p,
+        Err(why) => {
+            println!("skipped: no python-osc venv ({why})");
+            return;
+        }
+    };
+    const FINGERS: [&str; 5] = ["Thumb", "Index", "Middle", "Ring", "Little"];
+    const BASE: [[f32; 3]; 5] = [
+        [0.03, -0.01, 0.04],
+        [0.09, 0.0, 0.03],
+        [0.095, 0.0, 0.01],
+        [0.09, 0.0, -0.01],
+        [0.08, 0.0, -0.03],
+    ];
+    const SEG: [[f32; 2]; 5] = [
+        [0.035, 0.03],
+        [0.045, 0.025],
+        [0.05, 0.03],
+        [0.045, 0.028],
+        [0.035, 0.022],
+    ];
+    let mut declared = vec!["frame-counter".to_owned(), "RightHand".to_owned()];
+    for f in FINGERS {
+        for s in ["Proximal", "Intermediate", "Distal", "Tip"] {
+            declared.push(format!("Right{f}{s}"));
+        }
+    }
+    let script = repo().join("tests/python/vmc_sender.py");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let (r, frames, stats) = run_loop(&declared, Duration::from_secs(30), move |port| {
+        let out = Command::new(&python)
+            .arg(&script)
+            .args([
+                "--port",
+                &port.to_string(),
+                "--seconds",
+                "2",
+                "--rate",
+                "60",
+            ])
+            .output()
+            .unwrap();
+        tx.send(out).unwrap();
+    });
+    let out = rx.recv().unwrap();
+    assert!(
+        out.status.success(),
+        "vmc_sender.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let sent: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let bundles = sent["bundles"].as_u64().unwrap();
+    let junk = sent["junk"].as_u64().unwrap();
+    r.unwrap();
+    println!("sender: {sent}; bridge: {}", stats.summary(false));
+    assert_eq!(bundles, 120);
+    assert_eq!(frames.len() as u64, bundles, "every bundle yields a frame");
+    assert_eq!(
+        count(&stats.dropped),
+        junk,
+        "every junk datagram is counted"
+    );
+    assert!(junk >= 5, "the sender sent junk of every kind");
+    assert_eq!(count(&stats.datagrams), bundles + junk);
+    let hand = [0.5 + 0.35, 1.0 + 0.45, 0.25 + 0.05];
+    let mut tip_y = Vec::new();
+    for (n, f) in frames.iter().enumerate() {
+        assert!(f.markers_valid.is_empty(), "frame {n}: every marker valid");
+        let k = (marker(f, 0).unwrap()[0] * 1000.0).round() as usize;
+        assert_eq!(k, n, "frames in bundle order");
+        let theta = std::f32::consts::FRAC_PI_2 * k as f32 / (bundles - 1) as f32;
+        assert_near(marker(f, 1), [hand[0], hand[1], -hand[2]], "RightHand");
+        for (d, finger) in FINGERS.iter().enumerate() {
+            let want = curled(hand, BASE[d], SEG[d], theta);
+            for (j, s) in ["Proximal", "Intermediate", "Distal", "Tip"]
+                .iter()
+                .enumerate()
+            {
+                let w = want[j];
+                assert_near(
+                    marker(f, 2 + 4 * d + j),
+                    [w[0], w[1], -w[2]],
+                    &format!("bundle {k}: Right{finger}{s}"),
+                );
+            }
+        }
+        tip_y.push(marker(f, 2 + 4 + 3).unwrap()[1]);
+    }
+    // The index tip rises as the finger curls (up to 3 x 90 degrees of the last segment, so
+    // not monotonic to the end: it peaks, then comes back over the top).
+    let (first, top) = (tip_y[0], tip_y.iter().copied().fold(f32::MIN, f32::max));
+    assert!(
+        top > first + 0.05,
+        "the index tip moved up {} m",
+        top - first
+    );
+}
