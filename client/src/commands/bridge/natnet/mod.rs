@@ -30,7 +30,7 @@ use crease_proto::control::encode_valid_mask;
 use crease_proto::v1;
 use tokio::net::UdpSocket;
 
-use self::wire::{DataDescriptions, FrameOfData, NAT_FRAMEOFDATA, NAT_MODELDEF, NAT_SERVERINFO};
+use self::wire::{DataDescriptions, FrameOfData, NAT_MODELDEF, NAT_SERVERINFO};
 use self::wire::{ServerInfo, Version};
 use super::super::common::{ServerArgs, authorized, get_room, percentile, unix_us};
 
@@ -443,6 +443,7 @@ pub struct Source {
     pub descriptions: DataDescriptions,
     last_keep_alive: Instant,
     buf: Vec<u8>,
+    buf2: Vec<u8>,
 }
 
 /// Largest UDP payload.
@@ -555,6 +556,7 @@ impl Source {
             descriptions,
             last_keep_alive: Instant::now(),
             buf: vec![0u8; DATAGRAM],
+            buf2: vec![0u8; DATAGRAM],
         })
     }
 
@@ -579,12 +581,12 @@ impl Source {
                     .await;
             }
             let got = tokio::select! {
-                r = self.data.recv_from(&mut self.buf) => r,
-                r = self.command.recv_from(&mut self.buf) => r,
+                r = self.data.recv_from(&mut self.buf) => r.map(|(n, _)| self.buf[..n].to_vec()),
+                r = self.command.recv_from(&mut self.buf2) => r.map(|(n, _)| self.buf2[..n].to_vec()),
                 () = tokio::time::sleep(Duration::from_secs(1)) => continue,
             };
             match got {
-                Ok((n, _)) => return Ok(self.buf[..n].to_vec()),
+                Ok(d) => return Ok(d),
                 // ICMP port unreachable from an earlier send: not a datagram.
                 Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {}
                 Err(e) => return Err(e),
