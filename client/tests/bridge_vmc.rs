@@ -1,9 +1,12 @@
 //! `crease bridge vmc` up to the ControlFrames it publishes: OSC decoding (datagrams built by
 //! `rosc` here, and by a third-party sender, python-osc, in `tests/python/vmc_sender.py`),
 //! forward kinematics against a chain computed by hand, the fingertips, the left- to
-//! right-handed mirror, validity, and the UDP receive loop surviving junk. The loop runs
-//! against a channel instead of the Publish RPC.
+//! right-handed mirror, validity, and the UDP receive loop surviving junk, against a channel;
+//! and the `crease bridge vmc` command end to end into a retargeting room of a server running
+//! in this process.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
+
+mod common;
 
 use std::f32::consts::FRAC_1_SQRT_2 as H;
 use std::path::{Path, PathBuf};
@@ -507,4 +510,172 @@ fn python_osc_bundles_each_make_a_frame_that_follows_the_curl() {
         "the index tip moved up {} m",
         top - first
     );
+}
+
+// ---- End to end: `crease bridge vmc` into a retargeting room ----
+
+/// A bundle of the right hand with every finger curled by `theta` (the sender's motion).
+fn curl_bundle(k: usize, theta: f32) -> Vec<u8> {
+    let (s, c) = (theta / 2.0).sin_cos();
+    let q = [0.0, 0.0, s, c];
+    let mut content = vec![bone("RightHand", [0.35, 1.45, 0.05], ID)];
+    for (f, z) in ["Thumb", "Index", "Middle", "Ring", "Little"]
+        .iter()
+        .zip([0.04, 0.03, 0.01, -0.01, -0.03])
+    {
+        content.push(bone(&format!("Right{f}Proximal"), [0.09, 0.0, z], q));
+        content.push(bone(&format!("Right{f}Intermediate"), [0.045, 0.0, 0.0], q));
+        content.push(bone(&format!("Right{f}Distal"), [0.028, 0.0, 0.0], q));
+    }
+    content.push(pose_msg(
+        "/VMC/Ext/Tra/Pos",
+        "frame-counter",
+        [k as f32, 0.0, 0.0],
+        ID,
+    ));
+    content.push(ok());
+    bundle(content)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn crease_bridge_vmc_publishes_every_bundle_into_a_retargeting_room() {
+    use std::io::BufRead;
+    let tmp = tempfile::tempdir().unwrap();
+    let model = crease_core::model::TrainedModel::load(common::train_model(tmp.path())).unwrap();
+    let controls: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
+    let addr = common::serve_tube(model, Some("admin")).await;
+    // The tube's five control points driven by five hand markers; the tracker is declared too
+    // (extra markers are allowed).
+    let drivers = [
+        "RightHand",
+        "RightIndexProximal",
+        "RightIndexTip",
+        "RightLittleProximal",
+        "RightLittleTip",
+    ];
+    let mut map = format!(
+        "[registration]\npoints = [{}]\ncalibration_frames = 10\n[markers]\n",
+        controls
+            .iter()
+            .map(|c| format!("{c:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for (c, m) in controls.iter().zip(drivers) {
+        map += &format!("{c} = {m:?}\n");
+    }
+    let markers: Vec<String> = drivers
+        .iter()
+        .map(|s| (*s).to_owned())
+        .chain(["frame-counter".to_owned()])
+        .collect();
+    let token = common::open_room(
+        addr,
+        "admin",
+        v1::OpenRoomRequest {
+            room: "vmc".into(),
+            model: "tube".into(),
+            retarget: Some(v1::Retarget {
+                map_toml: map,
+                markers,
+                units: "m".into(),
+                ..Default::default()
+            }),
+            ..Default::default()
+        },
+    )
+    .await;
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut child = common::crease()
+        .args([
+            "bridge",
+            "vmc",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            "vmc",
+        ])
+        .args(["--listen", &format!("127.0.0.1:{port}"), "--token", &token])
+        .args(["--idle-exit", "1", "--summary-every", "1"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines_tx, lines_rx) = std::sync::mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if lines_tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut log = Vec::new();
+    loop {
+        let line = lines_rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the bridge starts");
+        let ready = line.contains("listening on");
+        log.push(line);
+        if ready {
+            break;
+        }
+    }
+    const N: usize = 90;
+    let sent = tokio::task::spawn_blocking(move || {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let start = std::time::Instant::now();
+        for k in 0..N {
+            let theta = std::f32::consts::FRAC_PI_2 * k as f32 / (N - 1) as f32;
+            s.send_to(&curl_bundle(k, theta), ("127.0.0.1", port))
+                .unwrap();
+            if k % 15 == 7 {
+                s.send_to(b"\x00\x01junk", ("127.0.0.1", port)).unwrap();
+            }
+            let next = start + Duration::from_secs_f64((k + 1) as f64 / 60.0);
+            std::thread::sleep(next.saturating_duration_since(std::time::Instant::now()));
+        }
+    });
+    sent.await.unwrap();
+    let status = tokio::task::spawn_blocking(move || child.wait().unwrap())
+        .await
+        .unwrap();
+    while let Ok(line) = lines_rx.recv_timeout(Duration::from_secs(5)) {
+        log.push(line);
+    }
+    let log = log.join("\n");
+    println!("{log}");
+    assert!(status.success(), "crease bridge vmc failed:\n{log}");
+    let last = log
+        .lines()
+        .rev()
+        .find(|l| l.starts_with("vmc: done: "))
+        .unwrap();
+    assert!(
+        last.contains(&format!(
+            "{} datagrams ({N} bundles) in, {N} frames built, {N} published ({N} acked, 0 refused",
+            N + 6
+        )),
+        "{last}"
+    );
+    assert!(
+        last.contains("6 malformed datagrams dropped") && last.contains("p50"),
+        "{last}"
+    );
+    let mut client =
+        crease_proto::v1::crease_client::CreaseClient::connect(format!("http://{addr}"))
+            .await
+            .unwrap();
+    let info = client
+        .get_room(v1::GetRoomRequest { room: "vmc".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(info.published, N as u64);
 }

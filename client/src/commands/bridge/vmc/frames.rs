@@ -279,6 +279,9 @@ pub struct Stats {
     pub latency_period: Mutex<Vec<u64>>,
     /// All source-to-ack latencies (the first million), microseconds.
     pub latency_all: Mutex<Vec<u64>>,
+    /// Sum of squares and count of the acks' residuals in the capture's units
+    /// (`PublishAck.control_residual_capture`, once the room's scale is known).
+    pub residual: Mutex<(f64, u64)>,
 }
 
 /// Malformed datagrams whose reason is logged; the rest are counted.
@@ -297,12 +300,18 @@ impl Stats {
         c.load(Ordering::Relaxed)
     }
 
-    /// Records an ack of `seq`: its source-to-ack latency, if the frame is remembered.
-    pub fn ack(&self, seq: u64, refused: bool) {
+    /// Records an ack of `seq`: its source-to-ack latency, if the frame is remembered, and
+    /// its residual in the capture's units (0: not known yet).
+    pub fn ack(&self, seq: u64, refused: bool, residual_capture: f32) {
         if refused {
             self.refused.fetch_add(1, Ordering::Relaxed);
         } else {
             self.acked.fetch_add(1, Ordering::Relaxed);
+            if residual_capture > 0.0 && residual_capture.is_finite() {
+                let mut r = lock(&self.residual);
+                r.0 += f64::from(residual_capture).powi(2);
+                r.1 += 1;
+            }
         }
         let at = {
             let mut q = lock(&self.sent_at);
@@ -329,7 +338,8 @@ impl Stats {
         }
     }
 
-    /// The one-line summary; `period` takes (and clears) the latencies since the last one.
+    /// The one-line summary; `period` takes (and clears) the latencies since the last one,
+    /// else the line covers the whole run (`vmc: done: ...`).
     pub fn summary(&self, period: bool) -> String {
         let mut l = if period {
             std::mem::take(&mut *lock(&self.latency_period))
@@ -346,8 +356,18 @@ impl Stats {
                 crate::commands::common::percentile(&l, 99.0) as f64 / 1e3
             )
         };
+        let (sq, n) = *lock(&self.residual);
+        let residual = if n == 0 {
+            String::new()
+        } else {
+            format!(
+                "; marker residual RMS {:.4} (capture units)",
+                (sq / n as f64).sqrt()
+            )
+        };
         format!(
-            "vmc: {} datagrams ({} bundles) in, {} frames built, {} published ({} acked, {} refused, {} dropped: publisher behind), {} malformed datagrams dropped; source-to-ack latency {latency}",
+            "vmc: {}{} datagrams ({} bundles) in, {} frames built, {} published ({} acked, {} refused, {} dropped: publisher behind), {} malformed datagrams dropped; source-to-ack latency {latency}{residual}",
+            if period { "" } else { "done: " },
             Self::count(&self.datagrams),
             Self::count(&self.bundles),
             Self::count(&self.frames),

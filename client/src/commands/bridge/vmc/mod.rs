@@ -145,7 +145,7 @@ async fn bridge(args: &VmcArgs, tips: TipLengths, opts: &LoopOptions) -> anyhow:
                 .context("publishing")?
                 .into_inner();
             while let Some(ack) = acks.message().await.context("the Publish stream")? {
-                stats.ack(ack.seq, ack.error.is_some());
+                stats.ack(ack.seq, ack.error.is_some(), ack.control_residual_capture);
                 if let Some(e) = ack.error {
                     let refused = stats.refused.load(std::sync::atomic::Ordering::Relaxed);
                     if refused <= SHOWN_REFUSALS {
