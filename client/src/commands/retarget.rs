@@ -17,14 +17,15 @@ use super::control_file::{ControlFrame, write_csv};
 /// A recording and its marker map (shared by `stream` and `retarget`).
 #[derive(Clone, Debug, clap::Args)]
 pub struct RecordingArgs {
-    /// A Qualisys TSV marker recording (needs --map).
-    #[arg(long, value_name = "FILE", requires = "map", conflicts_with = "c3d")]
+    /// A Qualisys TSV marker recording (with --map, or into a room that retargets).
+    #[arg(long, value_name = "FILE", conflicts_with = "c3d")]
     pub tsv: Option<PathBuf>,
-    /// A C3D marker recording (needs --map).
-    #[arg(long, value_name = "FILE", requires = "map")]
+    /// A C3D marker recording (with --map, or into a room that retargets).
+    #[arg(long, value_name = "FILE")]
     pub c3d: Option<PathBuf>,
     /// Marker map (TOML): recording markers -> the model's control points, registration, gap
-    /// filling. Examples: bench/mocap/*.toml.
+    /// filling, applied here. Examples: bench/mocap/*.toml. Not for a room opened with a map
+    /// (`crease room open --map`): that room retargets the raw markers itself.
     #[arg(long, value_name = "FILE")]
     pub map: Option<PathBuf>,
 }
@@ -103,18 +104,9 @@ impl RecordingArgs {
         self.tsv.as_deref().or(self.c3d.as_deref())
     }
 
-    /// Reads the recording, resamples it to `rate` when given, and retargets every frame onto
-    /// `controls`, reporting on stderr.
-    pub fn retarget(
-        &self,
-        controls: &ModelControls,
-        rate: Option<f64>,
-    ) -> anyhow::Result<Retargeted> {
+    /// Reads the recording and resamples it to `rate` when given, reporting on stderr.
+    fn read(&self, rate: Option<f64>) -> anyhow::Result<(Recording, f64)> {
         let path = self.path().context("--tsv or --c3d is needed")?;
-        let map_path = self
-            .map
-            .as_deref()
-            .context("--map is required with a recording")?;
         let start = Instant::now();
         let mut recording = Recording::read(path)?;
         eprintln!(
@@ -134,6 +126,66 @@ impl RecordingArgs {
             recording = recording.resampled(rate);
             eprintln!("resampled to {rate} Hz: {} frames", recording.frame_count());
         }
+        Ok((recording, rate))
+    }
+
+    /// The recording's raw markers for a room that retargets (issue 19): per frame, the
+    /// positions and validity of the room's declared markers (`Retarget.markers`), in that
+    /// order, in the recording's units.
+    ///
+    /// # Errors
+    /// A declared marker the recording does not have (named, with those it has); `--map`
+    /// given (the room has its own).
+    pub fn raw_markers(
+        &self,
+        declared: &[String],
+        rate: Option<f64>,
+    ) -> anyhow::Result<Retargeted> {
+        if let Some(map) = &self.map {
+            bail!(
+                "--map {}: this room retargets with its own map (crease room open --map); send it the raw markers without --map",
+                map.display()
+            );
+        }
+        let (recording, rate) = self.read(rate)?;
+        let index = declared
+            .iter()
+            .map(|name| {
+                recording.marker(name).with_context(|| {
+                    format!(
+                        "the room expects marker {name:?}, the recording has none (it has {})",
+                        recording.names.join(", ")
+                    )
+                })
+            })
+            .collect::<anyhow::Result<Vec<usize>>>()?;
+        let frames = recording
+            .frames()
+            .map(|f| ControlFrame {
+                positions: index.iter().map(|&m| f.positions[m]).collect(),
+                valid: index.iter().map(|&m| f.valid[m]).collect(),
+            })
+            .collect();
+        Ok(Retargeted {
+            frames,
+            rate,
+            scale: None,
+            units: recording.units,
+            stats: None,
+        })
+    }
+
+    /// Reads the recording, resamples it to `rate` when given, and retargets every frame onto
+    /// `controls`, reporting on stderr.
+    pub fn retarget(
+        &self,
+        controls: &ModelControls,
+        rate: Option<f64>,
+    ) -> anyhow::Result<Retargeted> {
+        let map_path = self.map.as_deref().context(
+            "--map is required with a recording (unless the room retargets: crease room open --map)",
+        )?;
+        let (recording, rate) = self.read(rate)?;
         let map = MarkerMap::read(map_path)?;
         let bound = map.bind(&recording, &controls.names).with_context(|| {
             format!(

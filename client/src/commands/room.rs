@@ -1,6 +1,8 @@
 //! `crease room open|info|close`: manage rooms on a server (opening and closing need the
 //! server's admin token). `open` prints the publish token `crease stream --token` takes.
 
+use std::path::PathBuf;
+
 use anyhow::{Context, bail};
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
@@ -62,6 +64,29 @@ pub struct OpenArgs {
     /// or --filter say otherwise.
     #[arg(long)]
     pub mocap: bool,
+    /// A room that retargets raw capture markers (issue 19) through this marker map (TOML,
+    /// bench/mocap/*.toml); publishers then send the capture's markers (`crease stream --tsv`
+    /// without --map, `crease bridge`). Needs --markers or --markers-from.
+    #[arg(long, value_name = "FILE", conflicts_with = "map_name")]
+    pub map: Option<PathBuf>,
+    /// The same with a map from the server's maps folder (`crease-server --maps DIR`), by
+    /// file stem.
+    #[arg(long, value_name = "NAME")]
+    pub map_name: Option<String>,
+    /// The capture's marker names, in the order its frames carry them (comma-separated).
+    #[arg(
+        long,
+        value_name = "NAMES",
+        value_delimiter = ',',
+        conflicts_with = "markers_from"
+    )]
+    pub markers: Option<Vec<String>>,
+    /// Take the marker names (and units) from a recording (Qualisys TSV or C3D).
+    #[arg(long, value_name = "RECORDING")]
+    pub markers_from: Option<PathBuf>,
+    /// The capture's length unit (with --markers; default "mm").
+    #[arg(long, default_value = "mm")]
+    pub units: String,
 }
 
 /// Beta of `--mocap` rooms (HZY11 Fig. 11: noisy markers, a loose fit).
@@ -160,13 +185,14 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
     {
         bail!("--beta must be a positive number, got {b}");
     }
+    let retarget = retarget_spec(args)?;
     let mut client = args.server.connect().await?;
     let request = v1::OpenRoomRequest {
         room: args.room.clone(),
         model: args.model.clone(),
         beta: beta.unwrap_or(0.0),
         filter: filter.map(v1::MarkerFilter::from),
-        ..Default::default()
+        retarget,
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
@@ -176,15 +202,55 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         .into_inner();
     let room = get_room(&mut client, &opened.room).await?;
     eprintln!(
-        "opened room {:?} on model {:?}: beta {}, filter {}",
+        "opened room {:?} on model {:?}: beta {}, filter {}{}",
         room.room,
         args.model,
         room.beta,
-        print_filter(room.filter.as_ref())
+        print_filter(room.filter.as_ref()),
+        room.retarget.as_ref().map_or(String::new(), |r| format!(
+            ", retargets {} markers ({})",
+            r.markers.len(),
+            r.units
+        ))
     );
     // The token alone on stdout, for scripts: TOKEN=$(crease room open ...).
     println!("{}", opened.publish_token);
     Ok(())
+}
+
+/// The room's `Retarget` from `--map` / `--map-name` and `--markers` / `--markers-from`.
+fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
+    let has_map = args.map.is_some() || args.map_name.is_some();
+    let has_markers = args.markers.is_some() || args.markers_from.is_some();
+    match (has_map, has_markers) {
+        (false, false) => return Ok(None),
+        (true, false) => bail!(
+            "--map needs the capture's marker names: --markers A,B,... or --markers-from RECORDING"
+        ),
+        (false, true) => bail!("--markers and --markers-from need --map or --map-name"),
+        (true, true) => {}
+    }
+    let map_toml = match &args.map {
+        Some(path) => {
+            std::fs::read_to_string(path).with_context(|| format!("--map {}", path.display()))?
+        }
+        None => String::new(),
+    };
+    let (markers, units) = match (&args.markers, &args.markers_from) {
+        (Some(m), _) => (m.clone(), args.units.clone()),
+        (None, Some(path)) => {
+            let r = crease_mocap::Recording::read(path)
+                .with_context(|| format!("--markers-from {}", path.display()))?;
+            (r.names, r.units)
+        }
+        (None, None) => unreachable!("checked above"),
+    };
+    Ok(Some(v1::Retarget {
+        map_toml,
+        map_name: args.map_name.clone().unwrap_or_default(),
+        markers,
+        units,
+    }))
 }
 
 async fn info(args: &InfoArgs) -> anyhow::Result<()> {

@@ -150,11 +150,16 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             units: "model units".into(),
             stats: None,
         },
-        None => {
-            let controls = ModelControls::from_info(&model);
-            args.recording.retarget(&controls, args.rate)?
-        }
+        None => match &room.retarget {
+            // The room retargets: it gets the raw markers (issue 19).
+            Some(rt) => args.recording.raw_markers(&rt.markers, args.rate)?,
+            None => {
+                let controls = ModelControls::from_info(&model);
+                args.recording.retarget(&controls, args.rate)?
+            }
+        },
     };
+    let raw_markers = room.retarget.is_some() && args.frames.is_none();
     if prepared.frames.is_empty() {
         bail!("nothing to send: no frames");
     }
@@ -203,7 +208,11 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             for seq in 0..total {
                 ticker.tick().await;
                 let f = &frames[(seq % frames.len() as u64) as usize];
-                let frame = control_frame(&room_id, seq, unix_us(), &f.positions, &f.valid);
+                let mut frame = control_frame(&room_id, seq, unix_us(), &f.positions, &f.valid);
+                if raw_markers {
+                    frame.markers = std::mem::take(&mut frame.positions);
+                    frame.markers_valid = std::mem::take(&mut frame.valid);
+                }
                 let invalid = f.valid.iter().filter(|v| !**v).count() as u64;
                 invalid_points += invalid;
                 invalid_frames += u64::from(invalid > 0);
@@ -234,6 +243,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let mut latencies = Vec::new();
     let mut round_trips = Vec::new();
     let mut residual_sq = 0.0f64;
+    let mut capture_sq = 0.0f64;
     while let Some(ack) = acks.message().await? {
         let sent = {
             let mut q = sent_at.lock().unwrap_or_else(|e| e.into_inner());
@@ -267,6 +277,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 report.held_controls += u64::from(ack.held_controls);
                 latencies.push(ack.server_latency_us);
                 residual_sq += f64::from(ack.control_residual).powi(2);
+                capture_sq += f64::from(ack.control_residual_capture).powi(2);
             }
         }
     }
@@ -281,9 +292,14 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     report.round_trip_us_p50 = percentile(&round_trips, 50.0);
     report.round_trip_us_p99 = percentile(&round_trips, 99.0);
     report.control_residual_rms_model = (residual_sq / report.acknowledged.max(1) as f64).sqrt();
-    report.control_residual_rms_recording_units = prepared
-        .scale
-        .map(|s| report.control_residual_rms_model / f64::from(s));
+    report.control_residual_rms_recording_units = if raw_markers {
+        // The room reports the residual in the capture's units itself.
+        Some((capture_sq / report.acknowledged.max(1) as f64).sqrt())
+    } else {
+        prepared
+            .scale
+            .map(|s| report.control_residual_rms_model / f64::from(s))
+    };
     println!(
         "{} frames in {:.2} s ({:.1} frames/s): {} acknowledged, {} refused; server latency p50 {} µs p99 {} µs, round trip p50 {} µs p99 {} µs",
         report.frames_sent,
