@@ -52,7 +52,7 @@ pub struct NatnetArgs {
     /// The data port (frames of data); 0 = any free port (unicast only).
     #[arg(long, default_value_t = 1511)]
     pub data_port: u16,
-    /// The room to publish into (a retargeting room: `crease room open --retarget ...`).
+    /// The room to publish into (a retargeting room: `crease room open --map ... --markers ...`).
     #[arg(long)]
     pub room: String,
     /// The room's publish token. Also read from CREASE_TOKEN.
