@@ -397,6 +397,34 @@ fn stream_tsv_into_a_retargeting_room() {
         .unwrap();
     let e = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && e.contains("its own map"), "{e}");
+    // A map that gives a control point no source is refused when the room opens, naming it.
+    let partial = tmp.path().join("partial.toml");
+    let text = std::fs::read_to_string(map("qualisys-glove13.toml")).unwrap();
+    std::fs::write(
+        &partial,
+        text.replace("little_middle = \"little_middle\"\n", ""),
+    )
+    .unwrap();
+    let out = crease()
+        .args([
+            "room",
+            "open",
+            "--server",
+            &room.server,
+            "--admin-token",
+            "admin",
+        ])
+        .args(["--room", "cap2", "--model", "glove-hand", "--map"])
+        .arg(&partial)
+        .arg("--markers-from")
+        .arg(&tsv)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && e.contains("no source for control point little_middle"),
+        "{e}"
+    );
     // Streaming a recording into a plain room without --map names --map.
     let out = stream(&room).arg("--tsv").arg(&tsv).output().unwrap();
     let e = String::from_utf8_lossy(&out.stderr);

@@ -22,11 +22,19 @@ pub struct JsonControlFrame {
     /// Capture time, microseconds since the Unix epoch.
     #[serde(default)]
     pub capture_time_us: i64,
-    /// x, y, z of every control point.
+    /// x, y, z of every control point (empty in a retargeting room).
+    #[serde(default)]
     pub positions: Vec<f32>,
     /// One flag per control point.
     #[serde(default)]
     pub valid: Option<Vec<bool>>,
+    /// A retargeting room's input (issue 19): x, y, z of every declared marker, in the
+    /// capture's units.
+    #[serde(default)]
+    pub markers: Vec<f32>,
+    /// One flag per marker.
+    #[serde(default)]
+    pub markers_valid: Option<Vec<bool>>,
 }
 
 impl JsonControlFrame {
@@ -49,28 +57,39 @@ impl JsonControlFrame {
     /// # Errors
     /// A [`WireError`] naming `valid` when its flags are not one per `x, y, z` triple.
     pub fn into_control_frame(self, room: &str) -> Result<v1::ControlFrame, WireError> {
-        let mut valid = Vec::new();
-        if let Some(v) = &self.valid {
-            if v.len() * 3 != self.positions.len() {
-                return Err(WireError::new(
-                    "ControlFrame",
-                    "valid",
-                    format!(
-                        "{} flags for {} position values (one flag per x, y, z triple)",
-                        v.len(),
-                        self.positions.len()
-                    ),
-                ));
+        let mask = |field: &'static str, what: &str, flags: &Option<Vec<bool>>, values: &[f32]| {
+            let mut out = Vec::new();
+            if let Some(v) = flags {
+                if v.len() * 3 != values.len() {
+                    return Err(WireError::new(
+                        "ControlFrame",
+                        field,
+                        format!(
+                            "{} flags for {} {what} values (one flag per x, y, z triple)",
+                            v.len(),
+                            values.len()
+                        ),
+                    ));
+                }
+                encode_valid_mask(v, &mut out);
             }
-            encode_valid_mask(v, &mut valid);
-        }
+            Ok(out)
+        };
+        let valid = mask("valid", "position", &self.valid, &self.positions)?;
+        let markers_valid = mask(
+            "markers_valid",
+            "marker",
+            &self.markers_valid,
+            &self.markers,
+        )?;
         Ok(v1::ControlFrame {
             room: room.to_owned(),
             seq: self.seq,
             capture_time_us: self.capture_time_us,
             positions: self.positions,
             valid,
-            ..Default::default()
+            markers: self.markers,
+            markers_valid,
         })
     }
 }
@@ -87,8 +106,15 @@ pub struct JsonAck {
     pub held_controls: u32,
     /// RMS distance of the valid control points to the mesh, model units.
     pub control_residual: f32,
+    /// A retargeting room's residual in the capture's units (absent elsewhere).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub control_residual_capture: f32,
     /// Set when the frame was refused.
     pub error: Option<JsonError>,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 /// A refused frame's error as JSON.
@@ -116,6 +142,7 @@ impl From<v1::PublishAck> for JsonAck {
             server_latency_us: ack.server_latency_us,
             held_controls: ack.held_controls,
             control_residual: ack.control_residual,
+            control_residual_capture: ack.control_residual_capture,
             error: ack.error.map(JsonError::from),
         }
     }
@@ -242,6 +269,36 @@ mod tests {
     use crate::errors::{ErrorCode, error_ack, frame_error};
 
     #[test]
+    fn json_marker_frames_carry_markers_and_their_mask() {
+        let f = JsonControlFrame::parse(
+            r#"{"seq": 4, "markers": [1, 2, 3, 4, 5, 6], "markers_valid": [true, false]}"#,
+        )
+        .unwrap()
+        .into_control_frame("cap")
+        .unwrap();
+        assert!(f.positions.is_empty() && f.valid.is_empty());
+        assert_eq!(f.markers, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(f.markers_valid, [0b01]);
+        let e = JsonControlFrame::parse(r#"{"markers": [1, 2, 3], "markers_valid": [true, true]}"#)
+            .unwrap()
+            .into_control_frame("cap")
+            .unwrap_err();
+        assert_eq!(e.field, "markers_valid");
+        // A retargeting room's ack carries the capture-units residual; others stay as before.
+        let ack = v1::PublishAck {
+            seq: 1,
+            control_residual: 0.01,
+            control_residual_capture: 12.5,
+            ..Default::default()
+        };
+        assert!(
+            JsonAck::from(ack)
+                .to_text()
+                .contains(r#""control_residual_capture":12.5"#)
+        );
+    }
+
+    #[test]
     fn acks_serialise_as_the_websocket_always_sent_them() {
         let ok = v1::PublishAck {
             seq: 1,
@@ -331,11 +388,14 @@ mod tests {
             e.to_string(),
             "ControlFrame.valid: 2 flags for 3 position values (one flag per x, y, z triple)"
         );
-        let e = JsonControlFrame::parse("{\"seq\": 1}").unwrap_err();
+        // A frame of neither positions nor markers parses (a retargeting room's frames carry
+        // markers only); the room then names the count it expected (`read_control_frame`).
+        let f = JsonControlFrame::parse("{\"seq\": 1}").unwrap();
+        assert!(f.positions.is_empty() && f.markers.is_empty());
+        let e = JsonControlFrame::parse("{\"positions\": \"x\"}").unwrap_err();
         assert!(
-            e.to_string().starts_with(
-                "WebSocket.message: not a JSON control frame: missing field `positions`"
-            ),
+            e.to_string()
+                .starts_with("WebSocket.message: not a JSON control frame: invalid type"),
             "{e}"
         );
     }

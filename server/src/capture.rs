@@ -2,7 +2,7 @@
 //! points here, before the pipeline's filter and predictor. A room is opened with a
 //! [`CaptureSpec`] (a marker map, HZY11 §7's correspondence, and the capture's marker names);
 //! each frame's markers go through `crease_mocap`'s mixing, registration (a rigid transform
-//! per frame, one scale fitted on the first frames) and gap filling ([`Capture::read`]).
+//! per frame, one scale fitted on the first frames) and gap filling (`Capture::read`).
 //!
 //! The publisher sends markers in the capture's units and frame; the control residual of its
 //! acks is then reported in both the model's units and the capture's (divided by the fitted
@@ -98,6 +98,22 @@ impl CaptureSpec {
         let bound = map
             .bind(&names, &control_names)
             .map_err(|e| CaptureError::Map(format!("{source}: {e}")))?;
+        // Every control point needs a source: an unmapped one would never be seen, and the
+        // mesh would hold it at rest for the whole session.
+        let unmapped: Vec<&str> = control_names
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !bound.controls.iter().any(|(c, _)| c == i))
+            .map(|(_, n)| n.as_str())
+            .collect();
+        if !unmapped.is_empty() {
+            return Err(CaptureError::Map(format!(
+                "{source}: [markers] gives no source for control point{} {} (every control point needs one; the model has {})",
+                if unmapped.len() == 1 { "" } else { "s" },
+                unmapped.join(", "),
+                control_names.join(", ")
+            )));
+        }
         let rest = model
             .controls
             .iter()

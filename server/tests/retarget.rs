@@ -238,6 +238,17 @@ async fn a_retargeting_room_registers_raw_markers_and_names_bad_input() {
         .unwrap_err();
     assert_eq!(err.code(), tonic::Code::InvalidArgument);
     assert!(err.message().contains("M2"), "{}", err.message());
+    // A map that leaves a control point (here also a registration point) without a source
+    // is refused naming it (client/tests/cli_mocap.rs checks a plain control point).
+    let partial = v1::Retarget {
+        map_toml: toml.replace(&format!("{} = \"M2\"\n", names[2]), ""),
+        ..retarget.clone()
+    };
+    let err = client
+        .open_room(authed(open("cap4", Some(partial)), ADMIN))
+        .await
+        .unwrap_err();
+    assert!(err.message().contains(&names[2]), "{}", err.message());
     // A map name with no maps folder.
     let named = v1::Retarget {
         map_toml: String::new(),
