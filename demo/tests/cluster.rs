@@ -22,7 +22,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use common::{
-    authed, check_decoded, control_frame, http_get, metric, model_with_detail, predicted,
+    authed, bent, check_decoded, control_frame, http_get, metric, model_with_detail, predicted,
 };
 use crease_core::codec::FrameDecoder;
 use crease_core::model::TrainedModel;
@@ -915,4 +915,130 @@ async fn a_partitioned_owner_serves_its_own_clients_then_yields_to_the_adopter()
     assert!(d.metric("crease_cluster_forwarded_controls_total").await > 0.0);
     assert_eq!(e.owner_of("p").await.as_deref(), Some("E"));
     drop(publisher);
+}
+
+/// A retargeting room (issue 19) in a cluster: opened on A with a marker map, published to
+/// through B (forwarded to A, which retargets the raw markers), then adopted by B after kill -9
+/// of A: B rebuilt the room's map from the registry, so the same marker frames go on being
+/// acknowledged with a capture-units residual.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let _nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
+    let model = Arc::new(common::model());
+    let models = dir.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    model.save(models.join("tube.crease")).unwrap();
+    let mut a = Replica::start("A", &models, &_nats.url(), dir.path());
+    let mut b = Replica::start("B", &models, &_nats.url(), dir.path());
+    for r in [&mut a, &mut b] {
+        r.ready().await;
+    }
+    let names: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
+    let mut toml = format!(
+        "[registration]\npoints = [{}]\ncalibration_frames = 2\n[markers]\n",
+        names
+            .iter()
+            .map(|n| format!("{n:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for (i, n) in names.iter().enumerate() {
+        toml += &format!("{n} = \"M{i}\"\n");
+    }
+    let open = v1::OpenRoomRequest {
+        room: "mocap".into(),
+        model: "tube".into(),
+        retarget: Some(v1::Retarget {
+            map_toml: toml,
+            markers: (0..names.len()).map(|i| format!("M{i}")).collect(),
+            units: "mm".into(),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let token = a
+        .client()
+        .await
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    until(Duration::from_secs(5), "the room listed on B", || async {
+        b.owner_of("mocap").await.as_deref() == Some("A")
+    })
+    .await;
+    // Marker frames in millimetres, sent to B one at a time.
+    let frame = |seq: u64| {
+        let p = bent(&model.rig.rest, angle(seq));
+        v1::ControlFrame {
+            room: "mocap".into(),
+            seq,
+            markers: model
+                .controls
+                .iter()
+                .flat_map(|c| (p[c.vertex as usize] * 1000.0).to_array())
+                .collect(),
+            ..Default::default()
+        }
+    };
+    let send = |seq: u64| {
+        let (b_client, token) = (b.client(), token.clone());
+        async move {
+            let mut client = b_client.await;
+            let mut acks = client
+                .publish(authed(tokio_stream::iter(vec![frame(seq)]), &token))
+                .await
+                .unwrap()
+                .into_inner();
+            acks.message().await.unwrap().unwrap()
+        }
+    };
+    for seq in 0..10 {
+        let ack = send(seq).await;
+        assert!(
+            ack.error.is_none(),
+            "frame {seq} through B: {:?}",
+            ack.error
+        );
+        assert!(
+            seq < 2 || ack.control_residual_capture > 0.0 || ack.control_residual == 0.0,
+            "frame {seq}: {ack:?}"
+        );
+    }
+    a.kill9();
+    until(Duration::from_secs(10), "B adopts the room", || async {
+        b.owner_of("mocap").await.as_deref() == Some("B")
+    })
+    .await;
+    let mut ok = 0;
+    for seq in 10..200 {
+        let ack = send(seq).await;
+        if ack.error.is_none() {
+            ok += 1;
+            if ok >= 10 {
+                break;
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(
+        ok >= 10,
+        "B acknowledged only {ok} marker frames after the adoption"
+    );
+    let info = b
+        .client()
+        .await
+        .get_room(v1::GetRoomRequest {
+            room: "mocap".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(info.retarget.unwrap().markers.len(), names.len());
 }

@@ -33,7 +33,10 @@ pub enum CaptureError {
 /// A retargeting room's map bound to its markers and model (module docs).
 #[derive(Clone, Debug)]
 pub struct CaptureSpec {
+    /// As the opener sent it.
     wire: v1::Retarget,
+    /// With the map's TOML filled in (what another replica rebuilds the room from).
+    resolved: v1::Retarget,
     bound: BoundMap,
     rest: Vec<Vec3>,
 }
@@ -119,12 +122,27 @@ impl CaptureSpec {
             .iter()
             .map(|c| model.rig.rest.positions[c.vertex as usize])
             .collect();
-        Ok(CaptureSpec { wire, bound, rest })
+        let resolved = v1::Retarget {
+            map_toml: text,
+            ..wire.clone()
+        };
+        Ok(CaptureSpec {
+            wire,
+            resolved,
+            bound,
+            rest,
+        })
     }
 
     /// The room's retarget as the wire carries it (`RoomInfo.retarget`).
     pub fn wire(&self) -> &v1::Retarget {
         &self.wire
+    }
+
+    /// The room's retarget with the map's TOML filled in: another replica of a cluster
+    /// rebuilds the room from it without the owner's maps folder (`RoomEntry.retarget`).
+    pub fn resolved(&self) -> &v1::Retarget {
+        &self.resolved
     }
 
     /// Markers a frame carries.

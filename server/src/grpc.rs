@@ -157,11 +157,6 @@ impl Crease for CreaseService {
         }
         let capture = match r.retarget {
             None => None,
-            Some(_) if self.state.cluster().is_some() => {
-                return Err(Status::unimplemented(
-                    "retarget: retargeting rooms are not replicated across a cluster yet; open it on a single server",
-                ));
-            }
             Some(spec) => {
                 let maps = self.state.config.maps.clone();
                 let m = Arc::clone(&model);
@@ -177,7 +172,7 @@ impl Crease for CreaseService {
         let room = match self.state.cluster() {
             Some(cluster) => {
                 Arc::clone(cluster)
-                    .open_room(&self.state, &r.room, model, beta, filter)
+                    .open_room(&self.state, &r.room, model, beta, filter, capture)
                     .await?
             }
             None => {

@@ -447,6 +447,7 @@ impl Cluster {
         model: Arc<crate::registry::LoadedModel>,
         beta: Option<f32>,
         filter: Option<OneEuroParams>,
+        capture: Option<Arc<crate::capture::CaptureSpec>>,
     ) -> Result<Arc<Room>, tonic::Status> {
         if self.known(id).is_some() {
             return Err(tonic::Status::already_exists(format!(
@@ -468,11 +469,16 @@ impl Cluster {
             lease_ms: self.lease.as_millis() as u32,
             renewed_unix_ms: now_unix_ms(),
             adoptions: 0,
+            retarget: capture.as_ref().map(|c| c.resolved().clone()),
         };
         let (room, link, rx) = self
             .open_linked(id, model, beta, settings, filter, &entry, true, 0)
             .await
             .map_err(|e| e.status())?;
+        let room = match capture {
+            Some(c) => room.with_capture(c),
+            None => room,
+        };
         entry.beta = room.beta();
         entry.token_sha256 = room.session().token_sha256().to_vec();
         let revision = self
@@ -611,6 +617,21 @@ impl Cluster {
                 entry.token_sha256.len()
             ))
         })?;
+        // A retargeting room: rebuilt from the entry's resolved map (an adopter then
+        // retargets the publishers' markers as the owner did).
+        let capture = match &entry.retarget {
+            Some(r) => {
+                let (r, m) = (r.clone(), Arc::clone(&model));
+                let spec = tokio::task::spawn_blocking(move || {
+                    crate::capture::CaptureSpec::new(r, None, &m.model)
+                })
+                .await
+                .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?
+                .map_err(|e| LookupError::Internal(format!("room {id:?}: the registry's {e}")))?;
+                Some(Arc::new(spec))
+            }
+            None => None,
+        };
         let (room, link, rx) = self
             .open_linked(
                 id,
@@ -624,6 +645,10 @@ impl Cluster {
             )
             .await
             .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?;
+        let room = match capture {
+            Some(c) => room.with_capture(c),
+            None => room,
+        };
         let room = self
             .install(state, room.with_token_sha256(digest), link, rx)
             .map_err(|e| LookupError::Unavailable(e.to_string()))?;
