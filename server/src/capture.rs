@@ -134,6 +134,21 @@ impl CaptureSpec {
         })
     }
 
+    /// [`CaptureSpec::new`] on the blocking pool (it reads a map file and binds names), for
+    /// the async callers: OpenRoom and a cluster's relays.
+    ///
+    /// # Errors
+    /// [`CaptureError`]; a panicked task as [`CaptureError::Spec`].
+    pub async fn build(
+        wire: v1::Retarget,
+        maps: Option<std::path::PathBuf>,
+        model: std::sync::Arc<crate::registry::LoadedModel>,
+    ) -> Result<CaptureSpec, CaptureError> {
+        tokio::task::spawn_blocking(move || CaptureSpec::new(wire, maps.as_deref(), &model.model))
+            .await
+            .map_err(|e| CaptureError::Spec(format!("building the retarget: {e}")))?
+    }
+
     /// The room's retarget as the wire carries it (`RoomInfo.retarget`).
     pub fn wire(&self) -> &v1::Retarget {
         &self.wire

@@ -159,13 +159,9 @@ impl Crease for CreaseService {
             None => None,
             Some(spec) => {
                 let maps = self.state.config.maps.clone();
-                let m = Arc::clone(&model);
-                let spec = tokio::task::spawn_blocking(move || {
-                    crate::capture::CaptureSpec::new(spec, maps.as_deref(), &m.model)
-                })
-                .await
-                .map_err(|e| Status::internal(format!("retarget: {e}")))?
-                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+                let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(&model))
+                    .await
+                    .map_err(|e| Status::invalid_argument(e.to_string()))?;
                 Some(Arc::new(spec))
             }
         };

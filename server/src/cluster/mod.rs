@@ -621,13 +621,11 @@ impl Cluster {
         // retargets the publishers' markers as the owner did).
         let capture = match &entry.retarget {
             Some(r) => {
-                let (r, m) = (r.clone(), Arc::clone(&model));
-                let spec = tokio::task::spawn_blocking(move || {
-                    crate::capture::CaptureSpec::new(r, None, &m.model)
-                })
-                .await
-                .map_err(|e| LookupError::Internal(format!("room {id:?}: {e}")))?
-                .map_err(|e| LookupError::Internal(format!("room {id:?}: the registry's {e}")))?;
+                let spec = crate::capture::CaptureSpec::build(r.clone(), None, Arc::clone(&model))
+                    .await
+                    .map_err(|e| {
+                        LookupError::Internal(format!("room {id:?}: the registry's {e}"))
+                    })?;
                 Some(Arc::new(spec))
             }
             None => None,

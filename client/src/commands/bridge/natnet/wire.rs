@@ -512,21 +512,26 @@ fn section(
     r.section = name;
     r.entry = None;
     let n = r.count("count", min_entry)?;
-    let end = if version.sized() {
-        let at = r.pos;
-        let size = r.i32("byte count")?;
-        if size < 0 || size as usize > r.left() {
-            return Err(r.err(
-                "byte count",
-                at,
-                format!("{size} does not fit the {} bytes left", r.left()),
-            ));
-        }
-        Some(r.pos + size as usize)
-    } else {
-        None
-    };
+    let end = byte_count(r, version)?;
     Ok((n, end))
+}
+
+/// From 4.1 on, the byte count before a section or a description: where it must end (checked
+/// against the bytes left); `None` before 4.1, which has no counts.
+fn byte_count(r: &mut Reader<'_>, version: Version) -> Result<Option<usize>> {
+    if !version.sized() {
+        return Ok(None);
+    }
+    let at = r.pos;
+    let size = r.i32("byte count")?;
+    if size < 0 || size as usize > r.left() {
+        return Err(r.err(
+            "byte count",
+            at,
+            format!("{size} does not fit the {} bytes left", r.left()),
+        ));
+    }
+    Ok(Some(r.pos + size as usize))
 }
 
 /// Ends a 4.1 section: an overrun is an error, unread bytes (a newer server's additions) are
@@ -834,20 +839,7 @@ pub fn decode_descriptions(datagram: &[u8], version: Version) -> Result<DataDesc
         r.section = "data description";
         r.entry = Some(i);
         let kind = r.i32("type")?;
-        let end = if version.sized() {
-            let at = r.pos;
-            let size = r.i32("byte count")?;
-            if size < 0 || size as usize > r.left() {
-                return Err(r.err(
-                    "byte count",
-                    at,
-                    format!("{size} does not fit the {} bytes left", r.left()),
-                ));
-            }
-            Some(r.pos + size as usize)
-        } else {
-            None
-        };
+        let end = byte_count(&mut r, version)?;
         match kind {
             DESC_MARKER_SET => {
                 let name = r.cstr("marker set name")?;
