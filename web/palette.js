@@ -573,11 +573,16 @@ export class PaletteSynth {
     }
     const r = this.renderer;
     const previous = r.getRenderTarget();
+    // In an XR session three.js swaps the XR cameras in for any camera it renders with, render
+    // targets included: the passes' quads would be drawn through the eyes' projections.
+    const xr = r.xr.enabled;
+    r.xr.enabled = false;
     for (const p of this.passes) {
       this.quad.material = p.material;
       r.setRenderTarget(p.out);
       r.render(this.quadScene, this.quadCamera);
     }
+    r.xr.enabled = xr;
     r.setRenderTarget(previous);
     this.spare = this.displayed;
     this.displayed = frame;

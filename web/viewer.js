@@ -8,12 +8,18 @@
 // and the detail kernel vector per frame; palette.js skins, subdivides, displaces and computes
 // the normals on the GPU). auto takes palette where the renderer has float render targets
 // (WebGL2 + EXT_color_buffer_float), else vertices; the overlay says which and why.
+//
+// A retargeting room whose markers are WebXR joints (room `hands` of the demo) offers "track my
+// hands" where the browser has an immersive XR device: xr.js publishes the tracked hand's
+// joints every XR frame, the hand floats in front of the user, and the overlay (on the page
+// and in the headset) shows the control residual and the capture-to-mesh latency.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { decodeFrame, decodeIndices, ready } from "./codec.js";
 import { PaletteSynth, floatTargetsSupported } from "./palette.js";
 import { readMeshFrame } from "./wire.js";
+import { HandTracker, markerMessage, markerPlan } from "./xr.js";
 
 const params = new URLSearchParams(location.search);
 const roomId = params.get("room") || "demo";
@@ -40,6 +46,13 @@ const state = {
   sockets: 0, // sockets opened
   rendered: 0, // requestAnimationFrame redraws that showed a new frame
   renderFps: 0, // of those, per second (over the last second)
+  frameSeq: null, // the seq of the last mesh frame received
+  residual: null, // the last ack's control residual, model units
+  residualCapture: null, // ... and in the capture's units (retargeting rooms)
+  // WebXR hands: whether the browser offers an immersive session, why not, whether tracking,
+  // the hand, frames published and dropped (socket backed up), the last one's seq, and the capture-to-mesh latency
+  // (ms, mean over the last half second: an XR frame's time to its mesh frame's arrival).
+  xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, published: 0, dropped: 0, seq: null, latencyMs: null },
 };
 window.crease = state;
 // Not enumerable, so JSON.stringify(window.crease) stays small: `palette` (in palette mode
@@ -48,6 +61,14 @@ window.crease = state;
 const hidden = (name, value) =>
   Object.defineProperty(state, name, { value, enumerable: false, configurable: true, writable: true });
 hidden("palette", null);
+// The control vertices of the mesh shown (model units, model order) and the markers the hand
+// tracker last published (x, y, z each), for tests.
+hidden("controlPositions", () =>
+  roomInfo && geometry && stream
+    ? roomInfo.control_points.map((c) => vertexPosition(c.vertex, new THREE.Vector3()).toArray())
+    : null,
+);
+hidden("xrMarkers", () => (tracker ? Array.from(tracker.markers) : null));
 
 // ---- UI ----------------------------------------------------------------------------------
 const banner = document.getElementById("banner");
@@ -55,6 +76,9 @@ const stats = document.getElementById("stats");
 const tokenInput = document.getElementById("token");
 const detailBox = document.getElementById("detail");
 const roomSelect = document.getElementById("room");
+const xrRow = document.getElementById("xr-row");
+const xrButton = document.getElementById("xr");
+const handSelect = document.getElementById("hand");
 tokenInput.value = params.get("token") || sessionStorage.getItem(`crease-token-${roomId}`) || "";
 tokenInput.addEventListener("change", () => {
   sessionStorage.setItem(`crease-token-${roomId}`, tokenInput.value);
@@ -78,6 +102,7 @@ function showBanner(kind, text) {
 // ---- Scene -------------------------------------------------------------------------------
 const canvas = document.getElementById("view");
 const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
+renderer.xr.enabled = true; // draws as before until a session starts
 renderer.setPixelRatio(Math.min(devicePixelRatio, 2));
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0x1d2025);
@@ -118,8 +143,12 @@ let pendingMessage = null; // the palette frame message waiting for the GPU pass
 let chain = null;
 const MAX_CHAIN = 4096;
 let fresh = false; // a new frame since the last redraw
+// The model's frame: identity on the page; in an XR session it puts the hand in front of the
+// user (placeStage).
+const stage = new THREE.Group();
+scene.add(stage);
 const handleGroup = new THREE.Group();
-scene.add(handleGroup);
+stage.add(handleGroup);
 
 function resize() {
   const w = canvas.clientWidth;
@@ -218,7 +247,7 @@ function showMesh(geo, mat) {
   geometry = geo;
   if (!mesh) {
     mesh = new THREE.Mesh(geometry, mat);
-    scene.add(mesh);
+    stage.add(mesh);
   } else {
     mesh.geometry = geometry;
     mesh.material = mat;
@@ -280,6 +309,7 @@ function onFrame(f) {
   geometry.computeBoundingSphere();
   if (!framed) frameCamera();
   fresh = true;
+  onMeshFrame(f);
   state.frames += 1;
   state.bytes += f.data.length;
   fpsWindow.frames += 1;
@@ -334,6 +364,7 @@ function onPaletteFrame(f, bytes) {
   else if (chain && chain.length < MAX_CHAIN) chain.push(bytes);
   else chain = null;
   pendingMessage = { bytes, seq: f.seq, chain, length: chain ? chain.length : 0 };
+  onMeshFrame(f);
   state.frames += 1;
   state.bytes += f.data.length;
   fpsWindow.frames += 1;
@@ -341,8 +372,21 @@ function onPaletteFrame(f, bytes) {
   fpsWindow.latency += f.serverLatencyUs;
 }
 
+/** Bookkeeping common to both encodings: the seq, and an XR frame's capture-to-mesh time. */
+function onMeshFrame(f) {
+  state.frameSeq = f.seq;
+  if (tracker && tracker.firstCaptureUs !== undefined && f.captureTimeUs >= tracker.firstCaptureUs) {
+    xrWindow.latency += (performance.timeOrigin + performance.now()) / 1000 - f.captureTimeUs / 1e6;
+    xrWindow.frames += 1;
+  }
+}
+
 function onAck(ack) {
   state.acks += 1;
+  if (!ack.error) {
+    state.residual = ack.control_residual;
+    state.residualCapture = ack.control_residual_capture ?? null;
+  }
   if (ack.error) {
     const bad = ack.error.code === 7;
     state.error = bad ? `publish refused: wrong or missing token` : `publish refused: ${ack.error.message}`;
@@ -469,11 +513,147 @@ function publish(points) {
   state.published += 1;
 }
 
+// ---- WebXR hands (xr.js) ----------------------------------------------------------------------
+let tracker = null; // HandTracker while a session runs
+let placed = false;
+let xrWindow = { t: performance.now(), frames: 0, latency: 0 };
+const captureUnits = () => roomInfo?.capture?.units || "capture units";
+
+/** Publishes one XR frame's markers; false when the socket is not ready or backed up. */
+function sendMarkers(captureUs, markers) {
+  if (!ws || ws.readyState !== WebSocket.OPEN) return false;
+  // Latest wins: a frame queued behind 64 KB would only arrive late.
+  if (ws.bufferedAmount > 65536) {
+    state.xr.dropped += 1;
+    return false;
+  }
+  if (tracker.firstCaptureUs === undefined) tracker.firstCaptureUs = captureUs;
+  state.xr.seq = seq;
+  ws.send(markerMessage(seq++, captureUs, markers));
+  state.published += 1;
+  state.xr.published += 1;
+  return true;
+}
+
+/** Shows "track my hands" in rooms whose markers are WebXR joints; enabled where XR is. */
+async function updateXrControl() {
+  xrRow.hidden = !roomInfo?.capture;
+  if (xrRow.hidden) return;
+  const plan = markerPlan(roomInfo.capture.markers);
+  let supported = false;
+  try {
+    supported = Boolean(navigator.xr) && (await navigator.xr.isSessionSupported("immersive-vr"));
+  } catch {
+    supported = false;
+  }
+  state.xr.supported = supported;
+  state.xr.reason = plan.error || (!navigator.xr ? "this browser has no WebXR" : supported ? "" : "no immersive XR device");
+  xrButton.disabled = Boolean(state.xr.reason) && !tracker;
+  xrButton.title = state.xr.reason;
+}
+navigator.xr?.addEventListener?.("devicechange", updateXrControl);
+
+xrButton.addEventListener("click", async () => {
+  if (tracker) return tracker.stop();
+  if (!tokenInput.value) {
+    state.error = "enter the room's publish token to track your hands";
+    return showBanner("error", state.error);
+  }
+  const plan = markerPlan(roomInfo.capture.markers);
+  const t = new HandTracker({ renderer, handedness: handSelect.value, plan, send: sendMarkers, onEnd: endXr });
+  tracker = t;
+  try {
+    await t.start();
+  } catch (err) {
+    tracker = null;
+    state.error = `WebXR: ${err.message || err}`;
+    return showBanner("error", state.error);
+  }
+  state.xr.active = true;
+  state.xr.hand = handSelect.value;
+  xrButton.textContent = "stop tracking";
+  handleGroup.visible = false;
+  placed = false;
+  scene.add(xrPanel);
+});
+
+function endXr() {
+  tracker = null;
+  state.xr.active = false;
+  state.xr.tracked = false;
+  xrButton.textContent = "track my hands";
+  handleGroup.visible = true;
+  stage.position.set(0, 0, 0);
+  stage.quaternion.identity();
+  stage.scale.setScalar(1);
+  scene.remove(xrPanel);
+  updateXrControl();
+}
+
+/** Puts the model 45 cm in front of where the user looked at the first XR frame, 10 cm below
+ * eye level, turned to face them, about 22 cm across whatever its units. */
+function placeStage() {
+  if (placed || !tracker.viewer || !roomInfo?.bounds) return;
+  const [lo, hi] = roomInfo.bounds.map((v) => new THREE.Vector3(...v));
+  const centre = lo.clone().add(hi).multiplyScalar(0.5);
+  const size = Math.max(hi.x - lo.x, hi.y - lo.y, hi.z - lo.z) || 1;
+  const { position: p, orientation: o } = tracker.viewer;
+  const look = new THREE.Vector3(0, 0, -1).applyQuaternion(new THREE.Quaternion(o.x, o.y, o.z, o.w));
+  const yaw = Math.atan2(-look.x, -look.z);
+  const forward = new THREE.Vector3(-Math.sin(yaw), 0, -Math.cos(yaw));
+  const at = new THREE.Vector3(p.x, p.y - 0.1, p.z).addScaledVector(forward, 0.45);
+  stage.scale.setScalar(0.22 / size);
+  stage.quaternion.setFromAxisAngle(new THREE.Vector3(0, 1, 0), yaw);
+  stage.position.copy(at).sub(centre.multiplyScalar(0.22 / size).applyQuaternion(stage.quaternion));
+  xrPanel.position.copy(at).add(new THREE.Vector3(0, 0.17, 0));
+  xrPanel.quaternion.copy(stage.quaternion);
+  placed = true;
+}
+
+// The overlay inside the headset: a small text panel above the hand.
+const xrCanvas = document.createElement("canvas");
+xrCanvas.width = 640;
+xrCanvas.height = 96;
+const xrTexture = new THREE.CanvasTexture(xrCanvas);
+const xrPanel = new THREE.Mesh(
+  new THREE.PlaneGeometry(0.24, 0.036),
+  new THREE.MeshBasicMaterial({ map: xrTexture, transparent: true, depthTest: false }),
+);
+xrPanel.renderOrder = 20;
+
+/** The tracking line: the hand, the residual (mm when the capture is in metres), the latency. */
+function xrText() {
+  const x = state.xr;
+  let res = "…";
+  if (state.residualCapture != null && captureUnits() === "m") res = `${(state.residualCapture * 1000).toFixed(1)} mm`;
+  else if (state.residualCapture != null) res = `${state.residualCapture.toFixed(4)} ${captureUnits()}`;
+  else if (state.residual != null) res = `${state.residual.toFixed(4)} (model units)`;
+  const lat = x.latencyMs == null ? "…" : `${x.latencyMs.toFixed(0)} ms`;
+  return `${x.hand} hand ${x.tracked ? "tracked" : "not seen"}\nresidual ${res} · capture to mesh ${lat}`;
+}
+
+function drawXrPanel() {
+  const g = xrCanvas.getContext("2d");
+  g.clearRect(0, 0, xrCanvas.width, xrCanvas.height);
+  g.fillStyle = "rgba(20, 22, 26, 0.8)";
+  g.fillRect(0, 0, xrCanvas.width, xrCanvas.height);
+  g.fillStyle = "#e8e8e8";
+  g.font = "24px system-ui, sans-serif";
+  xrText()
+    .split("\n")
+    .forEach((line, i) => g.fillText(line, 14, 38 + 38 * i));
+  xrTexture.needsUpdate = true;
+}
+
 // ---- Render loop ---------------------------------------------------------------------------
 const tmp = new THREE.Vector3();
 let renderWindow = { t: performance.now(), rendered: 0 };
-function render() {
-  requestAnimationFrame(render);
+function render(time, frame) {
+  if (frame && tracker) {
+    tracker.onFrame(time, frame);
+    state.xr.tracked = tracker.tracked;
+    placeStage();
+  }
   controls.update();
   if (stream === "palette" && synth.update()) {
     state.palette.frame = pendingMessage.bytes;
@@ -488,7 +668,7 @@ function render() {
     renderWindow.rendered += 1;
     fresh = false;
   }
-  if (geometry && stream && handleMeshes.length) {
+  if (geometry && stream && handleMeshes.length && !tracker) {
     const r = canvas.getBoundingClientRect();
     state.handles = handleMeshes.map((m, k) => {
       if (drag && drag.handle === m) m.position.copy(drag.points[drag.index]);
@@ -511,6 +691,11 @@ function render() {
     fpsWindow.lat = fpsWindow.latency / Math.max(fpsWindow.frames, 1);
     fpsWindow = { ...fpsWindow, t: now, frames: 0, bytes: 0, latency: 0 };
   }
+  if (now - xrWindow.t >= 500) {
+    if (xrWindow.frames) state.xr.latencyMs = (1000 * xrWindow.latency) / xrWindow.frames;
+    xrWindow = { t: now, frames: 0, latency: 0 };
+    if (tracker) drawXrPanel();
+  }
   if (now - renderWindow.t >= 1000) {
     state.renderFps = renderWindow.rendered / ((now - renderWindow.t) / 1000);
     renderWindow = { t: now, rendered: 0 };
@@ -522,7 +707,8 @@ function render() {
     `${fpsWindow.fps.toFixed(1)} frames/s · ${Math.round(fpsWindow.bpf).toLocaleString()} B/frame\n` +
     `${state.renderFps.toFixed(1)} frames/s drawn\n` +
     `server latency ${(fpsWindow.lat / 1000).toFixed(2)} ms\n` +
-    `published ${state.published} · acks ${state.acks}`;
+    `published ${state.published} · acks ${state.acks}` +
+    (tracker ? `\n${xrText()}` : roomInfo?.capture && state.xr.reason ? `\nWebXR: ${state.xr.reason}` : "");
 }
 
 await ready;
@@ -533,4 +719,5 @@ try {
   showBanner("error", state.error);
 }
 connect();
-render();
+updateXrControl();
+renderer.setAnimationLoop(render); // the window's frames, or the XR session's while one runs

@@ -14,7 +14,7 @@ use crease_server::{AddRoomError, AppState, Running};
 
 use crate::animation::{DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
-use crate::{DEMO_BETA, DEMO_MODEL, DEMO_ROOM};
+use crate::{DEMO_BETA, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, WEBXR_MAP};
 
 /// Everything `crease-server` is told: what to serve and how.
 #[derive(Clone, Debug)]
@@ -86,6 +86,9 @@ pub enum LaunchError {
     /// The demo room could not be opened.
     #[error("the demo room: {0}")]
     Room(#[from] RoomError),
+    /// The WebXR room's joint map does not bind to the demo model.
+    #[error("the demo's WebXR room {DEMO_HANDS_ROOM:?}: {0}")]
+    Hands(String),
     /// The demo room could not be added.
     #[error("the demo room: {0}")]
     AddRoom(#[from] AddRoomError),
@@ -139,6 +142,12 @@ impl Started {
             crease_command(),
             host(grpc),
             grpc.port()
+        ));
+        lines.push(format!(
+            "demo: room {DEMO_HANDS_ROOM:?} follows a tracked hand: open {scheme}://{}:{}/?room={DEMO_HANDS_ROOM} \
+             in a WebXR browser with hand tracking (Quest, visionOS) and press \"track my hands\"",
+            host(http),
+            http.port(),
         ));
         if !token_chosen {
             lines.push(format!(
@@ -222,14 +231,22 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let mut demo_token = None;
     if let Some((model, animation)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
-        let mut room =
-            Room::open(DEMO_ROOM, model, Some(DEMO_BETA), state.config.stream, None).await?;
+        let mut room = Room::open(
+            DEMO_ROOM,
+            Arc::clone(&model),
+            Some(DEMO_BETA),
+            state.config.stream,
+            None,
+        )
+        .await?;
         if let Some(token) = &config.demo_token {
             room = room.with_token(token);
         }
         let room = state.add_room(room)?;
-        demo_token = Some(room.token().unwrap_or_default().to_owned());
+        let token = room.token().unwrap_or_default().to_owned();
         tokio::spawn(drive(Arc::clone(&state), room, animation, config.demo_rate));
+        state.add_room(hands_room(&model, &state, &token).await?)?;
+        demo_token = Some(token);
     }
     let running = crease_server::serve(state).await?;
     Ok(Started {
@@ -237,6 +254,35 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
         demo_token,
         tls,
     })
+}
+
+/// The WebXR room [`DEMO_HANDS_ROOM`] on the demo model, with the demo room's `token`: it
+/// retargets the viewer's WebXR joints through [`WEBXR_MAP`], in metres, with the demo's beta
+/// and no filter (headset runtimes smooth their hand tracking already, and every filtered
+/// frame would add latency).
+async fn hands_room(
+    model: &Arc<crease_server::registry::LoadedModel>,
+    state: &AppState,
+    token: &str,
+) -> Result<Room, LaunchError> {
+    let wire = crease_proto::v1::Retarget {
+        map_toml: WEBXR_MAP.to_owned(),
+        markers: crease_hand::joint_map::capture_markers(),
+        units: "m".into(),
+        ..Default::default()
+    };
+    let spec = crease_server::capture::CaptureSpec::build(wire, None, Arc::clone(model))
+        .await
+        .map_err(|e| LaunchError::Hands(e.to_string()))?;
+    let room = Room::open(
+        DEMO_HANDS_ROOM,
+        Arc::clone(model),
+        Some(DEMO_BETA),
+        state.config.stream,
+        None,
+    )
+    .await?;
+    Ok(room.with_capture(Arc::new(spec)).with_token(token))
 }
 
 /// [`start`], the banner on stderr, then serving until `shutdown` resolves (the binary passes

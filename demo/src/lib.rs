@@ -2,7 +2,8 @@
 //! paragraph"), and the launch of the server binary. With no model folder the server trains a
 //! hand from the procedural sweep hand (LYK06) at two resolutions, so it has a detail layer
 //! (HZY11), opens room `demo` and animates it through the named poses; a newcomer sees a moving
-//! hand in the browser at once.
+//! hand in the browser at once. Beside it, room `hands` takes WebXR hand tracking (the
+//! viewer's "track my hands") and retargets it onto the same model.
 //!
 //! Layout:
 //! - [`hand_model`]: the demo model, from the cache folder or trained and cached there.
@@ -26,6 +27,13 @@ pub use hand_model::{DemoError, default_cache_dir, demo_model};
 pub const DEMO_MODEL: &str = "demo-hand";
 /// The demo room's id.
 pub const DEMO_ROOM: &str = "demo";
+/// The demo's WebXR room: a retargeting room on the demo model that the viewer's "track my
+/// hands" drives (issue 19), through [`WEBXR_MAP`] from the markers of
+/// `crease_hand::webxr::capture_markers`.
+pub const DEMO_HANDS_ROOM: &str = "hands";
+/// The joint map of [`DEMO_HANDS_ROOM`]: WebXR joints onto the demo hand's `back` landmarks
+/// (`bench/mocap/webxr-back.toml`, which says how it was built).
+pub const WEBXR_MAP: &str = include_str!("../../bench/mocap/webxr-back.toml");
 /// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
 /// control point is followed closely.
 pub const DEMO_BETA: f32 = 3.0;

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
-use crease_demo::{DEMO_MODEL, DEMO_ROOM, DemoAnimation, demo_model};
+use crease_demo::{DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, DemoAnimation, demo_model};
 use crease_hand::rig::{HandRig, Layers};
 use crease_hand::skeleton::{HandPose, NamedPose};
 use crease_hand::surface::Resolution;
@@ -160,6 +160,12 @@ fn demo_trains_animates_and_serves() {
         "the viewer URL: {line}"
     );
     run_the_printed_watch_command(&line);
+    let mut hands = String::new();
+    stderr.read_line(&mut hands).unwrap();
+    assert!(
+        hands.contains(&format!("/?room={DEMO_HANDS_ROOM}")) && hands.contains("track my hands"),
+        "the WebXR room's line: {hands}"
+    );
 
     let runtime = tokio::runtime::Runtime::new().unwrap();
     runtime.block_on(async {
@@ -212,6 +218,20 @@ fn demo_trains_animates_and_serves() {
         assert!(positions.iter().all(|p| {
             p.cmpge(lo - Vec3::splat(margin)).all() && p.cmple(hi + Vec3::splat(margin)).all()
         }));
+
+        // Beside it, the WebXR room: the joint map bound to the demo model, the 25 joints'
+        // centres and dorsal points declared as its markers.
+        let hands = client
+            .get_room(v1::GetRoomRequest {
+                room: DEMO_HANDS_ROOM.into(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let retarget = hands.retarget.expect("room hands retargets");
+        assert_eq!(retarget.markers, crease_hand::joint_map::capture_markers());
+        assert_eq!(retarget.markers.len(), 75);
+        assert_eq!(retarget.units, "m");
     });
 
     // The viewer page and readiness over plain HTTP.

@@ -241,39 +241,70 @@ pub fn landmarks(
     rest: &Mesh,
     normals: &[Vec3],
 ) -> Vec<Landmark> {
+    landmark_anchors(layout, skeleton, rest, normals)
+        .into_iter()
+        .map(|(landmark, _, _)| landmark)
+        .collect()
+}
+
+/// What a landmark is placed from, for `crate::joint_map`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LandmarkAnchor {
+    /// On the bone from chain joint `from` of `digit` to the next.
+    Bone { digit: Digit, from: usize },
+    /// On the palm.
+    Palm,
+}
+
+/// [`landmarks`] with each one's anchor and whether it is palmar.
+pub(crate) fn landmark_anchors(
+    layout: Layout,
+    skeleton: &HandSkeleton,
+    rest: &Mesh,
+    normals: &[Vec3],
+) -> Vec<(Landmark, LandmarkAnchor, bool)> {
     let posed = skeleton.pose(&HandPose::FLAT);
     let domain = Domain::of(skeleton);
     landmark_specs(layout)
         .into_iter()
         .map(|(name, anchor, side)| {
-            let (point, dorsal) = match anchor {
+            let (point, dorsal, kind) = match anchor {
                 Anchor::Bone { digit, from, at } => {
                     let chain = posed.chain(digit);
                     let (a, b) = (chain[from], chain[from + 1]);
-                    (a.position.lerp(b.position, at), a.dorsal())
+                    (
+                        a.position.lerp(b.position, at),
+                        a.dorsal(),
+                        LandmarkAnchor::Bone { digit, from },
+                    )
                 }
-                Anchor::Palm(uv) => (domain.at(uv).extend(0.0), Vec3::Z),
+                Anchor::Palm(uv) => (domain.at(uv).extend(0.0), Vec3::Z, LandmarkAnchor::Palm),
             };
             let dir = if side == Side::Dorsal {
                 dorsal
             } else {
                 -dorsal
             };
-            let vertex = (0..rest.positions.len())
-                .filter(|&i| {
-                    normals[i].dot(dir) > 0.3 && (rest.positions[i] - point).dot(dir) > 0.0
-                })
-                .min_by(|&x, &y| {
-                    let off = |i: usize| {
-                        let r = rest.positions[i] - point;
-                        (r - r.dot(dir) * dir).length_squared()
-                    };
-                    off(x).total_cmp(&off(y))
-                })
-                .unwrap_or(0) as u32;
-            Landmark { name, vertex }
+            let vertex = snap_to_skin(point, dir, &rest.positions, normals) as u32;
+            (Landmark { name, vertex }, kind, side == Side::Palmar)
         })
         .collect()
+}
+
+/// The skin vertex over `point` in direction `dir` (unit): among the vertices facing `dir`
+/// (normal within ~73 degrees) on that side of `point`, the one closest to the ray. 0 when
+/// none qualifies.
+pub(crate) fn snap_to_skin(point: Vec3, dir: Vec3, positions: &[Vec3], normals: &[Vec3]) -> usize {
+    (0..positions.len())
+        .filter(|&i| normals[i].dot(dir) > 0.3 && (positions[i] - point).dot(dir) > 0.0)
+        .min_by(|&x, &y| {
+            let off = |i: usize| {
+                let r = positions[i] - point;
+                (r - r.dot(dir) * dir).length_squared()
+            };
+            off(x).total_cmp(&off(y))
+        })
+        .unwrap_or(0)
 }
 
 /// What [`write_dataset`] wrote.

@@ -24,6 +24,8 @@
 //! - [`rig`]: all of the above as one per-frame deformer ([`rig::HandRig`]).
 //! - [`webxr`]: the WebXR generic hand (../shared/data/hand) bound to the sweeps from its
 //!   joints; WebXR joint matrices <-> joint angles; the iwer poses.
+//! - [`joint_map`]: a tracked hand's WebXR joints as mocap markers, and the marker maps that
+//!   put a layout's landmarks on them (fitted on the sweep hand).
 //! - [`dataset`]: the data-set generator of `crease handgen` (poses, control-point layouts,
 //!   meshes at both resolutions, joint angles, manifests, contact sheet).
 //! - [`render`]: a software rasteriser and PNG writer for contact sheets and picture strips
@@ -32,6 +34,7 @@
 pub mod collide;
 pub mod creases;
 pub mod dataset;
+pub mod joint_map;
 pub mod palm;
 pub mod render;
 pub mod rig;

@@ -208,6 +208,10 @@ pub struct RoomDocument {
     /// The rest mesh's box, `[min, max]`.
     #[serde(serialize_with = "widened_box")]
     pub bounds: Option<[[f32; 3]; 2]>,
+    /// A retargeting room's capture (issue 19): the marker names its frames carry, in order,
+    /// and their units. Absent in other rooms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub capture: Option<RoomCapture>,
     /// The model's control points.
     pub control_points: Vec<RoomControlPoint>,
     /// Vertices of the detail mesh (0: none).
@@ -218,6 +222,15 @@ pub struct RoomDocument {
     pub model: String,
     /// The room id.
     pub room: String,
+}
+
+/// A retargeting room's capture in a [`RoomDocument`] (`v1::Retarget`'s markers and units).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoomCapture {
+    /// The markers a frame carries (`ControlFrame.markers`), in frame order.
+    pub markers: Vec<String>,
+    /// Their units, as the room's opener gave them (may be empty).
+    pub units: String,
 }
 
 /// A control point in a [`RoomDocument`].
@@ -235,8 +248,15 @@ pub struct RoomControlPoint {
 }
 
 impl RoomDocument {
-    /// The document of room `room` on the model `info`, with the room's `beta`.
-    pub fn new(room: &str, info: &v1::ModelInfo, beta: f32, has_detail: bool) -> RoomDocument {
+    /// The document of room `room` on the model `info`, with the room's `beta` and, for a
+    /// retargeting room, its `retarget`.
+    pub fn new(
+        room: &str,
+        info: &v1::ModelInfo,
+        beta: f32,
+        has_detail: bool,
+        retarget: Option<&v1::Retarget>,
+    ) -> RoomDocument {
         let v3 = |v: Option<&v1::Vec3>| v.map_or([0.0; 3], |v| [v.x, v.y, v.z]);
         RoomDocument {
             base_vertices: info.base_vertices,
@@ -245,6 +265,10 @@ impl RoomDocument {
                 .bounds
                 .as_ref()
                 .map(|b| [v3(b.min.as_ref()), v3(b.max.as_ref())]),
+            capture: retarget.map(|r| RoomCapture {
+                markers: r.markers.clone(),
+                units: r.units.clone(),
+            }),
             control_points: info
                 .control_points
                 .iter()
@@ -347,7 +371,7 @@ mod tests {
             )),
             ..Default::default()
         };
-        let doc = RoomDocument::new("r1", &info, 0.3, false);
+        let doc = RoomDocument::new("r1", &info, 0.3, false, None);
         // 0.3f32 and 0.1f32 widened to f64, as a `serde_json::Value` holds them.
         assert_eq!(
             serde_json::to_string(&doc).unwrap(),
@@ -357,6 +381,21 @@ mod tests {
                 r#""control_points":[{"id":0,"name":"tip","rest":[0.5,0.10000000149011612,-1.0],"vertex":4}],"#,
                 r#""detail_vertices":0,"has_detail":false,"model":"tube","room":"r1"}"#
             )
+        );
+        // A retargeting room names its markers, between the bounds and the control points.
+        let retarget = v1::Retarget {
+            markers: vec!["wrist".into(), "wrist/dorsal".into()],
+            units: "m".into(),
+            ..Default::default()
+        };
+        let text =
+            serde_json::to_string(&RoomDocument::new("r1", &info, 0.3, false, Some(&retarget)))
+                .unwrap();
+        assert!(
+            text.contains(
+                r#"[1.0,1.0,1.0]],"capture":{"markers":["wrist","wrist/dorsal"],"units":"m"},"control_points""#
+            ),
+            "{text}"
         );
         let list = RoomList {
             rooms: vec!["a".into(), "b".into()],

@@ -78,8 +78,8 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
 }
 
 /// `GET /api/rooms/{id}`: what a viewer needs besides the stream: the model's control points
-/// (id, name, model vertex, rest position), the room's beta, the vertex counts
-/// ([`RoomDocument`]).
+/// (id, name, model vertex, rest position), the room's beta, the vertex counts and, for a
+/// retargeting room, the markers its frames carry ([`RoomDocument`]).
 async fn room_info(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
@@ -93,6 +93,7 @@ async fn room_info(
         &room.model.info,
         room.beta(),
         room.has_detail(),
+        room.pipeline().capture().map(|c| c.wire()),
     ))
     .into_response()
 }

@@ -170,3 +170,39 @@ export function watchPage(page, label) {
   return errors;
 }
 
+
+/** A list of named checks, each run even when an earlier one failed: `check(name, fn)` prints
+ * "ok name — detail (ms)" or "FAIL name: message"; `failed()` counts the failures. */
+export function checkList() {
+  const results = [];
+  let failures = 0;
+  async function check(name, fn) {
+    const t0 = Date.now();
+    try {
+      const detail = await fn();
+      results.push(`ok   ${name}${detail ? ` — ${detail}` : ""} (${Date.now() - t0} ms)`);
+    } catch (e) {
+      failures++;
+      results.push(`FAIL ${name}: ${e && e.message ? e.message : e}`);
+    }
+    console.log(results.at(-1));
+  }
+  return { check, results, failed: () => failures, fail: () => failures++ };
+}
+
+export const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/** Polls window.crease until `pred(state)` holds; throws with the last state after `ms`. */
+export async function waitForCrease(page, what, pred, ms) {
+  const deadline = Date.now() + ms;
+  let last;
+  for (;;) {
+    last = await page.evaluate(() => (window.crease ? JSON.parse(JSON.stringify(window.crease)) : null));
+    if (last && pred(last)) return last;
+    if (Date.now() > deadline) {
+      const shown = last ? { ...last, handles: last.handles && `${last.handles.length} handles` } : last;
+      throw new Error(`${what}: not within ${ms / 1000} s; window.crease = ${JSON.stringify(shown)}`);
+    }
+    await sleep(100);
+  }
+}

@@ -3,7 +3,8 @@
 # crease CLI, starts the server on its embedded demo (free ports, a random publish token for room
 # demo), then runs tests/browser/viewer.test.mjs and tests/browser/palette.test.mjs (palette
 # streams on the GPU against `crease decode-stream`; playwright-core driving Debian's
-# /usr/bin/chromium) against it.
+# /usr/bin/chromium) and tests/browser/webxr.test.mjs (WebXR hands in room `hands`, through
+# Meta's WebXR emulator iwer) against it.
 # Called by .ci/run; runs alone from anywhere:
 #   bash tests/browser/run.sh
 # Uses ${CARGO_TARGET_DIR:-target} for the build, the demo cache (demo-cache/, trained once,
@@ -51,7 +52,7 @@ cargo build --release --locked -p crease-demo -p crease-cli
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 start_demo_server --demo-token "$token"
 
-# Both tests run even when the first fails; the script fails if either did.
+# Every test runs even when an earlier one fails; the script fails if any did.
 failed=0
 echo "== viewer in headless chromium"
 CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
@@ -60,6 +61,14 @@ CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$c
 echo "== palette streams in headless chromium"
 CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
     CREASE_BIN="$bin/crease" node tests/browser/palette.test.mjs || failed=1
+
+# WebXR hands through Meta's emulator (iwer): the encoding the viewer picks here (palette,
+# drawn by GPU passes inside the XR session), then vertex frames.
+for encoding in "" vertices; do
+    echo "== WebXR hands in headless chromium (iwer${encoding:+, $encoding frames})"
+    CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work${encoding:+/$encoding}" CHROMIUM="$chromium_bin" \
+        CREASE_XR_ENCODING="$encoding" node tests/browser/webxr.test.mjs || failed=1
+done
 
 echo "== stop crease-server"
 stop_server
