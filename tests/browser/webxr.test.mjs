@@ -301,6 +301,11 @@ window.__xrDevice = device;`,
     const body = `import "/__iwer/install.mjs";\n${await res.text()}`;
     await r.fulfill({ response: res, body });
   });
+  await check("(x0) a room of control points offers no hand tracking", async () => {
+    await page.goto(`${base}/?room=demo`, { waitUntil: "load" });
+    await waitForCrease(page, "the demo room's frames", (c) => c.connected && c.frames > 0, 30_000);
+    assert.equal(await page.locator("#xr-row").isHidden(), true, "#xr-row is hidden in room demo");
+  });
   // CREASE_XR_ENCODING=vertices|palette pins the stream's encoding (default: the viewer's choice).
   const encoding = process.env.CREASE_XR_ENCODING ? `&encoding=${process.env.CREASE_XR_ENCODING}` : "";
   await page.goto(`${base}/?room=${ROOM}&token=${encodeURIComponent(token)}${encoding}`, { waitUntil: "load" });

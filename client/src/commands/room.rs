@@ -82,8 +82,13 @@ pub struct OpenArgs {
     )]
     pub markers: Option<Vec<String>>,
     /// Take the marker names (and units) from a recording (Qualisys TSV or C3D).
-    #[arg(long, value_name = "RECORDING")]
+    #[arg(long, value_name = "RECORDING", conflicts_with = "webxr")]
     pub markers_from: Option<PathBuf>,
+    /// The capture is WebXR hand tracking (the viewer's "track my hands"): its 75 markers
+    /// (every joint's centre, `/dorsal` and `/palmar` points; crease_hand::joint_map) in
+    /// metres. With a WebXR joint map, e.g. --map bench/mocap/webxr-back.toml.
+    #[arg(long, conflicts_with = "markers")]
+    pub webxr: bool,
     /// The capture's length unit (with --markers; default "mm").
     #[arg(long, default_value = "mm")]
     pub units: String,
@@ -221,13 +226,13 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
 /// The room's `Retarget` from `--map` / `--map-name` and `--markers` / `--markers-from`.
 fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
     let has_map = args.map.is_some() || args.map_name.is_some();
-    let has_markers = args.markers.is_some() || args.markers_from.is_some();
+    let has_markers = args.markers.is_some() || args.markers_from.is_some() || args.webxr;
     match (has_map, has_markers) {
         (false, false) => return Ok(None),
         (true, false) => bail!(
-            "--map needs the capture's marker names: --markers A,B,... or --markers-from RECORDING"
+            "--map needs the capture's marker names: --markers A,B,..., --markers-from RECORDING or --webxr"
         ),
-        (false, true) => bail!("--markers and --markers-from need --map or --map-name"),
+        (false, true) => bail!("--markers, --markers-from and --webxr need --map or --map-name"),
         (true, true) => {}
     }
     let map_toml = match &args.map {
@@ -237,6 +242,7 @@ fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
         None => String::new(),
     };
     let (markers, units) = match (&args.markers, &args.markers_from) {
+        _ if args.webxr => (crease_hand::joint_map::capture_markers(), "m".to_owned()),
         (Some(m), _) => (m.clone(), args.units.clone()),
         (None, Some(path)) => {
             let r = crease_mocap::Recording::read(path)
