@@ -20,7 +20,7 @@ import os from "node:os";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
 import { chromium } from "playwright-core";
-import { LAUNCH_ARGS, capturePng, changedPixels, decodePng, imageStats, screenshotPng, watchPage } from "./common.mjs";
+import { LAUNCH_ARGS, capturePng, changedPixels, decodePng, imageStats, screenshotPng, watchPage, checkList, sleep, waitForCrease } from "./common.mjs";
 import {
   LaneEncoder,
   paletteLaneCount,
@@ -73,43 +73,14 @@ const MAX_DIFFERING_SHARE = 0.005;
 const OVERALL_TIMEOUT_MS = 600_000;
 
 // ---------------------------------------------------------------------------------------------
-// Harness (as viewer.test.mjs): each check runs even when an earlier one failed.
+// Harness (common.mjs's checkList): each check runs even when an earlier one failed.
 
-const results = [];
-let failed = 0;
+const { check, results, failed: failures, fail } = checkList();
 const notes = [];
 const figures = [];
 
-async function check(name, fn) {
-  const t0 = Date.now();
-  try {
-    const detail = await fn();
-    results.push(`ok   ${name}${detail ? ` — ${detail}` : ""} (${Date.now() - t0} ms)`);
-  } catch (e) {
-    failed++;
-    results.push(`FAIL ${name}: ${e && e.message ? e.message : e}`);
-  }
-  console.log(results.at(-1));
-}
-
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-
 /** The small, enumerable part of window.crease (not `palette`, which is hidden). */
 const creaseState = (page) => page.evaluate(() => (window.crease ? JSON.parse(JSON.stringify(window.crease)) : null));
-
-async function waitForCrease(page, what, pred, ms) {
-  const deadline = Date.now() + ms;
-  let last;
-  for (;;) {
-    last = await creaseState(page);
-    if (last && pred(last)) return last;
-    if (Date.now() > deadline) {
-      const shown = last ? { ...last, handles: last.handles && `${last.handles.length} handles` } : last;
-      throw new Error(`${what}: not within ${ms / 1000} s; window.crease = ${JSON.stringify(shown)}`);
-    }
-    await sleep(100);
-  }
-}
 
 const overlay = (page) => page.evaluate(() => document.getElementById("stats").textContent);
 
@@ -831,7 +802,7 @@ try {
     await serverChecks();
   }
 } catch (e) {
-  failed++;
+  fail();
   results.push(`FAIL ${e && e.stack ? e.stack : e}`);
   console.log(results.at(-1));
 } finally {
@@ -1119,5 +1090,5 @@ for (const n of notes) console.log(`note ${n}`);
 for (const f of figures) console.log(`figure ${f}`);
 const saved = shotFiles.filter((f) => fs.existsSync(path.join(shots, f)));
 console.log(`screenshots: ${saved.length ? saved.map((f) => path.join(shots, f)).join(" ") : "none"}`);
-console.log(`palette: ${results.length - failed} passed, ${failed} failed`);
-process.exit(failed ? 1 : 0);
+console.log(`palette: ${results.length - failures()} passed, ${failures()} failed`);
+process.exit(failures() ? 1 : 0);

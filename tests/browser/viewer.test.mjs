@@ -13,7 +13,7 @@ import os from "node:os";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
 import { chromium } from "playwright-core";
-import { LAUNCH_ARGS, capturePng, changedPixels as changed, decodePng, imageStats, screenshotPng, watchPage } from "./common.mjs";
+import { LAUNCH_ARGS, capturePng, changedPixels as changed, decodePng, imageStats, screenshotPng, watchPage, checkList, sleep, waitForCrease } from "./common.mjs";
 
 const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
 const httpAddr = process.env.CREASE_HTTP;
@@ -47,41 +47,11 @@ const OVERALL_TIMEOUT_MS = 300_000;
 const changedPixels = (a, b) => changed(a, b, PIXEL_TOLERANCE);
 
 // ---------------------------------------------------------------------------------------------
-// Harness: each check runs even when an earlier one failed (unless it needs what failed).
+// Harness (common.mjs's checkList): each check runs even when an earlier one failed (unless it
+// needs what failed).
 
-const results = [];
-let failed = 0;
+const { check, results, failed: failures, fail } = checkList();
 const notes = [];
-
-async function check(name, fn) {
-  const t0 = Date.now();
-  try {
-    const detail = await fn();
-    results.push(`ok   ${name}${detail ? ` — ${detail}` : ""} (${Date.now() - t0} ms)`);
-    console.log(results.at(-1));
-  } catch (e) {
-    failed++;
-    results.push(`FAIL ${name}: ${e && e.message ? e.message : e}`);
-    console.log(results.at(-1));
-  }
-}
-
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-
-/** Polls window.crease until `pred(state)` holds; throws with the last state after `ms`. */
-async function waitForCrease(page, what, pred, ms) {
-  const deadline = Date.now() + ms;
-  let last;
-  for (;;) {
-    last = await page.evaluate(() => (window.crease ? JSON.parse(JSON.stringify(window.crease)) : null));
-    if (last && pred(last)) return last;
-    if (Date.now() > deadline) {
-      const shown = last ? { ...last, handles: last.handles && `${last.handles.length} handles` } : last;
-      throw new Error(`${what}: not within ${ms / 1000} s; window.crease = ${JSON.stringify(shown)}`);
-    }
-    await sleep(100);
-  }
-}
 
 async function metric(name) {
   const res = await fetch(`${base}/metrics`);
@@ -431,7 +401,7 @@ try {
   });
 } catch (e) {
   // Outside a check: the page did not load, the browser died.
-  failed++;
+  fail();
   results.push(`FAIL ${e && e.message ? e.message : e}`);
   console.log(results.at(-1));
 } finally {
@@ -443,5 +413,5 @@ try {
 for (const n of notes) console.log(`note ${n}`);
 const saved = ["base.png", "drag.png", "detail.png"].filter((f) => fs.existsSync(path.join(shots, f)));
 console.log(`screenshots: ${saved.length ? saved.map((f) => path.join(shots, f)).join(" ") : "none"}`);
-console.log(`browser: ${results.length - failed} passed, ${failed} failed`);
-process.exit(failed ? 1 : 0);
+console.log(`browser: ${results.length - failures()} passed, ${failures()} failed`);
+process.exit(failures() ? 1 : 0);
