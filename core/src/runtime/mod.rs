@@ -9,6 +9,8 @@
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
+//! - [`refine`]: bone-level local-global refinement after the regression: the control points
+//!   as constraints, the regression as a prior (issue 20).
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 //! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
 //! - [`filter`]: the One Euro filter (Casiez et al. 2012), the input smoothing of a room's
@@ -20,6 +22,7 @@ pub mod edge_skin;
 pub mod filter;
 pub mod kernel;
 pub mod predict;
+pub mod refine;
 pub mod skin;
 pub mod translations;
 

@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub(crate) mod mesh_checks;
+pub(crate) mod rig;
 
 use std::path::{Path, PathBuf};
 
