@@ -25,9 +25,11 @@ use std::sync::{Arc, OnceLock};
 use glam::{Quat, Vec3};
 
 use crate::model::TrainedModel;
+use crate::runtime::confidence::{Confidence, ConfidenceScratch};
 use crate::runtime::detail::{DetailError, DetailSynth};
 use crate::runtime::displacement::{DetailInput, DetailRegressor, rotations_input};
 use crate::runtime::predict::RotationScratch;
+use crate::runtime::refine::{BoneRefiner, RefineScratch};
 use crate::runtime::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
 use crate::runtime::translations::{TranslationError, TranslationScratch, TranslationSolver};
 
@@ -82,6 +84,24 @@ pub struct Predictor {
     /// predictor nobody asks for detail never builds it), then cloned, buffers and all, into a
     /// context by its first detail frame; the topology is shared.
     detail: OnceLock<Result<DetailSynth, DetailError>>,
+    /// The bone-level refinement after the regression, when switched on
+    /// ([`Predictor::set_refinement`]).
+    refine: Option<(BoneRefiner, Refinement)>,
+    /// The scale of the per-frame confidence (`None` for a model of one example).
+    confidence: Option<Confidence>,
+}
+
+/// The bone-level refinement's settings (`runtime::refine`, issue 20).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refinement {
+    /// Local-global rounds per frame.
+    pub iterations: usize,
+    /// Weight of the regression prior, relative to each bone's data term, at confidence 1;
+    /// it falls as `1 / confidence^2` as a frame leaves the training span, and a frame at an
+    /// example (confidence 0) is not refined at all.
+    pub strength: f32,
+    /// Start from the rest rotations with no prior: the control points alone (a baseline).
+    pub from_rest: bool,
 }
 
 /// The detail layer's per-stream buffers.
@@ -111,6 +131,9 @@ pub struct FrameContext {
     positions: Vec<Vec3>,
     held: usize,
     detail: Option<Box<DetailFrame>>,
+    refine_scratch: RefineScratch,
+    confidence: f32,
+    confidence_scratch: ConfidenceScratch,
 }
 
 impl FrameContext {
@@ -127,6 +150,12 @@ impl FrameContext {
     /// The control positions the last frame used (occluded ones held).
     pub fn controls(&self) -> &[Vec3] {
         &self.controls
+    }
+
+    /// The last frame's distance from the training examples (`runtime::confidence`: 0 at an
+    /// example, 1 as far as the farthest example is from its nearest neighbour).
+    pub fn confidence(&self) -> f32 {
+        self.confidence
     }
 
     /// How many control values were held (occluded or non-finite) in the last frame.
@@ -161,13 +190,41 @@ impl Predictor {
             beta,
         )?;
         let skin = PackedSkin::new(&model.rig.skin)?;
+        let confidence = Confidence::new(&model.rotations);
         Ok(Self {
             model,
             skin,
             solver,
             beta,
             detail: OnceLock::new(),
+            refine: None,
+            confidence,
         })
+    }
+
+    /// Switches the bone-level refinement on (`Some`) or off. Builds its precomputed local step
+    /// (a pass over the mesh's edges: setup, not a per-frame operation).
+    pub fn set_refinement(&mut self, refinement: Option<Refinement>) {
+        self.refine = refinement.map(|r| (self.build_refiner(), r));
+    }
+
+    /// The refinement's settings, when on.
+    pub fn refinement(&self) -> Option<Refinement> {
+        self.refine.as_ref().map(|(_, r)| *r)
+    }
+
+    fn build_refiner(&self) -> BoneRefiner {
+        let m = &self.model;
+        let control_vertices: Vec<u32> = m.controls.iter().map(|c| c.vertex).collect();
+        BoneRefiner::new(
+            &m.rig.rest.positions,
+            &m.edges,
+            &m.rig.skin,
+            &m.edge_skin,
+            &control_vertices,
+            m.rig.bone_count,
+            self.beta,
+        )
     }
 
     /// The detail layer's synthesis: `Ok(None)` for a model without one; built on first use.
@@ -215,6 +272,9 @@ impl Predictor {
         check_beta(beta)?;
         self.solver.set_beta(beta)?;
         self.beta = beta;
+        if let Some(r) = self.refinement() {
+            self.refine = Some((self.build_refiner(), r));
+        }
         Ok(())
     }
 
@@ -237,6 +297,13 @@ impl Predictor {
             positions: m.rig.rest.positions.clone(),
             held: 0,
             detail: None,
+            refine_scratch: self
+                .refine
+                .as_ref()
+                .map(|(r, _)| r.scratch())
+                .unwrap_or_default(),
+            confidence: 0.0,
+            confidence_scratch: ConfidenceScratch::default(),
         }
     }
 
@@ -274,7 +341,38 @@ impl Predictor {
         self.model
             .rotations
             .predict(&ctx.controls, &mut ctx.rotation_scratch, &mut ctx.rotations);
-        self.solve_translations_into(ctx);
+        ctx.confidence = self
+            .confidence
+            .as_ref()
+            .map_or(0.0, |c| c.of(&ctx.controls, &mut ctx.confidence_scratch));
+        match &self.refine {
+            // A frame at an example is the regression's (it reproduces the example).
+            Some((_, r)) if !r.from_rest && ctx.confidence == 0.0 => {
+                self.solve_translations_into(ctx);
+            }
+            Some((refiner, r)) => {
+                let strength = if r.from_rest {
+                    ctx.rotations.fill(Quat::IDENTITY);
+                    0.0
+                } else {
+                    f64::from(r.strength) / f64::from(ctx.confidence).powi(2)
+                };
+                // On error (non-finite input, which the regressors never emit) the previous
+                // translations stay, as in the plain solve.
+                let _ = refiner.refine(
+                    &self.solver,
+                    &mut ctx.rotations,
+                    None,
+                    strength,
+                    &ctx.controls,
+                    r.iterations,
+                    &mut ctx.refine_scratch,
+                    &mut ctx.translations,
+                );
+                self.set_transforms(ctx);
+            }
+            None => self.solve_translations_into(ctx),
+        }
         Ok(())
     }
 
@@ -313,6 +411,12 @@ impl Predictor {
             &mut ctx.translation_scratch,
             &mut ctx.translations,
         );
+        self.set_transforms(ctx);
+    }
+
+    /// The context's transforms from its rotations and translations (a non-finite translation
+    /// becomes zero: a frame never produces NaN).
+    fn set_transforms(&self, ctx: &mut FrameContext) {
         for ((t, &q), &p) in ctx
             .transforms
             .iter_mut()

@@ -41,7 +41,7 @@ use std::time::Instant;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
-use crease_core::predictor::Predictor;
+use crease_core::predictor::{Predictor, Refinement};
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
 
 use crease_core::model::DetailLayer;
@@ -98,6 +98,26 @@ pub struct MethodStats {
 
 /// One table: method name -> statistics.
 pub type EvalTable = BTreeMap<String, MethodStats>;
+
+/// The rows of `table` in the order of [`ROWS`], each method's `+refine` row after it, then
+/// any other rows (the refinement's baselines) in name order.
+pub fn rows(table: &EvalTable) -> Vec<&str> {
+    let mut out: Vec<&str> = Vec::new();
+    for row in ROWS {
+        if let Some((k, _)) = table.get_key_value(row) {
+            out.push(k);
+        }
+        if let Some((k, _)) = table.get_key_value(&format!("{row}+refine")) {
+            out.push(k);
+        }
+    }
+    for k in table.keys() {
+        if !out.contains(&k.as_str()) {
+            out.push(k);
+        }
+    }
+    out
+}
 
 /// The row order of printed tables.
 pub const ROWS: [&str; 12] = [
@@ -157,6 +177,10 @@ pub struct EvalOptions {
     /// Translation-solve beta (FKY08 eq. 11) of the oracle rows, and of the methods unless
     /// `train.select` chooses it.
     pub beta: f32,
+    /// Issue 20's bone-level refinement: when set, every method also gets a `METHOD+refine`
+    /// row (its rotations refined with the regression as the prior), and the table a
+    /// `refine-from-rest` row (the control points alone, from the rest rotations, no prior).
+    pub refine: Option<Refinement>,
 }
 
 /// Frames of one held-out set: names and positions.
@@ -479,8 +503,33 @@ fn evaluate_frames(
                 regressor: d.pose.clone(),
             });
         }
-        let predictor = Predictor::new(Arc::new(model), Some(beta))
-            .map_err(|e| TrainError::Controls(e.to_string()))?;
+        let model = Arc::new(model);
+        if let Some(refine) = options.refine {
+            let mut rows = vec![(format!("{}+refine", method.name()), refine)];
+            if Some(method) == options.methods.first().copied() {
+                let from_rest = Refinement {
+                    from_rest: true,
+                    ..refine
+                };
+                rows.push(("refine-from-rest".to_owned(), from_rest));
+            }
+            for (row, refine) in rows {
+                let mut predictor = Predictor::new(Arc::clone(&model), Some(beta))
+                    .map_err(|e| TrainError::Controls(e.to_string()))?;
+                predictor.set_refinement(Some(refine));
+                let mut ctx = predictor.new_context();
+                for f in frames {
+                    let t = Instant::now();
+                    let got = predictor
+                        .predict(&mut ctx, &controls_of(f), None)
+                        .map_err(|e| TrainError::Controls(e.to_string()))?;
+                    let us = t.elapsed().as_secs_f64() * 1e6;
+                    push(table, &row, rms_normalized(got, f, scale), us);
+                }
+            }
+        }
+        let predictor =
+            Predictor::new(model, Some(beta)).map_err(|e| TrainError::Controls(e.to_string()))?;
         let mut ctx = predictor.new_context();
         for (k, f) in frames.iter().enumerate() {
             let controls = controls_of(f);

@@ -232,6 +232,7 @@ fn evaluation_detail_rows_are_complete_and_consistent() {
         train: opts.clone(),
         methods: vec![Method::Global, Method::Local],
         beta: 1.0,
+        refine: None,
     };
     let table = eval::evaluate_test_layers(
         TrainInput {

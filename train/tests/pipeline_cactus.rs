@@ -144,6 +144,7 @@ fn cactus_leave_one_out_and_test_tables() {
         train: options(Method::Global),
         methods: Method::ALL.to_vec(),
         beta: 1.0,
+        refine: None,
     };
     let test = eval::evaluate_test(
         input,

@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
-use crease_train::eval::{self, DetailEval, EvalOptions, EvalTable, HeldOut, ROWS};
+use crease_core::predictor::Refinement;
+use crease_train::eval::{self, DetailEval, EvalOptions, EvalTable, HeldOut};
 use crease_train::pipeline::TrainInput;
 use crease_train::regress::Method;
 
@@ -37,6 +38,11 @@ pub struct EvalArgs {
     /// Detail layer options (used when the examples are detailed).
     #[command(flatten)]
     pub detail: layers::DetailArgs,
+    /// Issue 20's bone-level refinement after the regression, `ITERATIONS,STRENGTH` (e.g.
+    /// `4,0.1`): adds a `METHOD+refine` row per method and a `refine-from-rest` row (the
+    /// control points alone, no regression prior).
+    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = parse_refinement)]
+    pub refine: Option<Refinement>,
     /// Print `{"loo": {METHOD: {...}}, "test": {METHOD: {...}}}` on stdout.
     #[arg(long)]
     pub json: bool,
@@ -63,6 +69,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         train: args.regress.train_options(Method::Global, set)?,
         methods,
         beta: args.regress.beta,
+        refine: args.refine,
     };
     let frames: Vec<&[Vec3]> = set.frames();
     let names: Vec<String> = set.names();
@@ -167,7 +174,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     for (protocol, table) in &tables {
         println_table(protocol, table, args.json);
         let mut obj = serde_json::Map::new();
-        for row in ROWS {
+        for row in eval::rows(table) {
             if let Some(s) = table.get(row) {
                 obj.insert(row.to_string(), serde_json::to_value(s)?);
                 let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
@@ -205,6 +212,29 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `ITERATIONS,STRENGTH` of `--refine`.
+fn parse_refinement(text: &str) -> Result<Refinement, String> {
+    let (it, strength) = text
+        .split_once(',')
+        .ok_or_else(|| format!("{text:?}: expected ITERATIONS,STRENGTH (e.g. 4,0.1)"))?;
+    let iterations: usize = it
+        .trim()
+        .parse()
+        .map_err(|e| format!("iterations {it:?}: {e}"))?;
+    let strength: f32 = strength
+        .trim()
+        .parse()
+        .map_err(|e| format!("strength {strength:?}: {e}"))?;
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(format!("strength {strength}: expected a number >= 0"));
+    }
+    Ok(Refinement {
+        iterations,
+        strength,
+        from_rest: false,
+    })
+}
+
 /// The human table (to stderr when stdout carries JSON).
 fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
     let mut text = format!("{protocol}: RMS vertex error, rest bbox largest side = 1\n");
@@ -220,7 +250,7 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
         ));
     }
     text.push('\n');
-    for row in ROWS {
+    for row in eval::rows(table) {
         if let Some(s) = table.get(row) {
             text.push_str(&format!(
                 "  {:<18} {:>10.4e} {:>10.4e} {:>10.1} {:>7}",
@@ -244,7 +274,7 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
             eval::CREASE_FRACTION * 100.0
         ));
     }
-    for row in ROWS {
+    for row in eval::rows(table) {
         if let Some(s) = table.get(row).filter(|s| !s.selected.is_empty()) {
             let picks: Vec<String> = s
                 .selected

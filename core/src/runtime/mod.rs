@@ -9,6 +9,8 @@
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
+//! - [`confidence`]: how far a frame's control vector lies from the training examples, in the
+//!   kernel's metric (issue 20).
 //! - [`refine`]: bone-level local-global refinement after the regression: the control points
 //!   as constraints, the regression as a prior (issue 20).
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
@@ -16,6 +18,7 @@
 //! - [`filter`]: the One Euro filter (Casiez et al. 2012), the input smoothing of a room's
 //!   control points.
 
+pub mod confidence;
 pub mod detail;
 pub mod displacement;
 pub mod edge_skin;
