@@ -49,6 +49,7 @@ const state = {
   frameSeq: null, // the seq of the last mesh frame received
   residual: null, // the last ack's control residual, model units
   residualCapture: null, // ... and in the capture's units (retargeting rooms)
+  confidence: null, // the last ack's distance from the training examples (1: their spread)
   // WebXR hands: whether the browser offers an immersive session, why not, whether tracking,
   // the hand, frames published and dropped (socket backed up), the last one's seq, and the capture-to-mesh latency
   // (ms, mean over the last half second: an XR frame's time to its mesh frame's arrival).
@@ -386,6 +387,7 @@ function onAck(ack) {
   if (!ack.error) {
     state.residual = ack.control_residual;
     state.residualCapture = ack.control_residual_capture ?? null;
+    state.confidence = ack.confidence ?? 0; // absent at an example
   }
   if (ack.error) {
     const bad = ack.error.code === 7;
@@ -629,7 +631,8 @@ function xrText() {
   else if (state.residualCapture != null) res = `${state.residualCapture.toFixed(4)} ${captureUnits()}`;
   else if (state.residual != null) res = `${state.residual.toFixed(4)} (model units)`;
   const lat = x.latencyMs == null ? "…" : `${x.latencyMs.toFixed(0)} ms`;
-  return `${x.hand} hand ${x.tracked ? "tracked" : "not seen"}\nresidual ${res} · capture to mesh ${lat}`;
+  const far = state.confidence > 1 ? " · outside the examples" : "";
+  return `${x.hand} hand ${x.tracked ? "tracked" : "not seen"}${far}\nresidual ${res} · capture to mesh ${lat}`;
 }
 
 function drawXrPanel() {
@@ -708,6 +711,7 @@ function render(time, frame) {
     `${state.renderFps.toFixed(1)} frames/s drawn\n` +
     `server latency ${(fpsWindow.lat / 1000).toFixed(2)} ms\n` +
     `published ${state.published} · acks ${state.acks}` +
+    (state.confidence != null ? `\nconfidence ${state.confidence.toFixed(2)}${state.confidence > 1 ? " (outside the examples)" : ""}` : "") +
     (tracker ? `\n${xrText()}` : roomInfo?.capture && state.xr.reason ? `\nWebXR: ${state.xr.reason}` : "");
 }
 

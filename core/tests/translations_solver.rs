@@ -4,7 +4,7 @@
 //! vector skin (`e_k^s = sum_b R_b a_kb`), not just FKY08's scalar weights.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-use crease_core::glam::{Quat, Vec3};
+use crease_core::glam::{Mat3A, Quat, Vec3};
 use crease_core::runtime::skin::RigidTransform;
 use crease_core::runtime::translations::{TranslationError, TranslationSolver};
 use nalgebra::{DMatrix, DVector};
@@ -12,9 +12,16 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 
 mod common;
-use common::rig::{
-    Problem, dense_weights, problem, random_point, random_rotation, rotation_f64, v64,
-};
+use common::rig::{Problem, dense_weights, problem, random_point, random_rotation};
+
+fn rotation_f64(q: Quat) -> nalgebra::Matrix3<f64> {
+    let m = Mat3A::from_quat(q).to_cols_array();
+    nalgebra::Matrix3::from_column_slice(&m.map(|x| x as f64))
+}
+
+fn v64(p: Vec3) -> nalgebra::Vector3<f64> {
+    nalgebra::Vector3::new(p.x as f64, p.y as f64, p.z as f64)
+}
 
 impl Problem {
     /// Dense eq. 11 from scratch: unknown `x[3 b + c]`, three rows per edge and per control,

@@ -109,6 +109,10 @@ pub struct JsonAck {
     /// A retargeting room's residual in the capture's units (absent elsewhere).
     #[serde(skip_serializing_if = "is_zero")]
     pub control_residual_capture: f32,
+    /// How far the frame lies from the model's training examples (`PublishAck.confidence`;
+    /// absent when 0: at an example, and in acks of refused frames).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub confidence: f32,
     /// Set when the frame was refused.
     pub error: Option<JsonError>,
 }
@@ -143,6 +147,7 @@ impl From<v1::PublishAck> for JsonAck {
             held_controls: ack.held_controls,
             control_residual: ack.control_residual,
             control_residual_capture: ack.control_residual_capture,
+            confidence: ack.confidence,
             error: ack.error.map(JsonError::from),
         }
     }

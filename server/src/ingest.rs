@@ -154,6 +154,7 @@ fn count(state: &AppState, done: &Result<Published, PublishError>) {
                 m.detail_frames.inc();
             }
             m.frame_latency.observe(f64::from(p.latency_us) * 1e-6);
+            m.frame_confidence.observe(f64::from(p.confidence));
         }
         Err(_) => {
             m.frames_refused.inc();
@@ -188,6 +189,7 @@ async fn publish_inner(
                 // The owner synthesised (or not) the detail layer: not this replica's work.
                 detail: false,
                 control_rms_capture: ack.control_residual_capture,
+                confidence: ack.confidence,
             }),
         };
     }
@@ -264,6 +266,7 @@ pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAc
             error: None,
             control_residual: p.control_rms,
             control_residual_capture: p.control_rms_capture,
+            confidence: p.confidence,
         },
         Err(e) => error_ack(seq, e.frame_error()),
     }
@@ -344,9 +347,11 @@ mod tests {
                 control_rms: 0.5,
                 detail: false,
                 control_rms_capture: 2.5,
+                confidence: 0.5,
             }),
         );
         assert_eq!(ok.control_residual_capture, 2.5);
+        assert_eq!(ok.confidence, 0.5);
         assert_eq!(
             (
                 ok.seq,

@@ -19,6 +19,9 @@ pub struct Metrics {
     pub detail_frames: Counter,
     /// Seconds from a control frame's arrival to its meshes being ready.
     pub frame_latency: Histogram,
+    /// How far published frames lie from their model's training examples (issue 20: 0 at an
+    /// example, 1 as far as the examples are spread).
+    pub frame_confidence: Histogram,
     /// Encoded mesh bytes sent to subscribers and batch clients.
     pub bytes_out: Counter,
     /// Mesh frames sent.
@@ -40,6 +43,7 @@ impl Default for Metrics {
             detail_frames: Counter::default(),
             // 25 µs to ~51 ms.
             frame_latency: Histogram::new(exponential_buckets(25e-6, 2.0, 12)),
+            frame_confidence: Histogram::new([0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0]),
             bytes_out: Counter::default(),
             frames_out: Counter::default(),
             rooms: Gauge::default(),
@@ -67,6 +71,11 @@ impl Default for Metrics {
             "frame_latency_seconds",
             "From a control frame's arrival to its meshes being ready",
             m.frame_latency.clone(),
+        );
+        registry.register(
+            "frame_confidence",
+            "How far published frames lie from the model's training examples (0 at an example, 1 as far as the examples are spread)",
+            m.frame_confidence.clone(),
         );
         registry.register("bytes_out", "Encoded mesh bytes sent", m.bytes_out.clone());
         registry.register("frames_out", "Mesh frames sent", m.frames_out.clone());

@@ -112,6 +112,9 @@ pub struct Published {
     /// A retargeting room's `control_rms` in the capture's units (0 before its scale is known,
     /// and in other rooms).
     pub control_rms_capture: f32,
+    /// How far the frame lies from the model's training examples
+    /// (`FrameContext::confidence`).
+    pub confidence: f32,
 }
 
 /// Why a frame was not published (the room is unchanged but for the encoders' state).
@@ -569,6 +572,7 @@ impl Pipeline {
             control_rms,
             detail,
             control_rms_capture,
+            confidence: state.ctx.confidence(),
         })
     }
 }

@@ -663,6 +663,17 @@ async fn filtered_rooms_lag_a_step_and_acks_report_the_control_residual() {
     // Unfiltered: the mesh of the step itself.
     let want = residual(&model, &predicted(&model, &step), &targets);
     assert!(want > 0.0);
+    // The ack's confidence is the predictor's for the same controls, and grows off the rest.
+    let confidence = {
+        let predictor =
+            crease_core::predictor::Predictor::new(std::sync::Arc::new(model.clone()), None)
+                .unwrap();
+        let mut ctx = predictor.new_context();
+        predictor.predict(&mut ctx, &targets, None).unwrap();
+        ctx.confidence()
+    };
+    assert!(confidence > 0.0, "a bent frame lies off the examples");
+    assert_eq!(acks[0][1].confidence, confidence);
     let raw_residual = acks[0][1].control_residual;
     assert!(
         (raw_residual - want).abs() <= 1e-4 * want.max(1e-3),

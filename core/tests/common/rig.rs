@@ -2,7 +2,7 @@
 //! skins and edge skins, random rotations and points, and dense weight rows.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-use crease_core::glam::{Mat3A, Quat, Vec3};
+use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::runtime::edge_skin::EdgeSkin;
 use crease_core::runtime::skin::SkinWeights;
@@ -91,15 +91,6 @@ pub(crate) fn dense_weights(skin: &SkinWeights, row: usize, bones: usize) -> Vec
     let sum: f64 = w.iter().sum();
     w.iter_mut().for_each(|x| *x /= sum);
     w
-}
-
-pub(crate) fn rotation_f64(q: Quat) -> nalgebra::Matrix3<f64> {
-    let m = Mat3A::from_quat(q).to_cols_array();
-    nalgebra::Matrix3::from_column_slice(&m.map(|x| x as f64))
-}
-
-pub(crate) fn v64(p: Vec3) -> nalgebra::Vector3<f64> {
-    nalgebra::Vector3::new(p.x as f64, p.y as f64, p.z as f64)
 }
 
 /// Everything eq. 11 needs.
