@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::examples::ExampleSet;
-use crease_core::predictor::Predictor;
+use crease_core::predictor::{Predictor, Refinement};
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use crease_train::regress::{Method, RegressOptions};
@@ -95,6 +95,27 @@ fn bench(c: &mut Criterion) {
                 predictor.predict(&mut ctx, &inputs[i], None).unwrap();
             })
         });
+        // Issue 20's bone-level refinement on top of the transforms (test frames lie off the
+        // examples, so every one is refined).
+        if method == Method::Global {
+            for iterations in [1usize, 4] {
+                let mut refined = Predictor::new(model.clone(), None).expect("predictor");
+                refined.set_refinement(Some(Refinement {
+                    iterations,
+                    strength: 0.01,
+                    from_rest: false,
+                }));
+                let mut ctx = refined.new_context();
+                g.bench_function(format!("transforms_refined_{iterations}"), |b| {
+                    b.iter(|| {
+                        i = (i + 1) % inputs.len();
+                        refined
+                            .predict_transforms(&mut ctx, &inputs[i], None)
+                            .unwrap();
+                    })
+                });
+            }
+        }
         g.finish();
     }
 }

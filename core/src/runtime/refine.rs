@@ -322,8 +322,11 @@ fn alignment(r: &DMat3, m: &DMat3) -> f64 {
     r.x_axis.dot(m.x_axis) + r.y_axis.dot(m.y_axis) + r.z_axis.dot(m.z_axis)
 }
 
-/// Iterations of the polar-factor search.
-const POLAR_ITERATIONS: usize = 12;
+/// Most iterations of the polar-factor search per bone and local step (warm-started at the
+/// current rotation, which a local step moves little, it converges in a few).
+const POLAR_ITERATIONS: usize = 4;
+/// The search stops when its step is below this angle (radians).
+const POLAR_TOLERANCE: f64 = 1e-7;
 
 /// The rotation maximising `tr(R^T m)` near `start` (Müller et al. 2016), or `start` when the
 /// search does not improve on it (module docs: this keeps the descent monotone).
@@ -339,6 +342,9 @@ fn best_rotation(m: &DMat3, start: DMat3) -> DMat3 {
             break;
         }
         q = (DQuat::from_axis_angle(omega / w, w) * q).normalize();
+        if w < POLAR_TOLERANCE {
+            break;
+        }
     }
     let r = DMat3::from_quat(q);
     if alignment(&r, m) >= alignment(&start, m) {
