@@ -240,7 +240,7 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
     let mut text = format!("{protocol}: RMS vertex error, rest bbox largest side = 1\n");
     let detailed = table.values().any(|s| s.detail_rms_mean.is_some());
     text.push_str(&format!(
-        "  {:<18} {:>10} {:>10} {:>10} {:>7}",
+        "  {:<22} {:>10} {:>10} {:>10} {:>7}",
         "method", "rms_mean", "rms_max", "us/frame", "frames"
     ));
     if detailed {
@@ -253,7 +253,7 @@ fn println_table(protocol: &str, table: &EvalTable, to_stderr: bool) {
     for row in eval::rows(table) {
         if let Some(s) = table.get(row) {
             text.push_str(&format!(
-                "  {:<18} {:>10.4e} {:>10.4e} {:>10.1} {:>7}",
+                "  {:<22} {:>10.4e} {:>10.4e} {:>10.1} {:>7}",
                 row,
                 s.rms_mean,
                 s.rms_max,

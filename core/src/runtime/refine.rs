@@ -82,10 +82,9 @@ impl<T: Copy> Cols<T> {
 #[derive(Clone, Debug)]
 pub struct BoneRefiner {
     bones: usize,
-    /// `G_ab`, by column `b`.
-    g: Cols<DMat3>,
-    /// `H_cb`, by column `b`.
-    h: Cols<DVec3>,
+    /// `(G_ab, H_ab)` by column `b`, one entry per bone pair sharing a residual (`G_bb` is
+    /// kept but unused: a bone's own term cancels in `M_b`).
+    pairs: Cols<(DMat3, DVec3)>,
     /// `q_lb`, by column `b` (rows: control points).
     q: Cols<DVec3>,
     /// `tr(G_bb) / 3`.
@@ -127,19 +126,18 @@ impl BoneRefiner {
         beta: f32,
     ) -> BoneRefiner {
         let beta = beta as f64;
-        let mut g: BTreeMap<(u32, u32), DMat3> = BTreeMap::new();
-        let mut h: BTreeMap<(u32, u32), DVec3> = BTreeMap::new();
+        let mut pairs: BTreeMap<(u32, u32), (DMat3, DVec3)> = BTreeMap::new();
         let mut q: BTreeMap<(u32, u32), DVec3> = BTreeMap::new();
         let mut r: Residual = Vec::new();
         let mut accumulate = |r: &Residual, weight: f64| {
             for &(b, xb, _) in r {
+                if xb == DVec3::ZERO {
+                    continue;
+                }
                 for &(a, xa, da) in r {
-                    if xa != DVec3::ZERO && xb != DVec3::ZERO {
-                        *g.entry((b, a)).or_insert(DMat3::ZERO) += outer(xa, xb) * weight;
-                    }
-                    if da != 0.0 && xb != DVec3::ZERO {
-                        *h.entry((b, a)).or_insert(DVec3::ZERO) += xb * (da * weight);
-                    }
+                    let e = pairs.entry((b, a)).or_insert((DMat3::ZERO, DVec3::ZERO));
+                    e.0 += outer(xa, xb) * weight;
+                    e.1 += xb * (da * weight);
                 }
             }
         };
@@ -173,14 +171,14 @@ impl BoneRefiner {
         }
         let scale = (0..bone_count as u32)
             .map(|b| {
-                g.get(&(b, b))
-                    .map_or(0.0, |c| (c.x_axis.x + c.y_axis.y + c.z_axis.z) / 3.0)
+                pairs
+                    .get(&(b, b))
+                    .map_or(0.0, |(c, _)| (c.x_axis.x + c.y_axis.y + c.z_axis.z) / 3.0)
             })
             .collect();
         BoneRefiner {
             bones: bone_count,
-            g: Cols::from_map(bone_count, &g),
-            h: Cols::from_map(bone_count, &h),
+            pairs: Cols::from_map(bone_count, &pairs),
             q: Cols::from_map(bone_count, &q),
             scale,
         }
@@ -208,13 +206,11 @@ impl BoneRefiner {
     ) {
         for b in 0..self.bones {
             let mut m = DMat3::ZERO;
-            for (a, gab) in self.g.col(b) {
+            for (a, (gab, hab)) in self.pairs.col(b) {
                 if a != b {
                     m -= r[a] * *gab;
                 }
-            }
-            for (c, hcb) in self.h.col(b) {
-                m -= outer(t[c], *hcb);
+                m -= outer(t[a], *hab);
             }
             for (l, qlb) in self.q.col(b) {
                 m += outer(controls[l].as_dvec3(), *qlb);
