@@ -341,10 +341,13 @@ impl Predictor {
         self.model
             .rotations
             .predict(&ctx.controls, &mut ctx.rotation_scratch, &mut ctx.rotations);
-        ctx.confidence = self
-            .confidence
-            .as_ref()
-            .map_or(0.0, |c| c.of(&ctx.controls, &mut ctx.confidence_scratch));
+        ctx.confidence = self.confidence.as_ref().map_or(0.0, |c| {
+            c.of(
+                &self.model.rotations,
+                &ctx.controls,
+                &mut ctx.confidence_scratch,
+            )
+        });
         match &self.refine {
             // A frame at an example is the regression's (it reproduces the example).
             Some((_, r)) if !r.from_rest && ctx.confidence == 0.0 => {

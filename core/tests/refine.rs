@@ -7,6 +7,7 @@
 
 use crease_core::glam::{DMat3, DVec3, Quat, Vec3};
 use crease_core::runtime::refine::BoneRefiner;
+use crease_core::runtime::translations::TranslationSolver;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -23,6 +24,33 @@ fn refiner(pb: &Problem, beta: f32) -> BoneRefiner {
         pb.bones,
         beta,
     )
+}
+
+/// `refine.refine` from `start` (its own prior), `iterations` rounds: the rotations and
+/// translations.
+fn refined(
+    refine: &BoneRefiner,
+    solver: &TranslationSolver,
+    start: &[Quat],
+    strength: f64,
+    controls: &[Vec3],
+    iterations: usize,
+) -> (Vec<Quat>, Vec<Vec3>) {
+    let mut r = start.to_vec();
+    let mut t = vec![Vec3::ZERO; start.len()];
+    refine
+        .refine(
+            solver,
+            &mut r,
+            None,
+            strength,
+            controls,
+            iterations,
+            &mut refine.scratch(),
+            &mut t,
+        )
+        .unwrap();
+    (r, t)
 }
 
 fn mat(q: Quat) -> DMat3 {
@@ -93,23 +121,9 @@ fn the_energy_never_rises_over_the_iterations() {
             let lambda: Vec<f64> = (0..pb.bones)
                 .map(|b| refine.prior_weight(b, strength))
                 .collect();
-            let mut scratch = refine.scratch();
             let mut energies = Vec::new();
             for iterations in 0..10 {
-                let mut r = prior.clone();
-                let mut t = vec![Vec3::ZERO; pb.bones];
-                refine
-                    .refine(
-                        &solver,
-                        &mut r,
-                        None,
-                        strength,
-                        &controls,
-                        iterations,
-                        &mut scratch,
-                        &mut t,
-                    )
-                    .unwrap();
+                let (r, t) = refined(&refine, &solver, &prior, strength, &controls, iterations);
                 energies.push(dense_energy(
                     &pb,
                     beta as f64,
@@ -154,7 +168,6 @@ fn without_a_prior_the_control_points_alone_find_a_rigid_pose() {
         .iter()
         .map(|&i| motion * pb.mesh.positions[i as usize] + shift)
         .collect();
-    let mut scratch = refine.scratch();
     let rest = vec![Quat::IDENTITY; pb.bones];
     let energy = |r: &[Quat], t: &[Vec3]| {
         dense_energy(
@@ -167,34 +180,8 @@ fn without_a_prior_the_control_points_alone_find_a_rigid_pose() {
             &vec![0.0; pb.bones],
         )
     };
-    let mut r0 = rest.clone();
-    let mut t0 = vec![Vec3::ZERO; pb.bones];
-    refine
-        .refine(
-            &solver,
-            &mut r0,
-            None,
-            0.0,
-            &controls,
-            0,
-            &mut scratch,
-            &mut t0,
-        )
-        .unwrap();
-    let mut r = rest.clone();
-    let mut t = vec![Vec3::ZERO; pb.bones];
-    refine
-        .refine(
-            &solver,
-            &mut r,
-            None,
-            0.0,
-            &controls,
-            60,
-            &mut scratch,
-            &mut t,
-        )
-        .unwrap();
+    let (r0, t0) = refined(&refine, &solver, &rest, 0.0, &controls, 0);
+    let (r, t) = refined(&refine, &solver, &rest, 0.0, &controls, 60);
     let (before, after) = (energy(&r0, &t0), energy(&r, &t));
     assert!(
         after < 1e-3 * before,
@@ -221,25 +208,11 @@ fn a_fully_trusted_prior_moves_nothing() {
     let controls: Vec<Vec3> = (0..pb.controls.len())
         .map(|_| random_point(&mut rng, 1.0))
         .collect();
-    let mut scratch = refine.scratch();
     let mut want = vec![Vec3::ZERO; pb.bones];
     solver
         .solve(&prior, &controls, &mut solver.scratch(), &mut want)
         .unwrap();
-    let mut r = prior.clone();
-    let mut t = vec![Vec3::ZERO; pb.bones];
-    refine
-        .refine(
-            &solver,
-            &mut r,
-            None,
-            1e9,
-            &controls,
-            5,
-            &mut scratch,
-            &mut t,
-        )
-        .unwrap();
+    let (r, t) = refined(&refine, &solver, &prior, 1e9, &controls, 5);
     for b in 0..pb.bones {
         // f32's acos resolves angles near 0 to ~1e-3 rad.
         let off = r[b].angle_between(prior[b]);

@@ -11,16 +11,13 @@
 
 use glam::Vec3;
 
-use super::kernel::Kernel;
 use super::predict::RotationModel;
 
 /// The precomputed scale of one model (module docs).
 #[derive(Clone, Debug)]
 pub struct Confidence {
-    controls: Vec<u32>,
-    kernel: Kernel,
-    inputs: Vec<f32>,
-    dim: usize,
+    /// The control group whose kernel and examples measure the distance.
+    group: usize,
     /// `k(x_i, x_i)` per example.
     k_self: Vec<f64>,
     /// The largest nearest-neighbour distance among the examples.
@@ -37,7 +34,11 @@ pub struct ConfidenceScratch {
 impl Confidence {
     /// The confidence scale of `model`; `None` without two examples (nothing to scale by).
     pub fn new(model: &RotationModel) -> Option<Confidence> {
-        let group = model.groups.iter().max_by_key(|g| g.controls.len())?;
+        let (index, group) = model
+            .groups
+            .iter()
+            .enumerate()
+            .max_by_key(|(_, g)| g.controls.len())?;
         let dim = 3 * group.controls.len();
         let n = model.example_count;
         if n < 2 || dim == 0 || group.inputs.len() != n * dim {
@@ -58,31 +59,36 @@ impl Confidence {
                 .fold(f64::INFINITY, f64::min);
             scale = scale.max(nearest.sqrt());
         }
-        (scale > 0.0 && scale.is_finite()).then(|| Confidence {
-            controls: group.controls.clone(),
-            kernel: group.kernel,
-            inputs: group.inputs.clone(),
-            dim,
+        (scale > 0.0 && scale.is_finite()).then_some(Confidence {
+            group: index,
             k_self,
             scale,
         })
     }
 
     /// The distance of `controls` (the model's control points, model order) to the nearest
-    /// example, in units of the scale (module docs). Allocation-free after the first call on a
-    /// scratch.
-    pub fn of(&self, controls: &[Vec3], scratch: &mut ConfidenceScratch) -> f32 {
+    /// example, in units of the scale (module docs); `model` is the one this was built from.
+    /// Allocation-free after the first call on a scratch.
+    pub fn of(
+        &self,
+        model: &RotationModel,
+        controls: &[Vec3],
+        scratch: &mut ConfidenceScratch,
+    ) -> f32 {
+        let group = &model.groups[self.group];
         scratch.input.clear();
-        for &c in &self.controls {
+        for &c in &group.controls {
             scratch
                 .input
                 .extend_from_slice(&controls[c as usize].to_array());
         }
         scratch.xi.resize(self.k_self.len(), 0.0);
-        self.kernel
-            .kernel_vector(&scratch.input, &self.inputs, self.dim, &mut scratch.xi);
+        let dim = scratch.input.len();
+        group
+            .kernel
+            .kernel_vector(&scratch.input, &group.inputs, dim, &mut scratch.xi);
         let x = &scratch.input;
-        let kxx = f64::from(self.kernel.eval(x, x));
+        let kxx = f64::from(group.kernel.eval(x, x));
         let nearest = scratch
             .xi
             .iter()

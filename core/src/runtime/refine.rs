@@ -36,7 +36,7 @@ use glam::{DMat3, DQuat, DVec3, Quat, Vec3};
 
 use super::edge_skin::EdgeSkin;
 use super::skin::SkinWeights;
-use super::translations::{TranslationError, TranslationScratch, TranslationSolver};
+use super::translations::{TranslationError, TranslationScratch, TranslationSolver, influences};
 
 /// Column-compressed per-bone lists.
 #[derive(Clone, Debug, Default)]
@@ -102,15 +102,6 @@ fn add(r: &mut Residual, b: u32, x: DVec3, d: f64) {
         }
         None => r.push((b, x, d)),
     }
-}
-
-fn influences(skin: &SkinWeights, v: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
-    let (idx, w) = skin.vertex(v);
-    let sum: f64 = w.iter().map(|&x| x as f64).sum();
-    idx.iter()
-        .zip(w)
-        .filter(|(_, w)| **w > 0.0)
-        .map(move |(&b, &w)| (b, w as f64 / sum))
 }
 
 impl BoneRefiner {

@@ -255,7 +255,7 @@ fn transpose_times<T: Acc>(
 }
 
 /// A vertex's influences in f64, renormalised to sum to one, zero weights dropped.
-fn influences(skin: &SkinWeights, v: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
+pub(super) fn influences(skin: &SkinWeights, v: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
     let (idx, w) = skin.vertex(v);
     let sum: f64 = w.iter().map(|&x| x as f64).sum();
     idx.iter()
