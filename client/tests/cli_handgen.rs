@@ -181,3 +181,91 @@ fn handgen_and_pose_reject_bad_input() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bad.json") && err.contains("elbow"), "{err}");
 }
+
+/// `crease eval --hands extrapolation` (issue 20) generates in memory what `crease handgen
+/// --train 10` writes: the same named training poses, sampled test poses and control points,
+/// so its table equals the one of `crease eval` on the written manifests.
+#[test]
+fn eval_hands_protocol_matches_the_written_data_set() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().join("hands");
+    run_ok(
+        crease()
+            .args([
+                "handgen",
+                "--train",
+                "10",
+                "--test",
+                "4",
+                "--seed",
+                "3",
+                "--base-only",
+                "--out",
+            ])
+            .arg(&out),
+    );
+    let (train, test) =
+        crease_hand::dataset::example_sets(10, 4, 3, crease_hand::dataset::Layout::Glove13)
+            .expect("in-memory sets");
+    let written = ExampleSet::load(out.join("train-glove13.toml")).expect("train manifest");
+    let written_test = ExampleSet::load(out.join("test.toml")).expect("test manifest");
+    for (mem, file) in [(&train, &written), (&test, &written_test)] {
+        assert_eq!(mem.examples.len(), file.examples.len());
+        for (a, b) in mem.examples.iter().zip(&file.examples) {
+            assert!(b.name.ends_with(&a.name), "{} vs {}", a.name, b.name);
+            assert_eq!(a.mesh.triangles, b.mesh.triangles);
+            assert_eq!(a.mesh.positions, b.mesh.positions, "{}", a.name);
+        }
+    }
+    assert_eq!(train.control_points, written.control_points);
+    let names: Vec<&str> = train.examples.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names[0], "train/00-flat.ply");
+    assert!(names.iter().all(|n| !n.contains("sampled")), "{names:?}");
+
+    let table = |args: &[&str]| -> serde_json::Value {
+        let mut cmd = crease();
+        cmd.args([
+            "eval",
+            "--bones",
+            "12",
+            "--max-influences",
+            "3",
+            "--methods",
+            "global",
+        ])
+        .args(["--refine", "2,0.01", "--json"])
+        .args(args);
+        let json: serde_json::Value = serde_json::from_str(&run_ok(&mut cmd)).expect("json");
+        let mut rows = json["test"].as_object().expect("a test table").clone();
+        for row in rows.values_mut() {
+            row.as_object_mut().unwrap().remove("us_per_frame");
+        }
+        serde_json::Value::Object(rows)
+    };
+    let from_files = table(&[
+        "--examples",
+        out.join("train-glove13.toml").to_str().unwrap(),
+        "--test",
+        out.join("test.toml").to_str().unwrap(),
+    ]);
+    let generated = table(&[
+        "--hands",
+        "extrapolation",
+        "--hand-layout",
+        "glove13",
+        "--hand-test",
+        "4",
+        "--hand-seed",
+        "3",
+    ]);
+    for row in [
+        "global",
+        "global+refine",
+        "nearest",
+        "nearest+refine",
+        "refine-from-rest",
+    ] {
+        assert!(generated.get(row).is_some(), "no {row} row: {generated}");
+    }
+    assert_eq!(generated, from_files);
+}

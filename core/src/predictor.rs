@@ -52,6 +52,14 @@ pub enum PredictError {
         /// The mask's length.
         got: usize,
     },
+    /// Given rotations of the wrong count (one per bone).
+    #[error("expected {expected} bone rotations, got {got}")]
+    RotationCount {
+        /// The rig's bone count.
+        expected: usize,
+        /// How many were given.
+        got: usize,
+    },
     /// beta out of range.
     #[error("beta must be finite and > 0, got {0}")]
     Beta(f32),
@@ -102,6 +110,33 @@ pub struct Refinement {
     pub strength: f32,
     /// Start from the rest rotations with no prior: the control points alone (a baseline).
     pub from_rest: bool,
+}
+
+impl Refinement {
+    /// The most iterations a room accepts (each costs about one translation solve and a pass
+    /// over the bone pairs: ~90 µs on the 150-bone horse, BENCHMARKS.md).
+    pub const MAX_ITERATIONS: usize = 32;
+
+    /// Checks settings a user sent: `1..=MAX_ITERATIONS` iterations, a finite strength > 0.
+    ///
+    /// # Errors
+    /// What is wrong, naming the field and the value.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(1..=Self::MAX_ITERATIONS).contains(&self.iterations) {
+            return Err(format!(
+                "iterations must be 1 to {}, got {}",
+                Self::MAX_ITERATIONS,
+                self.iterations
+            ));
+        }
+        if !(self.strength.is_finite() && self.strength > 0.0) {
+            return Err(format!(
+                "strength must be finite and > 0, got {}",
+                self.strength
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The detail layer's per-stream buffers.
@@ -341,6 +376,30 @@ impl Predictor {
         self.model
             .rotations
             .predict(&ctx.controls, &mut ctx.rotation_scratch, &mut ctx.rotations);
+        self.place_rotations(ctx, true);
+        Ok(())
+    }
+
+    /// The refinement started from (and pulled toward) the given rotations instead of the
+    /// regression's: the `nearest+refine` row of the evaluation starts it from the nearest
+    /// training example's. Without a refinement switched on, this is
+    /// [`Predictor::solve_with_rotations`]. Occluded (non-finite) controls are held.
+    pub fn refine_from(
+        &self,
+        ctx: &mut FrameContext,
+        rotations: &[Quat],
+        controls: &[Vec3],
+    ) -> Result<(), PredictError> {
+        self.set_rotations_and_controls(ctx, rotations, controls)?;
+        self.place_rotations(ctx, false);
+        Ok(())
+    }
+
+    /// The second half of a frame, from `ctx.rotations` (the regression's, or a given start)
+    /// and `ctx.controls`: the confidence, then the refinement when on, else eq. 11 alone.
+    /// `skip_at_examples`: a frame at an example (confidence 0) keeps the regression's
+    /// rotations, which reproduce the example.
+    fn place_rotations(&self, ctx: &mut FrameContext, skip_at_examples: bool) {
         ctx.confidence = self.confidence.as_ref().map_or(0.0, |c| {
             c.of(
                 &self.model.rotations,
@@ -349,8 +408,7 @@ impl Predictor {
             )
         });
         match &self.refine {
-            // A frame at an example is the regression's (it reproduces the example).
-            Some((_, r)) if !r.from_rest && ctx.confidence == 0.0 => {
+            Some((_, r)) if skip_at_examples && !r.from_rest && ctx.confidence == 0.0 => {
                 self.solve_translations_into(ctx);
             }
             Some((refiner, r)) => {
@@ -358,7 +416,9 @@ impl Predictor {
                     ctx.rotations.fill(Quat::IDENTITY);
                     0.0
                 } else {
-                    f64::from(r.strength) / f64::from(ctx.confidence).powi(2)
+                    // Confidence 0 (a given start exactly at an example's controls): the
+                    // prior holds the start (an infinite weight's limit).
+                    f64::from(r.strength) / f64::from(ctx.confidence.max(1e-6)).powi(2)
                 };
                 // On error (non-finite input, which the regressors never emit) the previous
                 // translations stay, as in the plain solve.
@@ -376,13 +436,9 @@ impl Predictor {
             }
             None => self.solve_translations_into(ctx),
         }
-        Ok(())
     }
 
-    /// Given rotations (one per bone) and the context's current controls, solves translations
-    /// (FKY08 eq. 11) and sets the context's transforms: the "oracle rotations" path of the
-    /// evaluation and the second half of [`Predictor::predict_transforms`].
-    pub fn solve_with_rotations(
+    fn set_rotations_and_controls(
         &self,
         ctx: &mut FrameContext,
         rotations: &[Quat],
@@ -395,12 +451,32 @@ impl Predictor {
                 got: controls.len(),
             });
         }
+        let bones = self.model.rig.bone_count;
+        if rotations.len() != bones {
+            return Err(PredictError::RotationCount {
+                expected: bones,
+                got: rotations.len(),
+            });
+        }
         ctx.rotations.copy_from_slice(rotations);
         for (held, &c) in ctx.controls.iter_mut().zip(controls) {
             if c.is_finite() {
                 *held = c;
             }
         }
+        Ok(())
+    }
+
+    /// Given rotations (one per bone) and the context's current controls, solves translations
+    /// (FKY08 eq. 11) and sets the context's transforms: the "oracle rotations" path of the
+    /// evaluation and the second half of [`Predictor::predict_transforms`].
+    pub fn solve_with_rotations(
+        &self,
+        ctx: &mut FrameContext,
+        rotations: &[Quat],
+        controls: &[Vec3],
+    ) -> Result<(), PredictError> {
+        self.set_rotations_and_controls(ctx, rotations, controls)?;
         self.solve_translations_into(ctx);
         Ok(())
     }

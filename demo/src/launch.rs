@@ -9,12 +9,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crease_server::registry::{ModelRegistry, RegistryError};
-use crease_server::room::{Room, RoomError};
+use crease_server::room::{Room, RoomError, RoomOptions};
 use crease_server::{AddRoomError, AppState, Running};
 
 use crate::animation::{DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
-use crate::{DEMO_BETA, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, WEBXR_MAP};
+use crate::{DEMO_BETA, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, WEBXR_MAP};
 
 /// Everything `crease-server` is told: what to serve and how.
 #[derive(Clone, Debug)]
@@ -231,14 +231,12 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let mut demo_token = None;
     if let Some((model, animation)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
-        let mut room = Room::open(
-            DEMO_ROOM,
-            Arc::clone(&model),
-            Some(DEMO_BETA),
-            state.config.stream,
-            None,
-        )
-        .await?;
+        let options = RoomOptions {
+            beta: Some(DEMO_BETA),
+            ..RoomOptions::default()
+        };
+        let mut room =
+            Room::open(DEMO_ROOM, Arc::clone(&model), options, state.config.stream).await?;
         if let Some(token) = &config.demo_token {
             room = room.with_token(token);
         }
@@ -274,12 +272,19 @@ async fn hands_room(
     let spec = crease_server::capture::CaptureSpec::build(wire, None, Arc::clone(model))
         .await
         .map_err(|e| LaunchError::Hands(e.to_string()))?;
+    // A performer's hands leave the training poses: the refinement holds the fingers to the
+    // tracked joints where the regression extrapolates (issue 20; BENCHMARKS.md "Beyond the
+    // examples": half the regression's error on hands far from the examples).
+    let options = RoomOptions {
+        beta: Some(DEMO_BETA),
+        filter: None,
+        refine: Some(DEMO_HANDS_REFINE),
+    };
     let room = Room::open(
         DEMO_HANDS_ROOM,
         Arc::clone(model),
-        Some(DEMO_BETA),
+        options,
         state.config.stream,
-        None,
     )
     .await?;
     Ok(room.with_capture(Arc::new(spec)).with_token(token))

@@ -37,3 +37,12 @@ pub const WEBXR_MAP: &str = include_str!("../../bench/mocap/webxr-back.toml");
 /// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
 /// control point is followed closely.
 pub const DEMO_BETA: f32 = 3.0;
+/// The refinement of [`DEMO_HANDS_ROOM`] (issue 20): 4 rounds at the strength of
+/// BENCHMARKS.md's hand runs (the regression prior at 1/100 of each bone's data term at
+/// confidence 1). The keyframed [`DEMO_ROOM`] replays poses near its examples and has none.
+pub const DEMO_HANDS_REFINE: crease_core::predictor::Refinement =
+    crease_core::predictor::Refinement {
+        iterations: 4,
+        strength: 0.01,
+        from_rest: false,
+    };

@@ -927,6 +927,10 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
         return;
     };
+    let refine = v1::Refine {
+        iterations: 3,
+        strength: 0.02,
+    };
     let dir = tempfile::tempdir().unwrap();
     let _nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
     let model = Arc::new(common::model());
@@ -959,6 +963,8 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
             units: "mm".into(),
             ..Default::default()
         }),
+        // Refining, as the demo's hands room: the adopter must refine as the owner did.
+        refine: Some(refine),
         ..Default::default()
     };
     let token = a
@@ -1011,6 +1017,20 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
             "frame {seq}: {ack:?}"
         );
     }
+    let relayed = b
+        .client()
+        .await
+        .get_room(v1::GetRoomRequest {
+            room: "mocap".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(
+        relayed.refine,
+        Some(refine),
+        "B's relay reads the registry's refine"
+    );
     a.kill9();
     until(Duration::from_secs(10), "B adopts the room", || async {
         b.owner_of("mocap").await.as_deref() == Some("B")
@@ -1041,4 +1061,9 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         .unwrap()
         .into_inner();
     assert_eq!(info.retarget.unwrap().markers.len(), names.len());
+    assert_eq!(
+        info.refine,
+        Some(refine),
+        "the adopter refines as the owner did"
+    );
 }

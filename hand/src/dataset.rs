@@ -48,6 +48,7 @@ use super::rig::{HandRig, Layers, RigScratch};
 use super::skeleton::{Digit, HandPose, HandSkeleton, NamedPose, PoseSampler};
 use super::surface::{Resolution, SurfaceError};
 use crate::render::{View, contact_sheet};
+use crease_core::mesh::examples::{ExampleSet, NamedMesh};
 use crease_core::mesh::ply::{PlyFormat, write_ply};
 use crease_core::mesh::{Mesh, MeshError};
 
@@ -124,6 +125,60 @@ pub fn dataset_poses(train: usize, test: usize, seed: u64) -> (Vec<DatasetPose>,
     (train_poses, test_poses)
 }
 
+/// The training and test sets of [`dataset_poses`] at the base resolution, in memory: what
+/// `train-LAYOUT.toml` and `test.toml` of [`write_dataset`] load (the same meshes, `layout`'s
+/// landmarks as the training set's control points, names `train/NN-NAME.ply` and
+/// `test/NNN-sampled.ply`), without writing them. `crease eval --hands` runs on these.
+///
+/// # Errors
+/// [`DatasetError::NoTraining`] for `train == 0`; the surface's or the set's errors.
+pub fn example_sets(
+    train: usize,
+    test: usize,
+    seed: u64,
+    layout: Layout,
+) -> Result<(ExampleSet, ExampleSet), DatasetError> {
+    if train == 0 {
+        return Err(DatasetError::NoTraining);
+    }
+    let (train_poses, test_poses) = dataset_poses(train, test, seed);
+    let rig = HandRig::build(Resolution::Base)?;
+    let normals = rig.rest().vertex_normals();
+    let controls: Vec<u32> = landmarks(layout, rig.skeleton(), rig.rest(), &normals)
+        .iter()
+        .map(|l| l.vertex)
+        .collect();
+    let mut scratch = RigScratch::new();
+    let mut meshes = |set: &str, poses: &[DatasetPose]| -> Vec<NamedMesh> {
+        poses
+            .iter()
+            .map(|p| {
+                let mut mesh = Mesh {
+                    positions: vec![Vec3::ZERO; rig.vertex_count()],
+                    triangles: rig.rest().triangles.clone(),
+                };
+                rig.deform(
+                    &p.pose,
+                    Layers::default(),
+                    &mut scratch,
+                    &mut mesh.positions,
+                );
+                NamedMesh {
+                    name: format!("{set}/{}.ply", p.name),
+                    mesh,
+                }
+            })
+            .collect()
+    };
+    let train_set = ExampleSet::new(
+        "generated-hand",
+        meshes("train", &train_poses),
+        Some(controls),
+    )?;
+    let test_set = ExampleSet::new("generated-hand", meshes("test", &test_poses), None)?;
+    Ok((train_set, test_set))
+}
+
 /// A control-point layout (module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -139,6 +194,11 @@ pub enum Layout {
 impl Layout {
     /// All layouts.
     pub const ALL: [Layout; 3] = [Layout::Palm, Layout::Back, Layout::Glove13];
+
+    /// The layout named `name` (`palm`, `back`, `glove13`).
+    pub fn from_name(name: &str) -> Option<Layout> {
+        Layout::ALL.into_iter().find(|l| l.name() == name)
+    }
 
     /// `palm`, `back`, `glove13`.
     pub const fn name(self) -> &'static str {

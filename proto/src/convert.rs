@@ -1,9 +1,10 @@
 //! The small conversions between wire messages and core types: points, boxes, a room's One
-//! Euro filter, levels, and model descriptions. Control frames are in [`crate::control`], the
+//! Euro filter and refinement, levels, and model descriptions. Control frames are in [`crate::control`], the
 //! mesh stream in [`crate::mesh`].
 
 use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
+use crease_core::predictor::Refinement;
 use crease_core::runtime::filter::OneEuroParams;
 
 use crate::errors::WireError;
@@ -45,6 +46,28 @@ impl From<v1::MarkerFilter> for OneEuroParams {
             min_cutoff_hz: f.min_cutoff_hz,
             beta: f.beta,
             d_cutoff_hz: f.d_cutoff_hz,
+        }
+    }
+}
+
+/// The wire form of a room's bone-level refinement.
+impl From<Refinement> for v1::Refine {
+    fn from(r: Refinement) -> Self {
+        Self {
+            iterations: u32::try_from(r.iterations).unwrap_or(u32::MAX),
+            strength: r.strength,
+        }
+    }
+}
+
+/// A wire refinement as core settings (check [`Refinement::validate`] before use; a room's
+/// refinement always has the regression prior).
+impl From<v1::Refine> for Refinement {
+    fn from(r: v1::Refine) -> Self {
+        Self {
+            iterations: r.iterations as usize,
+            strength: r.strength,
+            from_rest: false,
         }
     }
 }

@@ -4,6 +4,7 @@
 use std::pin::Pin;
 use std::sync::Arc;
 
+use crease_core::predictor::Refinement;
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
 use crease_proto::{Encoding, Level, v1};
@@ -15,7 +16,7 @@ use tonic::{Request, Response, Status, Streaming};
 use crate::fanout::Channel;
 use crate::ingest;
 use crate::registry::LoadedModel;
-use crate::room::{Room, StreamSettings};
+use crate::room::{Room, RoomOptions, StreamSettings};
 use crate::{AddRoomError, AppState};
 
 /// The largest message the server sends: what it sends is its own (a limit on requests,
@@ -155,6 +156,11 @@ impl Crease for CreaseService {
                 f.min_cutoff_hz, f.beta, f.d_cutoff_hz
             )));
         }
+        let options = RoomOptions {
+            beta,
+            filter,
+            refine: refinement(r.refine)?,
+        };
         let capture = match r.retarget {
             None => None,
             Some(spec) => {
@@ -168,11 +174,11 @@ impl Crease for CreaseService {
         let room = match self.state.cluster() {
             Some(cluster) => {
                 Arc::clone(cluster)
-                    .open_room(&self.state, &r.room, model, beta, filter, capture)
+                    .open_room(&self.state, &r.room, model, options, capture)
                     .await?
             }
             None => {
-                let room = Room::open(&r.room, model, beta, self.state.config.stream, filter)
+                let room = Room::open(&r.room, model, options, self.state.config.stream)
                     .await
                     .map_err(|e| e.status())?;
                 let room = match capture {
@@ -215,6 +221,7 @@ impl Crease for CreaseService {
             owner,
             replica,
             retarget: room.pipeline().capture().map(|c| c.wire().clone()),
+            refine: room.refinement().map(v1::Refine::from),
         }))
     }
 
@@ -288,8 +295,12 @@ impl Crease for CreaseService {
         let r = req.into_inner();
         let level = Level::from_wire("SynthesizeRequest", r.level)?;
         let model = self.model(&r.model)?;
-        let beta = (r.beta != 0.0).then_some(r.beta);
-        let room = Room::open("batch", model, beta, StreamSettings::full(), None)
+        let options = RoomOptions {
+            beta: (r.beta != 0.0).then_some(r.beta),
+            filter: None,
+            refine: refinement(r.refine)?,
+        };
+        let room = Room::open("batch", model, options, StreamSettings::full())
             .await
             .map_err(|e| e.status())?;
         check_level(&room, level)?;
@@ -299,6 +310,15 @@ impl Crease for CreaseService {
             level,
             r.frames,
         ))))
+    }
+}
+
+/// A request's refinement, checked (`refine: ...` names the field in the error).
+fn refinement(wire: Option<v1::Refine>) -> Result<Option<Refinement>, Status> {
+    let refine = wire.map(Refinement::from);
+    match refine.map(|r| r.validate()) {
+        Some(Err(e)) => Err(Status::invalid_argument(format!("refine: {e}"))),
+        _ => Ok(refine),
     }
 }
 

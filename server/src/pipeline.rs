@@ -34,7 +34,7 @@ use crease_core::codec::{
 };
 use crease_core::glam::Vec3;
 use crease_core::model::{ControlPoint, TrainedModel};
-use crease_core::predictor::{FrameContext, PredictError, Predictor};
+use crease_core::predictor::{FrameContext, PredictError, Predictor, Refinement};
 use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
@@ -173,6 +173,21 @@ struct State {
     last_time: Option<(i64, Instant)>,
 }
 
+/// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter and
+/// refine; the streaming side is the server's [`StreamSettings`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RoomOptions {
+    /// Translation-solve beta; the model's default when `None`.
+    pub beta: Option<f32>,
+    /// Smooth the control points with a One Euro filter (mocap rooms); `None` passes them
+    /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
+    pub filter: Option<OneEuroParams>,
+    /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
+    /// (the default: it pays where the control points are dense, the hands, and costs ~90 µs
+    /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
+    pub refine: Option<Refinement>,
+}
+
 /// A room's filter, predictor and encoders (module docs).
 pub struct Pipeline {
     model: Arc<LoadedModel>,
@@ -266,26 +281,36 @@ fn control_residual(
 }
 
 impl Pipeline {
-    /// Builds the predictor (a sparse factorisation: blocking, run it on the blocking pool)
-    /// and the encoders for `model` with `beta` (the model's default when `None`), streaming as
-    /// `settings` says, smoothing control points with `filter` if given.
+    /// Builds the predictor (a sparse factorisation, and the refinement's pass over the
+    /// edges when on: blocking, run it on the blocking pool) and the encoders for `model`
+    /// with `options`, streaming as `settings` says.
     ///
     /// # Errors
     /// [`BuildError`]: the predictor's or the encoder's.
     ///
     /// # Panics
-    /// If `filter` is not [valid](OneEuroParams::is_valid) (callers check what users send).
+    /// If `options.filter` is not [valid](OneEuroParams::is_valid) or `options.refine` does
+    /// not [validate](Refinement::validate) (callers check what users send).
     pub fn build(
         model: Arc<LoadedModel>,
-        beta: Option<f32>,
+        options: RoomOptions,
         settings: StreamSettings,
-        filter: Option<OneEuroParams>,
     ) -> Result<Pipeline, BuildError> {
+        let RoomOptions {
+            beta,
+            filter,
+            refine,
+        } = options;
         assert!(
             filter.is_none_or(|p| p.is_valid()),
             "invalid filter {filter:?}"
         );
-        let predictor = Predictor::new(Arc::clone(&model.model), beta)?;
+        assert!(
+            refine.is_none_or(|r| r.validate().is_ok()),
+            "invalid refinement {refine:?}"
+        );
+        let mut predictor = Predictor::new(Arc::clone(&model.model), beta)?;
+        predictor.set_refinement(refine);
         let ctx = predictor.new_context();
         let n = model.model.controls.len();
         let (lo, hi) = model.pose_bounds;
@@ -350,6 +375,11 @@ impl Pipeline {
     /// The translation-solve beta.
     pub fn beta(&self) -> f32 {
         self.predictor.beta()
+    }
+
+    /// The bone-level refinement, when on.
+    pub fn refinement(&self) -> Option<Refinement> {
+        self.predictor.refinement()
     }
 
     /// The quantisation box of `level`'s frames.

@@ -11,7 +11,7 @@ use crease_proto::v1;
 
 pub use crate::fanout::Channel;
 pub use crate::frames::MeshUpdate;
-pub use crate::pipeline::{BuildError, Published, StreamSettings};
+pub use crate::pipeline::{BuildError, Published, RoomOptions, StreamSettings};
 pub use crate::session::{RoomFull, new_token, valid_room_id};
 pub use crease_proto::{Encoding, Level};
 
@@ -79,33 +79,31 @@ pub struct Subscription {
 }
 
 impl Room {
-    /// Opens a room on `model` with `beta` (the model's default when `None`), a fresh random
-    /// publish token and the control-point `filter` (mocap rooms; `None` passes points through
-    /// as UI rooms need), streaming as `settings` says. The predictor's factorisation runs on
+    /// Opens a room on `model` with `options` (beta, filter, refinement) and a fresh random
+    /// publish token, streaming as `settings` says. The predictor's factorisation runs on
     /// the blocking pool, not on the caller's async thread.
     ///
     /// # Errors
     /// [`RoomError`]: a bad id, the predictor's or the encoder's error.
     ///
     /// # Panics
-    /// If `filter` is not [valid](OneEuroParams::is_valid) (callers check what users send).
+    /// If `options` holds an invalid filter or refinement (callers check what users send:
+    /// [`OneEuroParams::is_valid`], `Refinement::validate`).
     pub async fn open(
         id: &str,
         model: Arc<LoadedModel>,
-        beta: Option<f32>,
+        options: RoomOptions,
         settings: StreamSettings,
-        filter: Option<OneEuroParams>,
     ) -> Result<Room, RoomError> {
-        Room::open_with(id, model, beta, settings, filter, None).await
+        Room::open_with(id, model, options, settings, None).await
     }
 
     /// [`Room::open`] with `fanout` (a cluster's room link) instead of a [`LocalFanout`].
     pub(crate) async fn open_with(
         id: &str,
         model: Arc<LoadedModel>,
-        beta: Option<f32>,
+        options: RoomOptions,
         settings: StreamSettings,
-        filter: Option<OneEuroParams>,
         fanout: Option<Arc<dyn Fanout>>,
     ) -> Result<Room, RoomError> {
         if !valid_room_id(id) {
@@ -113,7 +111,7 @@ impl Room {
         }
         let id = id.to_owned();
         tokio::task::spawn_blocking(move || {
-            let pipeline = Pipeline::build(Arc::clone(&model), beta, settings, filter)?;
+            let pipeline = Pipeline::build(Arc::clone(&model), options, settings)?;
             Ok(Room {
                 id,
                 model,
@@ -185,6 +183,11 @@ impl Room {
     /// The translation-solve beta of this room.
     pub fn beta(&self) -> f32 {
         self.pipeline.beta()
+    }
+
+    /// The room's bone-level refinement, when on (issue 20).
+    pub fn refinement(&self) -> Option<crease_core::predictor::Refinement> {
+        self.pipeline.refinement()
     }
 
     /// Whether the model has a detail layer.

@@ -204,6 +204,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             level: 0,
             beta: 0.0,
             frames: batch.clone(),
+            refine: None,
         })
         .await
         .unwrap()
@@ -554,6 +555,138 @@ async fn limits_refuse_and_the_room_goes_on() {
         .into_inner();
     let ack = s.message().await.unwrap().unwrap();
     assert!(ack.error.is_none(), "{ack:?}");
+    running
+        .shutdown(std::time::Duration::from_secs(2))
+        .await
+        .unwrap();
+}
+
+/// A refining room (issue 20): OpenRoom checks the refinement, GetRoom reports it, and a frame
+/// beyond the training bends gets the refined prediction, which holds the control points
+/// closer than the regression alone (the ack's residual against a local predictor of each kind).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn refined_rooms_hold_the_control_points_beyond_the_examples() {
+    let model = model();
+    let running = serve_tube(&model, Limits::default()).await;
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let open = |room: &str, refine: Option<v1::Refine>| {
+        authed(
+            v1::OpenRoomRequest {
+                room: room.into(),
+                model: "tube".into(),
+                refine,
+                ..Default::default()
+            },
+            ADMIN,
+        )
+    };
+    let refine = v1::Refine {
+        iterations: 4,
+        strength: 0.01,
+    };
+    for (bad, what) in [
+        (
+            v1::Refine {
+                iterations: 0,
+                ..refine
+            },
+            "refine: iterations must be 1 to 32, got 0",
+        ),
+        (
+            v1::Refine {
+                iterations: 33,
+                ..refine
+            },
+            "refine: iterations must be 1 to 32, got 33",
+        ),
+        (
+            v1::Refine {
+                strength: f32::NAN,
+                ..refine
+            },
+            "refine: strength must be finite and > 0, got NaN",
+        ),
+    ] {
+        let err = client.open_room(open("bad", Some(bad))).await.unwrap_err();
+        assert_eq!(err.code(), tonic::Code::InvalidArgument);
+        assert_eq!(err.message(), what);
+    }
+    // The batch refuses a bad refinement the same way.
+    let err = client
+        .synthesize(v1::SynthesizeRequest {
+            model: "tube".into(),
+            frames: vec![control_frame(&model, "", 0, 0.1)],
+            refine: Some(v1::Refine {
+                iterations: 0,
+                ..refine
+            }),
+            ..Default::default()
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::InvalidArgument);
+    let mut tokens = Vec::new();
+    for (room, r) in [("plain", None), ("refined", Some(refine))] {
+        tokens.push(
+            client
+                .open_room(open(room, r))
+                .await
+                .unwrap()
+                .into_inner()
+                .publish_token,
+        );
+        let info = client
+            .get_room(v1::GetRoomRequest { room: room.into() })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(info.refine, r, "{room}");
+    }
+    // The training bends go to 1.25 rad; 1.8 lies beyond them.
+    let frame = |room: &str| control_frame(&model, room, 0, 1.8);
+    let targets: Vec<Vec3> = frame("")
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    let local = |refine: Option<crease_core::predictor::Refinement>| {
+        let mut predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+        predictor.set_refinement(refine);
+        let mut ctx = predictor.new_context();
+        let mesh = predictor
+            .predict(&mut ctx, &targets, None)
+            .unwrap()
+            .to_vec();
+        (residual(&model, &mesh, &targets), ctx.confidence())
+    };
+    let (plain_want, confidence) = local(None);
+    let (refined_want, _) = local(Some(refine.into()));
+    assert!(
+        confidence > 1.0,
+        "1.8 rad is outside the examples: {confidence}"
+    );
+    assert!(
+        refined_want < 0.99 * plain_want,
+        "the refinement holds the controls: {refined_want} vs {plain_want}"
+    );
+    for ((room, token), want) in ["plain", "refined"]
+        .into_iter()
+        .zip(&tokens)
+        .zip([plain_want, refined_want])
+    {
+        let req = authed(tokio_stream::iter(vec![frame(room)]), token);
+        let mut stream = client.publish(req).await.unwrap().into_inner();
+        let ack = stream.message().await.unwrap().unwrap();
+        assert!(ack.error.is_none(), "{ack:?}");
+        assert_eq!(ack.confidence, confidence, "{room}");
+        assert!(
+            (ack.control_residual - want).abs() <= 1e-5 * want.max(1e-3),
+            "{room}: {} vs {want}",
+            ack.control_residual
+        );
+    }
     running
         .shutdown(std::time::Duration::from_secs(2))
         .await

@@ -44,7 +44,7 @@ use crease_core::mesh::Mesh;
 use crease_core::predictor::{Predictor, Refinement};
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
 
-use crease_core::model::DetailLayer;
+use crease_core::model::{DetailLayer, TrainedModel};
 use crease_core::runtime::detail::DetailSynth;
 use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
 
@@ -179,7 +179,9 @@ pub struct EvalOptions {
     pub beta: f32,
     /// Issue 20's bone-level refinement: when set, every method also gets a `METHOD+refine`
     /// row (its rotations refined with the regression as the prior), and the table a
-    /// `refine-from-rest` row (the control points alone, from the rest rotations, no prior).
+    /// `refine-from-rest` row (the control points alone, from the rest rotations, no prior),
+    /// a `nearest` row (the nearest training example's rotations, eq. 11 alone) and a
+    /// `nearest+refine` row (refined from those, with them as the prior).
     pub refine: Option<Refinement>,
 }
 
@@ -527,6 +529,9 @@ fn evaluate_frames(
                     push(table, &row, rms_normalized(got, f, scale), us);
                 }
             }
+            if Some(method) == options.methods.first().copied() {
+                nearest_rows(base, &model, beta, refine, frames, table)?;
+            }
         }
         let predictor =
             Predictor::new(model, Some(beta)).map_err(|e| TrainError::Controls(e.to_string()))?;
@@ -556,6 +561,61 @@ fn evaluate_frames(
                 let (out, h) = (ctx.detail_positions(), ctx.displacements());
                 push_detail(table, row, e, out, h, &d.truth[k], &d.crease, scale);
             }
+        }
+    }
+    Ok(())
+}
+
+/// The `nearest` and `nearest+refine` rows (issue 20's extrapolating baselines): every frame
+/// starts from the rotations of the training example whose control points are nearest
+/// (Euclidean, over all control points), then `nearest` solves eq. 11 with them and
+/// `nearest+refine` refines from them with them as the prior.
+fn nearest_rows(
+    base: &TrainedBase,
+    model: &Arc<TrainedModel>,
+    beta: f32,
+    refine: Refinement,
+    frames: &[&[Vec3]],
+    table: &mut EvalTable,
+) -> Result<(), TrainError> {
+    let rest = &base.rig.rest;
+    let scale = rest.bbox_diagonal_scale();
+    let err = |e: crease_core::predictor::PredictError| TrainError::Controls(e.to_string());
+    let mut refined = Predictor::new(Arc::clone(model), Some(beta)).map_err(err)?;
+    refined.set_refinement(Some(refine));
+    let mut ctx = refined.new_context();
+    for f in frames {
+        let controls: Vec<Vec3> = base
+            .control_vertices
+            .iter()
+            .map(|&v| f[v as usize])
+            .collect();
+        let t = Instant::now();
+        let distance = |example: &[Vec3]| -> f32 {
+            example
+                .iter()
+                .zip(&controls)
+                .map(|(a, b)| a.distance_squared(*b))
+                .sum()
+        };
+        let nearest = (0..base.example_controls.len())
+            .min_by(|&a, &b| {
+                distance(&base.example_controls[a]).total_cmp(&distance(&base.example_controls[b]))
+            })
+            .ok_or_else(|| TrainError::Controls("no training examples".into()))?;
+        let start = &base.rotations[nearest];
+        let search_us = t.elapsed().as_secs_f64() * 1e6;
+        for row in ["nearest", "nearest+refine"] {
+            let t = Instant::now();
+            if row == "nearest" {
+                refined.solve_with_rotations(&mut ctx, start, &controls)
+            } else {
+                refined.refine_from(&mut ctx, start, &controls)
+            }
+            .and_then(|()| refined.skin(&mut ctx))
+            .map_err(err)?;
+            let us = search_us + t.elapsed().as_secs_f64() * 1e6;
+            push(table, row, rms_normalized(ctx.positions(), f, scale), us);
         }
     }
     Ok(())

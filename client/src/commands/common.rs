@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use crease_core::mesh::examples::ExampleSet;
+use crease_core::predictor::Refinement;
 use crease_train::bones::IterationStat;
 use crease_train::pipeline::ControlSpec;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -264,4 +265,36 @@ mod tests {
         // Four values: the median is the second (half of them at or below it).
         assert_eq!(percentile(&[1, 2, 3, 4], 50.0), 2);
     }
+}
+
+/// `ITERATIONS,STRENGTH` of a `--refine` option (issue 20's bone-level refinement, e.g.
+/// `4,0.01`). `crease eval` also takes a strength of 0 (no prior); a room refuses it.
+pub fn parse_refinement(text: &str) -> Result<Refinement, String> {
+    let (it, strength) = text
+        .split_once(',')
+        .ok_or_else(|| format!("{text:?}: expected ITERATIONS,STRENGTH (e.g. 4,0.01)"))?;
+    let iterations: usize = it
+        .trim()
+        .parse()
+        .map_err(|e| format!("iterations {it:?}: {e}"))?;
+    let strength: f32 = strength
+        .trim()
+        .parse()
+        .map_err(|e| format!("strength {strength:?}: {e}"))?;
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(format!("strength {strength}: expected a number >= 0"));
+    }
+    Ok(Refinement {
+        iterations,
+        strength,
+        from_rest: false,
+    })
+}
+
+/// How `crease room open|info` print a room's refinement.
+pub fn print_refinement(refine: Option<&crease_proto::v1::Refine>) -> String {
+    refine.map_or_else(
+        || "off".to_owned(),
+        |r| format!("{} iterations at strength {}", r.iterations, r.strength),
+    )
 }

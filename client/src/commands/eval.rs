@@ -20,8 +20,24 @@ use super::training_args::{RegressArgs, kernel_name, parse_method};
 #[derive(Clone, Debug, clap::Args)]
 pub struct EvalArgs {
     /// Training examples: a folder of meshes or a TOML manifest.
-    #[arg(long, value_name = "DIR|MANIFEST")]
-    pub examples: PathBuf,
+    #[arg(long, value_name = "DIR|MANIFEST", required_unless_present = "hands")]
+    pub examples: Option<PathBuf>,
+    /// A generated-hand protocol instead of --examples and --test (issue 20), at the base
+    /// resolution: `extrapolation` trains on the named poses only (`flat` and the 9 named
+    /// ones) and tests on sampled poses no example is near; `in-span` trains on those and 4
+    /// sampled poses (`crease handgen`'s default 14) and tests on the same sampled poses.
+    #[arg(long, value_name = "PROTOCOL", value_parser = ["extrapolation", "in-span"], conflicts_with_all = ["examples", "test"])]
+    pub hands: Option<String>,
+    /// The control-point layout of --hands: `back` (15 dorsal points, like HZY11's mocap
+    /// markers), `palm` (17) or `glove13` (the glove recording's 13).
+    #[arg(long, default_value = "back", value_parser = ["back", "palm", "glove13"], requires = "hands")]
+    pub hand_layout: String,
+    /// Sampled test poses of --hands.
+    #[arg(long, default_value_t = 40, requires = "hands")]
+    pub hand_test: usize,
+    /// Seed of --hands' pose sampler (`crease handgen --seed`).
+    #[arg(long, default_value_t = 1, requires = "hands")]
+    pub hand_seed: u64,
     /// Leave-one-out over the training examples (rest pose excluded); refits the bones per fold.
     #[arg(long)]
     pub loo: bool,
@@ -41,7 +57,7 @@ pub struct EvalArgs {
     /// Issue 20's bone-level refinement after the regression, `ITERATIONS,STRENGTH` (e.g.
     /// `4,0.1`): adds a `METHOD+refine` row per method and a `refine-from-rest` row (the
     /// control points alone, no regression prior).
-    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = parse_refinement)]
+    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
     pub refine: Option<Refinement>,
     /// Print `{"loo": {METHOD: {...}}, "test": {METHOD: {...}}}` on stdout.
     #[arg(long)]
@@ -53,10 +69,22 @@ pub struct EvalArgs {
 
 /// Runs `crease eval`.
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
-    if !args.loo && args.test.is_none() {
+    if !args.loo && args.test.is_none() && args.hands.is_none() {
         bail!("nothing to evaluate: give --loo, --test TEST, or both");
     }
-    let layers = layers::load(&args.examples, &args.detail, None)?;
+    let (layers, hand_test) = match (&args.hands, &args.examples) {
+        (Some(protocol), _) => {
+            let (train, test) = hand_sets(args, protocol)?;
+            let layers = |base| layers::Layers {
+                base,
+                detailed: None,
+                subset: None,
+            };
+            (layers(train), Some(layers(test)))
+        }
+        (None, Some(examples)) => (layers::load(examples, &args.detail, None)?, None),
+        (None, None) => bail!("give --examples DIR|MANIFEST or --hands PROTOCOL"),
+    };
     let set = &layers.base;
     let detail_options = layers::detail_options(&args.detail, &layers)?;
     let train_detail = layers.detail_frames();
@@ -82,8 +110,15 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
 
     let mut results = serde_json::Map::new();
     let mut tables: Vec<(&str, EvalTable)> = Vec::new();
-    if let Some(test_path) = &args.test {
-        let test_layers = layers::load(test_path, &args.detail, layers.subset.as_ref())?;
+    let test_set = match (&args.test, hand_test) {
+        (Some(path), _) => Some((
+            path.clone(),
+            layers::load(path, &args.detail, layers.subset.as_ref())?,
+        )),
+        (None, Some(hands)) => Some((PathBuf::from("generated-hand/test"), hands)),
+        (None, None) => None,
+    };
+    if let Some((test_path, test_layers)) = &test_set {
         let test = &test_layers.base;
         if layers.detailed.is_some() != test_layers.detailed.is_some() {
             bail!(
@@ -212,27 +247,44 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `ITERATIONS,STRENGTH` of `--refine`.
-fn parse_refinement(text: &str) -> Result<Refinement, String> {
-    let (it, strength) = text
-        .split_once(',')
-        .ok_or_else(|| format!("{text:?}: expected ITERATIONS,STRENGTH (e.g. 4,0.1)"))?;
-    let iterations: usize = it
-        .trim()
-        .parse()
-        .map_err(|e| format!("iterations {it:?}: {e}"))?;
-    let strength: f32 = strength
-        .trim()
-        .parse()
-        .map_err(|e| format!("strength {strength:?}: {e}"))?;
-    if !(strength.is_finite() && strength >= 0.0) {
-        return Err(format!("strength {strength}: expected a number >= 0"));
-    }
-    Ok(Refinement {
-        iterations,
-        strength,
-        from_rest: false,
-    })
+/// The training and test sets of `--hands PROTOCOL` (module docs of `crease_hand::dataset`).
+fn hand_sets(
+    args: &EvalArgs,
+    protocol: &str,
+) -> anyhow::Result<(
+    crease_core::mesh::examples::ExampleSet,
+    crease_core::mesh::examples::ExampleSet,
+)> {
+    use crease_hand::dataset::{Layout, example_sets};
+    use crease_hand::skeleton::NamedPose;
+    // `flat` (the rest pose) and the named poses; in-span adds crease handgen's 4 sampled.
+    let named = NamedPose::ALL.len();
+    let train = if protocol == "in-span" {
+        named + 4
+    } else {
+        named
+    };
+    let layout = Layout::from_name(&args.hand_layout)
+        .with_context(|| format!("--hand-layout {}: unknown layout", args.hand_layout))?;
+    let start = std::time::Instant::now();
+    let (train_set, test_set) = example_sets(train, args.hand_test, args.hand_seed, layout)
+        .context("generating the hand examples")?;
+    eprintln!(
+        "generated hand, {protocol}: {} training poses ({}), {} sampled test poses, {} control points ({}), {} vertices, {:.1} s",
+        train_set.examples.len(),
+        train_set
+            .examples
+            .iter()
+            .map(|e| e.name.trim_start_matches("train/").trim_end_matches(".ply"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        test_set.examples.len(),
+        train_set.control_points.as_ref().map_or(0, Vec::len),
+        layout.name(),
+        train_set.rest.vertex_count(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok((train_set, test_set))
 }
 
 /// The human table (to stderr when stdout carries JSON).

@@ -94,6 +94,7 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
         model: name.to_owned(),
         level: level as i32,
         beta: args.beta.unwrap_or(0.0),
+        refine: args.refine.map(v1::Refine::from),
         frames,
     };
     // The glTF's rest mesh: the server's prediction at the rest controls (a request of its own,

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 
-use super::common::{ServerArgs, authorized, get_room};
+use super::common::{ServerArgs, authorized, get_room, print_refinement};
 
 /// Options of `crease room`.
 #[derive(Clone, Debug, clap::Args)]
@@ -89,6 +89,11 @@ pub struct OpenArgs {
     /// metres. With a WebXR joint map, e.g. --map bench/mocap/webxr-back.toml.
     #[arg(long, conflicts_with = "markers")]
     pub webxr: bool,
+    /// Refine every frame's bone rotations against the control points, `ITERATIONS,STRENGTH`
+    /// (issue 20; e.g. `4,0.01`): pays where the control points are dense (hands) and the
+    /// performer leaves the training poses; each iteration costs about one translation solve.
+    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
+    pub refine: Option<crease_core::predictor::Refinement>,
     /// The capture's length unit (with --markers; default "mm").
     #[arg(long, default_value = "mm")]
     pub units: String,
@@ -198,6 +203,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         beta: beta.unwrap_or(0.0),
         filter: filter.map(v1::MarkerFilter::from),
         retarget,
+        refine: args.refine.map(v1::Refine::from),
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
@@ -207,11 +213,12 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         .into_inner();
     let room = get_room(&mut client, &opened.room).await?;
     eprintln!(
-        "opened room {:?} on model {:?}: beta {}, filter {}{}",
+        "opened room {:?} on model {:?}: beta {}, filter {}, refinement {}{}",
         room.room,
         args.model,
         room.beta,
         print_filter(room.filter.as_ref()),
+        print_refinement(room.refine.as_ref()),
         room.retarget.as_ref().map_or(String::new(), |r| format!(
             ", retargets {} markers ({})",
             r.markers.len(),
@@ -264,7 +271,7 @@ async fn info(args: &InfoArgs) -> anyhow::Result<()> {
     let room = get_room(&mut client, &args.room).await?;
     let model = room.model.unwrap_or_default();
     println!(
-        "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, {} subscribers, {} frames published",
+        "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, refinement {}, {} subscribers, {} frames published",
         room.room,
         model.name,
         model.base_vertices,
@@ -277,6 +284,7 @@ async fn info(args: &InfoArgs) -> anyhow::Result<()> {
             .join(", "),
         room.beta,
         print_filter(room.filter.as_ref()),
+        print_refinement(room.refine.as_ref()),
         room.subscribers,
         room.published
     );

@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use crease_core::mesh::Mesh;
 use crease_core::model::{TrainedModel, gltf_export};
-use crease_core::predictor::Predictor;
+use crease_core::predictor::{Predictor, Refinement};
 
 use super::control_file::read_control_frames;
 
@@ -68,6 +68,10 @@ pub struct SynthArgs {
     /// instead of the base meshes; the model must have a detail layer.
     #[arg(long)]
     pub detail: bool,
+    /// Refine every frame's bone rotations against the control points, `ITERATIONS,STRENGTH`
+    /// (issue 20; e.g. `4,0.01`), locally or on the server.
+    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
+    pub refine: Option<Refinement>,
 }
 
 impl SynthArgs {
@@ -78,6 +82,9 @@ impl SynthArgs {
         }
         if self.gltf.is_some() && !(self.fps.is_finite() && self.fps > 0.0) {
             bail!("--fps must be > 0, got {}", self.fps);
+        }
+        if let Some(e) = self.refine.and_then(|r| r.validate().err()) {
+            bail!("--refine: {e}");
         }
         Ok(())
     }
@@ -98,8 +105,9 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
             args.model.display()
         );
     }
-    let predictor =
+    let mut predictor =
         Predictor::new(Arc::new(model), args.beta).context("preparing the predictor")?;
+    predictor.set_refinement(args.refine);
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     }

@@ -34,6 +34,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use async_nats::jetstream::{self, kv};
+use crease_core::predictor::Refinement;
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 use futures_util::StreamExt;
@@ -49,7 +50,7 @@ type LinkFrames =
 
 use crate::AppState;
 use crate::fanout::Fanout;
-use crate::pipeline::StreamSettings;
+use crate::pipeline::{RoomOptions, StreamSettings};
 use crate::room::Room;
 
 /// The registry's bucket.
@@ -445,8 +446,7 @@ impl Cluster {
         state: &Arc<AppState>,
         id: &str,
         model: Arc<crate::registry::LoadedModel>,
-        beta: Option<f32>,
-        filter: Option<OneEuroParams>,
+        options: RoomOptions,
         capture: Option<Arc<crate::capture::CaptureSpec>>,
     ) -> Result<Arc<Room>, tonic::Status> {
         if self.known(id).is_some() {
@@ -459,7 +459,7 @@ impl Cluster {
             model: model.name.clone(),
             model_sha256: model.sha256().to_owned(),
             beta: 0.0,
-            filter: filter.map(v1::MarkerFilter::from),
+            filter: options.filter.map(v1::MarkerFilter::from),
             owner: self.replica.clone(),
             token_sha256: Vec::new(),
             base_bits: u32::from(settings.base_bits),
@@ -470,9 +470,10 @@ impl Cluster {
             renewed_unix_ms: now_unix_ms(),
             adoptions: 0,
             retarget: capture.as_ref().map(|c| c.resolved().clone()),
+            refine: options.refine.map(v1::Refine::from),
         };
         let (room, link, rx) = self
-            .open_linked(id, model, beta, settings, filter, &entry, true, 0)
+            .open_linked(id, model, options, settings, &entry, true, 0)
             .await
             .map_err(|e| e.status())?;
         let room = match capture {
@@ -565,9 +566,8 @@ impl Cluster {
         self: &Arc<Self>,
         id: &str,
         model: Arc<crate::registry::LoadedModel>,
-        beta: Option<f32>,
+        options: RoomOptions,
         settings: StreamSettings,
-        filter: Option<OneEuroParams>,
         entry: &v1::RoomEntry,
         owner: bool,
         revision: u64,
@@ -575,7 +575,7 @@ impl Cluster {
         let vertices = vertex_counts(&model);
         let (link, rx) = RoomLink::new(self, id, vertices, entry.clone(), owner, revision);
         let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
-        let room = Room::open_with(id, model, beta, settings, filter, Some(fanout)).await?;
+        let room = Room::open_with(id, model, options, settings, Some(fanout)).await?;
         Ok((room, link, rx))
     }
 
@@ -611,6 +611,12 @@ impl Cluster {
                 "room {id:?}: the registry's filter {filter:?} is invalid"
             )));
         }
+        let refine = entry.refine.map(Refinement::from);
+        if let Some(e) = refine.and_then(|r| r.validate().err()) {
+            return Err(LookupError::Internal(format!(
+                "room {id:?}: the registry's refine is invalid: {e}"
+            )));
+        }
         let digest = <[u8; 32]>::try_from(entry.token_sha256.as_slice()).map_err(|_| {
             LookupError::Internal(format!(
                 "room {id:?}: the registry's token digest has {} bytes, a SHA-256 has 32",
@@ -634,9 +640,12 @@ impl Cluster {
             .open_linked(
                 id,
                 model,
-                Some(entry.beta),
+                RoomOptions {
+                    beta: Some(entry.beta),
+                    filter,
+                    refine,
+                },
                 settings_of(entry),
-                filter,
                 entry,
                 false,
                 known.revision,
