@@ -32,7 +32,7 @@
 
 use std::collections::BTreeMap;
 
-use glam::{DMat3, DQuat, DVec3, Quat, Vec3};
+use glam::{DMat3, DQuat, DVec3, Mat3A, Quat, Vec3, Vec3A};
 
 use super::edge_skin::EdgeSkin;
 use super::skin::SkinWeights;
@@ -83,10 +83,11 @@ impl<T: Copy> Cols<T> {
 pub struct BoneRefiner {
     bones: usize,
     /// `(G_ab, H_ab)` by column `b`, one entry per bone pair sharing a residual (`G_bb` is
-    /// kept but unused: a bone's own term cancels in `M_b`).
-    pairs: Cols<(DMat3, DVec3)>,
+    /// kept but unused: a bone's own term cancels in `M_b`). Accumulated in f64, stored in
+    /// f32 SIMD form: the 3x3 products of the local step are its cost (module docs).
+    pairs: Cols<(Mat3A, Vec3A)>,
     /// `q_lb`, by column `b` (rows: control points).
-    q: Cols<DVec3>,
+    q: Cols<Vec3A>,
     /// `tr(G_bb) / 3`.
     scale: Vec<f64>,
 }
@@ -167,6 +168,14 @@ impl BoneRefiner {
                     .map_or(0.0, |(c, _)| (c.x_axis.x + c.y_axis.y + c.z_axis.z) / 3.0)
             })
             .collect();
+        let pairs: BTreeMap<(u32, u32), (Mat3A, Vec3A)> = pairs
+            .into_iter()
+            .map(|(k, (g, h))| (k, (Mat3A::from(g.as_mat3()), Vec3A::from(h.as_vec3()))))
+            .collect();
+        let q: BTreeMap<(u32, u32), Vec3A> = q
+            .into_iter()
+            .map(|(k, v)| (k, Vec3A::from(v.as_vec3())))
+            .collect();
         BoneRefiner {
             bones: bone_count,
             pairs: Cols::from_map(bone_count, &pairs),
@@ -185,31 +194,35 @@ impl BoneRefiner {
         strength * self.scale[b]
     }
 
-    /// One local step: every bone's rotation in turn, in place in `r` (module docs), with the
-    /// translations `t` and the prior `r_hat` at `strength`.
-    pub fn local_step(
+    /// One local step: every bone's rotation in turn, in place in `r` (f64, and its f32
+    /// copy `r32`, which the products read), with the translations `t` and the prior `r_hat`
+    /// at `strength` (module docs).
+    fn local_step(
         &self,
         r: &mut [DMat3],
-        t: &[DVec3],
+        r32: &mut [Mat3A],
+        t: &[Vec3],
         controls: &[Vec3],
         r_hat: &[DMat3],
         strength: f64,
     ) {
         for b in 0..self.bones {
-            let mut m = DMat3::ZERO;
+            let mut m = Mat3A::ZERO;
             for (a, (gab, hab)) in self.pairs.col(b) {
                 if a != b {
-                    m -= r[a] * *gab;
+                    m -= r32[a] * *gab;
                 }
-                m -= outer(t[a], *hab);
+                m -= outer32(Vec3A::from(t[a]), *hab);
             }
             for (l, qlb) in self.q.col(b) {
-                m += outer(controls[l].as_dvec3(), *qlb);
+                m += outer32(Vec3A::from(controls[l]), *qlb);
             }
+            let mut m = m.as_dmat3();
             if strength > 0.0 {
                 m += r_hat[b] * self.prior_weight(b, strength);
             }
             r[b] = best_rotation(&m, r[b]);
+            r32[b] = Mat3A::from(r[b].as_mat3());
         }
     }
 
@@ -235,14 +248,15 @@ impl BoneRefiner {
         scratch.prepare(self.bones);
         let RefineScratch {
             r,
+            r32,
             r_hat,
-            t,
             t32,
             q32,
             solve,
         } = scratch;
-        for (m, q) in r.iter_mut().zip(rotations.iter()) {
+        for ((m, m32), q) in r.iter_mut().zip(r32.iter_mut()).zip(rotations.iter()) {
             *m = DMat3::from_quat(q.as_dquat().normalize());
+            *m32 = Mat3A::from(m.as_mat3());
         }
         match prior {
             Some(p) => {
@@ -255,10 +269,7 @@ impl BoneRefiner {
         q32.copy_from_slice(rotations);
         solver.solve(q32, controls, solve, t32)?;
         for _ in 0..iterations {
-            for (d, s) in t.iter_mut().zip(t32.iter()) {
-                *d = s.as_dvec3();
-            }
-            self.local_step(r, t, controls, r_hat, strength);
+            self.local_step(r, r32, t32, controls, r_hat, strength);
             for (q, m) in q32.iter_mut().zip(r.iter()) {
                 *q = DQuat::from_mat3(m).normalize().as_quat();
             }
@@ -281,8 +292,8 @@ impl BoneRefiner {
 #[derive(Clone, Debug, Default)]
 pub struct RefineScratch {
     r: Vec<DMat3>,
+    r32: Vec<Mat3A>,
     r_hat: Vec<DMat3>,
-    t: Vec<DVec3>,
     t32: Vec<Vec3>,
     q32: Vec<Quat>,
     solve: TranslationScratch,
@@ -292,8 +303,8 @@ impl RefineScratch {
     fn prepare(&mut self, bones: usize) {
         if self.r.len() != bones {
             self.r = vec![DMat3::IDENTITY; bones];
+            self.r32 = vec![Mat3A::IDENTITY; bones];
             self.r_hat = vec![DMat3::IDENTITY; bones];
-            self.t = vec![DVec3::ZERO; bones];
             self.t32 = vec![Vec3::ZERO; bones];
             self.q32 = vec![Quat::IDENTITY; bones];
         }
@@ -302,6 +313,10 @@ impl RefineScratch {
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+fn outer32(a: Vec3A, b: Vec3A) -> Mat3A {
+    Mat3A::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
 /// `tr(R^T M)`.
