@@ -350,13 +350,7 @@ impl Predictor {
         controls: &[Vec3],
         valid: Option<&[bool]>,
     ) -> Result<(), PredictError> {
-        let n = self.model.controls.len();
-        if controls.len() != n {
-            return Err(PredictError::ControlCount {
-                expected: n,
-                got: controls.len(),
-            });
-        }
+        let n = self.check_control_count(controls)?;
         if let Some(mask) = valid
             && mask.len() != n
         {
@@ -438,12 +432,8 @@ impl Predictor {
         }
     }
 
-    fn set_rotations_and_controls(
-        &self,
-        ctx: &mut FrameContext,
-        rotations: &[Quat],
-        controls: &[Vec3],
-    ) -> Result<(), PredictError> {
+    /// The model's control-point count, when `controls` has it.
+    fn check_control_count(&self, controls: &[Vec3]) -> Result<usize, PredictError> {
         let n = self.model.controls.len();
         if controls.len() != n {
             return Err(PredictError::ControlCount {
@@ -451,6 +441,16 @@ impl Predictor {
                 got: controls.len(),
             });
         }
+        Ok(n)
+    }
+
+    fn set_rotations_and_controls(
+        &self,
+        ctx: &mut FrameContext,
+        rotations: &[Quat],
+        controls: &[Vec3],
+    ) -> Result<(), PredictError> {
+        self.check_control_count(controls)?;
         let bones = self.model.rig.bone_count;
         if rotations.len() != bones {
             return Err(PredictError::RotationCount {

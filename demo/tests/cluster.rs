@@ -1017,15 +1017,17 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
             "frame {seq}: {ack:?}"
         );
     }
-    let relayed = b
-        .client()
-        .await
-        .get_room(v1::GetRoomRequest {
-            room: "mocap".into(),
-        })
-        .await
-        .unwrap()
-        .into_inner();
+    let room_on_b = || async {
+        b.client()
+            .await
+            .get_room(v1::GetRoomRequest {
+                room: "mocap".into(),
+            })
+            .await
+            .unwrap()
+            .into_inner()
+    };
+    let relayed = room_on_b().await;
     assert_eq!(
         relayed.refine,
         Some(refine),
@@ -1051,15 +1053,7 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         ok >= 10,
         "B acknowledged only {ok} marker frames after the adoption"
     );
-    let info = b
-        .client()
-        .await
-        .get_room(v1::GetRoomRequest {
-            room: "mocap".into(),
-        })
-        .await
-        .unwrap()
-        .into_inner();
+    let info = room_on_b().await;
     assert_eq!(info.retarget.unwrap().markers.len(), names.len());
     assert_eq!(
         info.refine,

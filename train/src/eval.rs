@@ -409,12 +409,7 @@ fn evaluate_frames(
 ) -> Result<(), TrainError> {
     let rest = &base.rig.rest;
     let scale = rest.bbox_diagonal_scale();
-    let controls_of = |f: &[Vec3]| -> Vec<Vec3> {
-        base.control_vertices
-            .iter()
-            .map(|&v| f[v as usize])
-            .collect()
-    };
+    let controls_of = |f: &[Vec3]| control_positions(base, f);
     let mut out = vec![Vec3::ZERO; rest.vertex_count()];
 
     // rest
@@ -585,23 +580,21 @@ fn nearest_rows(
     refined.set_refinement(Some(refine));
     let mut ctx = refined.new_context();
     for f in frames {
-        let controls: Vec<Vec3> = base
-            .control_vertices
-            .iter()
-            .map(|&v| f[v as usize])
-            .collect();
+        let controls = control_positions(base, f);
         let t = Instant::now();
-        let distance = |example: &[Vec3]| -> f32 {
-            example
-                .iter()
-                .zip(&controls)
-                .map(|(a, b)| a.distance_squared(*b))
-                .sum()
-        };
-        let nearest = (0..base.example_controls.len())
-            .min_by(|&a, &b| {
-                distance(&base.example_controls[a]).total_cmp(&distance(&base.example_controls[b]))
+        let nearest = base
+            .example_controls
+            .iter()
+            .map(|example| -> f32 {
+                example
+                    .iter()
+                    .zip(&controls)
+                    .map(|(a, b)| a.distance_squared(*b))
+                    .sum()
             })
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(k, _)| k)
             .ok_or_else(|| TrainError::Controls("no training examples".into()))?;
         let start = &base.rotations[nearest];
         let search_us = t.elapsed().as_secs_f64() * 1e6;
@@ -619,6 +612,14 @@ fn nearest_rows(
         }
     }
     Ok(())
+}
+
+/// The control points' positions in `frame`, in model order.
+fn control_positions(base: &TrainedBase, frame: &[Vec3]) -> Vec<Vec3> {
+    base.control_vertices
+        .iter()
+        .map(|&v| frame[v as usize])
+        .collect()
 }
 
 /// Adds a frame's detailed errors to `row`: its base error `base`, the full and crease-region

@@ -69,6 +69,15 @@ impl<T: Copy> Cols<T> {
         c
     }
 
+    /// The same lists with every value converted by `f`.
+    fn map<U>(self, f: impl Fn(T) -> U) -> Cols<U> {
+        Cols {
+            ptr: self.ptr,
+            idx: self.idx,
+            val: self.val.into_iter().map(f).collect(),
+        }
+    }
+
     fn col(&self, b: usize) -> impl Iterator<Item = (usize, &T)> {
         let r = self.ptr[b]..self.ptr[b + 1];
         self.idx[r.clone()]
@@ -168,18 +177,11 @@ impl BoneRefiner {
                     .map_or(0.0, |(c, _)| (c.x_axis.x + c.y_axis.y + c.z_axis.z) / 3.0)
             })
             .collect();
-        let pairs: BTreeMap<(u32, u32), (Mat3A, Vec3A)> = pairs
-            .into_iter()
-            .map(|(k, (g, h))| (k, (Mat3A::from(g.as_mat3()), Vec3A::from(h.as_vec3()))))
-            .collect();
-        let q: BTreeMap<(u32, u32), Vec3A> = q
-            .into_iter()
-            .map(|(k, v)| (k, Vec3A::from(v.as_vec3())))
-            .collect();
         BoneRefiner {
             bones: bone_count,
-            pairs: Cols::from_map(bone_count, &pairs),
-            q: Cols::from_map(bone_count, &q),
+            pairs: Cols::from_map(bone_count, &pairs)
+                .map(|(g, h)| (Mat3A::from(g.as_mat3()), Vec3A::from(h.as_vec3()))),
+            q: Cols::from_map(bone_count, &q).map(|v| Vec3A::from(v.as_vec3())),
             scale,
         }
     }
