@@ -183,7 +183,7 @@ pub struct RoomOptions {
     /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
     pub filter: Option<OneEuroParams>,
     /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
-    /// (the default: it pays where the control points are dense, the hands, and costs ~90 µs
+    /// (the default: it pays where the control points are dense, the hands, and costs ~40 µs
     /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
     pub refine: Option<Refinement>,
 }
