@@ -249,24 +249,6 @@ pub fn percentile<T: Copy + Default>(sorted: &[T], p: f64) -> T {
     sorted[k.clamp(1, sorted.len()) - 1]
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn percentiles_by_nearest_rank() {
-        let v: Vec<u32> = (1..=100).collect();
-        assert_eq!(percentile(&v, 50.0), 50);
-        assert_eq!(percentile(&v, 99.0), 99);
-        assert_eq!(percentile(&v, 100.0), 100);
-        assert_eq!(percentile(&v, 0.0), 1);
-        assert_eq!(percentile(&[7i64], 99.0), 7);
-        assert_eq!(percentile::<u64>(&[], 50.0), 0);
-        // Four values: the median is the second (half of them at or below it).
-        assert_eq!(percentile(&[1, 2, 3, 4], 50.0), 2);
-    }
-}
-
 /// `ITERATIONS,STRENGTH` of a `--refine` option (issue 20's bone-level refinement, e.g.
 /// `4,0.01`). `crease eval` also takes a strength of 0 (no prior); a room refuses it.
 pub fn parse_refinement(text: &str) -> Result<Refinement, String> {
@@ -297,4 +279,22 @@ pub fn print_refinement(refine: Option<&crease_proto::v1::Refine>) -> String {
         || "off".to_owned(),
         |r| format!("{} iterations at strength {}", r.iterations, r.strength),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<u32> = (1..=100).collect();
+        assert_eq!(percentile(&v, 50.0), 50);
+        assert_eq!(percentile(&v, 99.0), 99);
+        assert_eq!(percentile(&v, 100.0), 100);
+        assert_eq!(percentile(&v, 0.0), 1);
+        assert_eq!(percentile(&[7i64], 99.0), 7);
+        assert_eq!(percentile::<u64>(&[], 50.0), 0);
+        // Four values: the median is the second (half of them at or below it).
+        assert_eq!(percentile(&[1, 2, 3, 4], 50.0), 2);
+    }
 }
