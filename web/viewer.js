@@ -18,7 +18,7 @@ import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { decodeFrame, decodeIndices, ready } from "./codec.js";
 import { PaletteSynth, floatTargetsSupported } from "./palette.js";
-import { readMeshFrame } from "./wire.js";
+import { readMeshFrame, socketProtocols } from "./wire.js";
 import { HandTracker, markerMessage, markerPlan } from "./xr.js";
 
 const params = new URLSearchParams(location.search);
@@ -80,10 +80,24 @@ const roomSelect = document.getElementById("room");
 const xrRow = document.getElementById("xr-row");
 const xrButton = document.getElementById("xr");
 const handSelect = document.getElementById("hand");
-tokenInput.value = params.get("token") || sessionStorage.getItem(`crease-token-${roomId}`) || "";
+// The publish token: from the page's fragment (`#token=T`, which browsers never send to a
+// server), else the page's query (`?token=T`: kept for old links, taken out of the address bar
+// at once), else what this tab was given before. It travels in the WebSocket's subprotocols
+// (wire.js socketProtocols), never in a URL.
+const hashParams = new URLSearchParams(location.hash.slice(1));
+const urlToken = hashParams.get("token") || params.get("token");
+if (params.has("token") || hashParams.has("token")) {
+  if (params.has("token")) console.warn("crease: a token in the page's query string reaches the server's logs; use #token= instead");
+  params.delete("token");
+  hashParams.delete("token");
+  const hash = hashParams.toString();
+  history.replaceState(null, "", `${location.pathname}?${params}${hash ? `#${hash}` : ""}`);
+}
+if (urlToken) sessionStorage.setItem(`crease-token-${roomId}`, urlToken);
+tokenInput.value = urlToken || sessionStorage.getItem(`crease-token-${roomId}`) || "";
 tokenInput.addEventListener("change", () => {
   sessionStorage.setItem(`crease-token-${roomId}`, tokenInput.value);
-  reconnect(); // the token travels in the WebSocket URL
+  reconnect(); // the token travels in the WebSocket's subprotocols, read at connection
 });
 detailBox.checked = level === "detail";
 detailBox.addEventListener("change", () => {
@@ -194,9 +208,8 @@ let socketOpened = 0;
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   const q = new URLSearchParams({ level, encoding: state.encoding });
-  if (tokenInput.value) q.set("token", tokenInput.value);
   socketOpened = performance.now();
-  ws = new WebSocket(`${scheme}://${location.host}/ws/rooms/${encodeURIComponent(roomId)}?${q}`);
+  ws = new WebSocket(`${scheme}://${location.host}/ws/rooms/${encodeURIComponent(roomId)}?${q}`, socketProtocols(tokenInput.value));
   ws.binaryType = "arraybuffer";
   ws.onopen = () => {
     state.connected = true;
@@ -514,6 +527,12 @@ function publish(points) {
   ws.send(JSON.stringify({ seq: seq++, capture_time_us: Date.now() * 1000, positions }));
   state.published += 1;
 }
+// Publishes control points (x, y, z each, model order) as a drag would: for scripts and tests.
+hidden("publish", (flat) => {
+  const points = [];
+  for (let i = 0; i + 2 < flat.length; i += 3) points.push({ x: flat[i], y: flat[i + 1], z: flat[i + 2] });
+  publish(points);
+});
 
 // ---- WebXR hands (xr.js) ----------------------------------------------------------------------
 let tracker = null; // HandTracker while a session runs

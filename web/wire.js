@@ -205,3 +205,15 @@ export function readMeshFrame(bytes) {
   }
   throw new Error("protobuf: a MeshFrame with neither topology, frame nor palette topology");
 }
+
+// The WebSocket subprotocols that carry a room's publish token (server/src/ws.rs, issue 21):
+// "crease.v1", which the server selects, and "crease.token." + the token's UTF-8 bytes in
+// unpadded base64url. The token never goes into a URL (proxies and access logs keep those).
+export function socketProtocols(token) {
+  if (!token) return ["crease.v1"];
+  const bytes = new TextEncoder().encode(token);
+  let binary = "";
+  for (const b of bytes) binary += String.fromCharCode(b);
+  const b64 = btoa(binary).replace(/\+/g, "-").replace(/\//g, "_").replace(/=+$/, "");
+  return ["crease.v1", `crease.token.${b64}`];
+}

@@ -19,9 +19,9 @@ use crease_train::detail::layer::{DetailFrames, DetailOptions};
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use crease_train::regress::{Method, RegressOptions};
 
-/// The cached model's file name. The version changes whenever the recipe below does, so a
-/// stale cache is never served.
-const CACHE_FILE: &str = "demo-hand-v1.crease";
+/// The cached model's file name in the cache folder. The version changes whenever the recipe
+/// below does, so a stale cache is never served.
+pub const CACHE_FILE: &str = "demo-hand-v1.crease";
 /// Training poses: the flat rest pose, the nine other named poses, two sampled ones.
 const TRAIN_POSES: usize = 12;
 /// Seed of the pose sampler (as `crease handgen --seed 1`).
@@ -84,20 +84,29 @@ pub fn demo_model(
         Err(_) => {}
     }
     let model = train_demo_model(progress)?;
-    let saved = std::fs::create_dir_all(cache_dir)
-        .map_err(|e| e.to_string())
-        .and_then(|()| model.save(&path).map_err(|e| e.to_string()));
-    match saved {
-        Ok(()) => progress(&format!("cached the demo model in {}", path.display())),
-        Err(message) => progress(&format!(
-            "{}",
-            DemoError::Cache {
-                path: path.clone(),
-                message
-            }
-        )),
+    match save_cache(cache_dir, &model) {
+        Ok(path) => progress(&format!("cached the demo model in {}", path.display())),
+        Err(e) => progress(&e.to_string()),
     }
     Ok(model)
+}
+
+/// Saves `model` as the demo model's cache in `cache_dir` (created if missing), atomically: a
+/// process killed while saving leaves the previous cache or this one, whole
+/// (`core::atomic`; `demo/tests/crash_safe_cache.rs` kills it). Returns the file's path.
+///
+/// # Errors
+/// [`DemoError::Cache`], naming the file and the cause (a full disk, no permission).
+pub fn save_cache(cache_dir: &Path, model: &TrainedModel) -> Result<PathBuf, DemoError> {
+    let path = cache_dir.join(CACHE_FILE);
+    std::fs::create_dir_all(cache_dir)
+        .map_err(|e| e.to_string())
+        .and_then(|()| model.save(&path).map_err(|e| e.to_string()))
+        .map_err(|message| DemoError::Cache {
+            path: path.clone(),
+            message,
+        })?;
+    Ok(path)
 }
 
 /// Generates the training poses at both resolutions and trains the model (module docs).

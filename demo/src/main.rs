@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use clap::Parser;
 use crease_demo::launch::{self, Config};
+use crease_server::admission::Caps;
 use crease_server::{DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
 
 /// Hosts live rooms on trained crease models and streams predicted meshes over gRPC and
@@ -71,6 +72,20 @@ struct Args {
     /// Largest gRPC or WebSocket message accepted, bytes.
     #[arg(long, default_value_t = Limits::default().message_bytes)]
     max_message_bytes: usize,
+    /// Most TCP connections one client address may hold (gRPC and HTTP together); more are
+    /// closed at once (HTTP: after a 503). Behind a proxy every client is the proxy: raise it.
+    #[arg(long, default_value_t = Limits::default().connections.per_address)]
+    max_connections_per_address: usize,
+    /// Most TCP connections in total.
+    #[arg(long, default_value_t = Limits::default().connections.total)]
+    max_connections: usize,
+    /// Most streams (gRPC Publish, Subscribe, Synthesize; WebSocket sessions) one client
+    /// address may hold; more are refused (RESOURCE_EXHAUSTED, HTTP 429).
+    #[arg(long, default_value_t = Limits::default().streams.per_address)]
+    max_streams_per_address: usize,
+    /// Most streams in total.
+    #[arg(long, default_value_t = Limits::default().streams.total)]
+    max_streams: usize,
     /// Join a cluster through this NATS server (JetStream on, e.g. `nats-server -js`): every
     /// replica serves every room of the cluster; a dead replica's rooms are adopted. With it,
     /// --models may be empty (models are fetched from the cluster).
@@ -96,6 +111,14 @@ impl From<Args> for Config {
                     subscribers_per_room: args.max_subscribers,
                     publish_hz: args.max_publish_hz,
                     message_bytes: args.max_message_bytes,
+                    connections: Caps {
+                        per_address: args.max_connections_per_address,
+                        total: args.max_connections,
+                    },
+                    streams: Caps {
+                        per_address: args.max_streams_per_address,
+                        total: args.max_streams,
+                    },
                 },
                 web: args.web.or_else(launch::source_tree_web),
                 maps: args.maps,

@@ -1,6 +1,7 @@
 //! The `crease.v1.Crease` gRPC service (tonic), plus grpc.health.v1 and server reflection so
 //! generic gRPC tools work.
 
+use std::net::IpAddr;
 use std::pin::Pin;
 use std::sync::Arc;
 
@@ -13,6 +14,7 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::admission::Permit;
 use crate::fanout::Channel;
 use crate::ingest;
 use crate::registry::LoadedModel;
@@ -101,6 +103,18 @@ impl CreaseService {
             .models
             .get(name)
             .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
+    }
+
+    /// A stream slot for the request's client address (`Limits::streams`), or
+    /// RESOURCE_EXHAUSTED naming the address and the cap.
+    fn admit<T>(&self, req: &Request<T>) -> Result<Permit, Status> {
+        let ip = req
+            .remote_addr()
+            .map_or(IpAddr::V4(std::net::Ipv4Addr::UNSPECIFIED), |a| a.ip());
+        self.state
+            .streams
+            .admit(ip)
+            .map_err(|e| Status::resource_exhausted(e.to_string()))
     }
 
     async fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
@@ -247,12 +261,24 @@ impl Crease for CreaseService {
         &self,
         req: Request<Streaming<v1::ControlFrame>>,
     ) -> Result<Response<Self::PublishStream>, Status> {
+        let permit = self.admit(&req)?;
         let token = bearer(&req);
         let mut frames = req.into_inner();
         let state = Arc::clone(&self.state);
         let (tx, rx) = mpsc::channel(STREAM_BUFFER);
         tokio::spawn(async move {
-            while let Ok(Some(frame)) = frames.message().await {
+            let _permit = permit;
+            loop {
+                let frame = match frames.message().await {
+                    Ok(Some(frame)) => frame,
+                    Ok(None) => break,
+                    // A message the server will not read (over `limits.message_bytes`, not a
+                    // ControlFrame): the client's stream ends with why, not silently.
+                    Err(status) => {
+                        let _ = tx.send(Err(status)).await;
+                        break;
+                    }
+                };
                 let seq = frame.seq;
                 let ack = ingest::ack(seq, &ingest::publish(&state, token.as_deref(), frame).await);
                 if tx.send(Ok(ack)).await.is_err() {
@@ -269,6 +295,7 @@ impl Crease for CreaseService {
         &self,
         req: Request<v1::SubscribeRequest>,
     ) -> Result<Response<Self::SubscribeStream>, Status> {
+        let permit = self.admit(&req)?;
         let r = req.into_inner();
         let level = Level::from_wire("SubscribeRequest", r.level)?;
         let encoding = Encoding::from_wire("SubscribeRequest", r.encoding)?;
@@ -278,12 +305,10 @@ impl Crease for CreaseService {
         let subscription = room
             .subscribe(channel, self.state.config.limits.subscribers_per_room)
             .map_err(|e| Status::resource_exhausted(format!("room {:?}: {e}", room.id)))?;
-        Ok(Response::new(Box::pin(crate::stream::subscribe(
-            Arc::clone(&self.state),
-            room,
-            channel,
-            subscription,
-        ))))
+        Ok(Response::new(holding(
+            permit,
+            crate::stream::subscribe(Arc::clone(&self.state), room, channel, subscription),
+        )))
     }
 
     type SynthesizeStream = BoxStream<v1::MeshFrame>;
@@ -292,6 +317,7 @@ impl Crease for CreaseService {
         &self,
         req: Request<v1::SynthesizeRequest>,
     ) -> Result<Response<Self::SynthesizeStream>, Status> {
+        let permit = self.admit(&req)?;
         let r = req.into_inner();
         let level = Level::from_wire("SynthesizeRequest", r.level)?;
         let model = self.model(&r.model)?;
@@ -304,13 +330,22 @@ impl Crease for CreaseService {
             .await
             .map_err(|e| e.status())?;
         check_level(&room, level)?;
-        Ok(Response::new(Box::pin(crate::stream::batch(
-            Arc::clone(&self.state),
-            room,
-            level,
-            r.frames,
-        ))))
+        Ok(Response::new(holding(
+            permit,
+            crate::stream::batch(Arc::clone(&self.state), room, level, r.frames),
+        )))
     }
+}
+
+/// `stream`, holding `permit` (a stream slot) until it is dropped.
+fn holding<T: Send + 'static>(
+    permit: Permit,
+    stream: impl Stream<Item = Result<T, Status>> + Send + 'static,
+) -> BoxStream<T> {
+    Box::pin(tokio_stream::StreamExt::map(stream, move |item| {
+        let _held = &permit;
+        item
+    }))
 }
 
 /// A request's refinement, checked (`refine: ...` names the field in the error).

@@ -1,6 +1,8 @@
 //! crease-server: hosts live rooms on loaded models and streams predicted meshes (issue 6).
 //!
 //! Layout, in the order a control frame crosses it:
+//! - [`admission`]: caps on the connections and streams one client address, and everyone,
+//!   may hold (the listeners and every long-lived call pass through it first).
 //! - [`grpc`] / [`ws`]: the transports: the `crease.v1.Crease` service (tonic, with gRPC
 //!   health and reflection) and `/ws/rooms/{id}` (subscribe and publish over WebSocket).
 //! - [`ingest`]: the one publish path of both: room lookup, token, rate, the wire frame
@@ -25,6 +27,7 @@
 //! `crease-proto`'s. Depends on `crease-core` and `crease-proto` only (ARCHITECTURE.md); the
 //! embedded demo and the `crease-server` binary are in `crease-demo`.
 
+pub mod admission;
 pub mod capture;
 pub mod cluster;
 pub mod fanout;
@@ -60,6 +63,12 @@ pub struct Limits {
     /// Most control frames per second a room accepts (bursts of a quarter second's worth);
     /// frames over it are refused with RESOURCE_EXHAUSTED and change nothing.
     pub publish_hz: f64,
+    /// TCP connections, per client address and in total, on each listener's count together
+    /// ([`admission`]).
+    pub connections: admission::Caps,
+    /// Long-lived calls (gRPC Publish, Subscribe, Synthesize; WebSocket sessions), per client
+    /// address and in total ([`admission`]).
+    pub streams: admission::Caps,
 }
 
 impl Default for Limits {
@@ -70,6 +79,16 @@ impl Default for Limits {
             subscribers_per_room: 512,
             // Twice the fastest mocap rigs we expect (120 Hz).
             publish_hz: 240.0,
+            // A classroom behind one NAT address stays well inside these; one client opening
+            // sockets in a loop does not.
+            connections: admission::Caps {
+                per_address: 256,
+                total: 4096,
+            },
+            streams: admission::Caps {
+                per_address: 256,
+                total: 8192,
+            },
         }
     }
 }
@@ -172,18 +191,28 @@ pub struct AppState {
     pub metrics: metrics::Metrics,
     /// The cluster this server joined (`cluster::join`), if any.
     cluster: OnceLock<Arc<cluster::Cluster>>,
+    /// TCP connections held, per client address (`Limits::connections`).
+    pub connections: Arc<admission::Admission>,
+    /// Long-lived calls held, per client address (`Limits::streams`).
+    pub streams: Arc<admission::Admission>,
 }
 
 impl AppState {
     /// State with `models` and no rooms.
     pub fn new(models: ModelRegistry, config: Config) -> Arc<Self> {
+        let connections = admission::Admission::new("connections", config.limits.connections);
+        let streams = admission::Admission::new("streams", config.limits.streams);
+        let mut metrics = metrics::Metrics::default();
+        metrics.register_admission(&connections, &streams);
         Arc::new(Self {
             models,
             rooms: RwLock::new(HashMap::new()),
             config,
             closing: tokio::sync::watch::channel(false).0,
-            metrics: metrics::Metrics::default(),
+            metrics,
             cluster: OnceLock::new(),
+            connections,
+            streams,
         })
     }
 
@@ -340,10 +369,8 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     let http_task = match &tls {
         None => tokio::spawn(
             axum::serve(
-                axum::serve::ListenerExt::tap_io(http_listener, |tcp| {
-                    let _ = tcp.set_nodelay(true);
-                }),
-                app,
+                admission::AdmittedListener::new(http_listener, Arc::clone(&state.connections)),
+                app.into_make_service_with_connect_info::<admission::Peer>(),
             )
             .with_graceful_shutdown(closing)
             .into_future(),
@@ -365,17 +392,23 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
                 stop.graceful_shutdown(Some(HTTPS_DRAIN));
             });
             let server = axum_server::from_tcp_rustls(http_listener.into_std()?, config)?;
-            tokio::spawn(server.handle(handle).serve(app.into_make_service()))
+            // The connection caps are not applied here (axum-server accepts on its own); the
+            // stream caps are, as everywhere.
+            tokio::spawn(
+                server
+                    .handle(handle)
+                    .serve(app.into_make_service_with_connect_info::<admission::Peer>()),
+            )
         }
     };
     tracing::info!(%http, "HTTP listening");
     let (tx, rx) = tokio::sync::oneshot::channel::<()>();
     let router = grpc::router(Arc::clone(&state), tls.as_ref())?;
-    // Nagle off on every accepted socket: frames are small and latency-bound (with it on, a
-    // frame could wait for the client's delayed ACK: ~27 ms p99 at the client in
-    // `crease bench-net`, BENCHMARKS.md). tonic's own `tcp_nodelay` does not apply to an
-    // incoming stream we hand it.
-    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+    // Nagle off on every accepted socket (`admission::incoming` sets it): frames are small and
+    // latency-bound (with it on, a frame could wait for the client's delayed ACK: ~27 ms p99 at
+    // the client in `crease bench-net`, BENCHMARKS.md). tonic's own `tcp_nodelay` does not
+    // apply to an incoming stream we hand it.
+    let incoming = admission::incoming(listener, Arc::clone(&state.connections));
     let task = tokio::spawn(router.serve_with_incoming_shutdown(incoming, async move {
         let _ = rx.await;
         state.closing.send_replace(true);

@@ -90,6 +90,31 @@ impl Default for Metrics {
 }
 
 impl Metrics {
+    /// Registers the refusals of the connection and stream caps
+    /// (`crease_admission_refused_total{kind}`).
+    pub fn register_admission(
+        &mut self,
+        connections: &crate::admission::Admission,
+        streams: &crate::admission::Admission,
+    ) {
+        let sub = self
+            .registry
+            .sub_registry_with_label(("kind".into(), "connections".into()));
+        sub.register(
+            "admission_refused",
+            "Connections or streams refused by a per-address or total cap",
+            connections.refused_counter(),
+        );
+        let sub = self
+            .registry
+            .sub_registry_with_label(("kind".into(), "streams".into()));
+        sub.register(
+            "admission_refused",
+            "Connections or streams refused by a per-address or total cap",
+            streams.refused_counter(),
+        );
+    }
+
     /// The text exposition of every metric.
     pub fn render(&self) -> String {
         let mut out = String::new();

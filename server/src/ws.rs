@@ -7,11 +7,19 @@
 //!   `?subscribe=false` publishes only.
 //! - **Publish**: a binary message is a protobuf `ControlFrame`, a text message the same as JSON
 //!   (`{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...], "valid": [true, ...]}`,
-//!   `valid` optional); the room is the path's. Publishing needs the room's token in
-//!   `?token=`. Each frame is answered by a text message, the ack as JSON
+//!   `valid` optional); the room is the path's. Publishing needs the room's token, sent in the
+//!   `Sec-WebSocket-Protocol` header (issue 21): the client offers the subprotocols
+//!   `crease.v1` and `crease.token.<the token in unpadded base64url>`, and the server selects
+//!   `crease.v1` (in a browser: `new WebSocket(url, ["crease.v1", "crease.token." + b64])`).
+//!   A token in the URL (`?token=`) is refused with `400`: URLs are kept by proxies, access
+//!   logs and browser history, a header is not; the token is never logged.
+//!   Each frame is answered by a text message, the ack as JSON
 //!   (`{"seq": 1, "server_latency_us": 120, "held_controls": 0, "control_residual": 0.002,
 //!   "error": null}` or with
 //!   `"error": {"code": 3, "message": "positions: ..."}`).
+//!
+//! A session is a stream for the caps on what one client address may hold
+//! ([`crate::admission`]): over them the upgrade is refused with `429` naming the cap.
 //!
 //! A bad message is answered by an error ack and the socket stays open. Publishing goes through
 //! [`crate::ingest`] as gRPC's does, and the ack is gRPC's as JSON (`crease_proto::json`); a
@@ -20,8 +28,8 @@
 use std::sync::Arc;
 
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::extract::{ConnectInfo, Path, Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use crease_proto::json::{JsonAck, JsonControlFrame};
 use crease_proto::{Encoding, Level, WireError, v1};
@@ -30,6 +38,7 @@ use prost::Message as _;
 use tokio::sync::mpsc;
 
 use crate::AppState;
+use crate::admission::Peer;
 use crate::fanout::Channel;
 use crate::ingest::{self, PublishError};
 use crate::room::{Room, Subscription};
@@ -39,7 +48,7 @@ use crate::room::{Room, Subscription};
 pub struct Params {
     /// `base` (default) or `detail`.
     level: Option<String>,
-    /// The room's publish token (needed to publish).
+    /// A publish token in the URL: refused (module docs).
     token: Option<String>,
     /// `false`: publish only, no mesh frames.
     subscribe: Option<bool>,
@@ -47,13 +56,83 @@ pub struct Params {
     encoding: Option<String>,
 }
 
+/// The subprotocol the server speaks (selected when the client offers it).
+pub const PROTOCOL: &str = "crease.v1";
+
+/// The prefix of the subprotocol that carries the publish token (base64url, no padding).
+pub const TOKEN_PROTOCOL_PREFIX: &str = "crease.token.";
+
+/// The subprotocol entry carrying `token` (what a client offers beside [`PROTOCOL`]).
+pub fn token_protocol(token: &str) -> String {
+    use base64::Engine as _;
+    format!(
+        "{TOKEN_PROTOCOL_PREFIX}{}",
+        base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(token)
+    )
+}
+
+/// The publish token the client offered in `Sec-WebSocket-Protocol`, if any.
+///
+/// # Errors
+/// A token entry that is not base64url of UTF-8 text, or one offered without [`PROTOCOL`]
+/// (the server could not select a protocol the client offered, and browsers then fail the
+/// connection).
+fn offered_token(headers: &HeaderMap) -> Result<Option<String>, String> {
+    use base64::Engine as _;
+    let offered: Vec<&str> = headers
+        .get_all(header::SEC_WEBSOCKET_PROTOCOL)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .map(str::trim)
+        .collect();
+    let Some(encoded) = offered
+        .iter()
+        .find_map(|p| p.strip_prefix(TOKEN_PROTOCOL_PREFIX))
+    else {
+        return Ok(None);
+    };
+    if !offered.contains(&PROTOCOL) {
+        return Err(format!(
+            "Sec-WebSocket-Protocol: a {TOKEN_PROTOCOL_PREFIX}... entry needs {PROTOCOL:?} offered beside it"
+        ));
+    }
+    let bytes = base64::engine::general_purpose::URL_SAFE_NO_PAD
+        .decode(encoded)
+        .map_err(|e| {
+            format!("Sec-WebSocket-Protocol: the {TOKEN_PROTOCOL_PREFIX}... entry is not unpadded base64url: {e}")
+        })?;
+    String::from_utf8(bytes).map(Some).map_err(|_| {
+        format!("Sec-WebSocket-Protocol: the {TOKEN_PROTOCOL_PREFIX}... entry is not UTF-8 text")
+    })
+}
+
 /// `GET /ws/rooms/{id}`: upgrades to a session on the room (module docs).
 pub async fn room_socket(
     Path(id): Path<String>,
     Query(params): Query<Params>,
     State(state): State<Arc<AppState>>,
+    ConnectInfo(Peer(peer)): ConnectInfo<Peer>,
+    headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
+    if params.token.is_some() {
+        return (
+            StatusCode::BAD_REQUEST,
+            format!(
+                "token: a publish token in the URL is refused (proxies, access logs and browser history keep URLs): offer it in Sec-WebSocket-Protocol as \"{TOKEN_PROTOCOL_PREFIX}<base64url>\" beside \"{PROTOCOL}\"\n"
+            ),
+        )
+            .into_response();
+    }
+    let token = match offered_token(&headers) {
+        Ok(token) => token,
+        Err(e) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+    };
+    let permit = match state.streams.admit(peer.ip()) {
+        Ok(permit) => permit,
+        Err(e) => return (StatusCode::TOO_MANY_REQUESTS, format!("{e}\n")).into_response(),
+    };
     let room = match state.find_room(&id).await {
         Ok(room) => room,
         Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
@@ -89,8 +168,13 @@ pub async fn room_socket(
             }
         }
     };
-    ws.max_message_size(state.config.limits.message_bytes)
-        .on_upgrade(move |socket| session(state, room, channel, params.token, subscription, socket))
+    ws.protocols([PROTOCOL])
+        .max_message_size(state.config.limits.message_bytes)
+        .on_upgrade(move |socket| async move {
+            // The stream slot is held for the whole session.
+            let _permit = permit;
+            session(state, room, channel, token, subscription, socket).await;
+        })
 }
 
 async fn session(

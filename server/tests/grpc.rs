@@ -18,6 +18,7 @@ use crease_server::registry::ModelRegistry;
 use crease_server::{AppState, Config, Limits};
 
 const ADMIN: &str = "admin-secret";
+const LOCALHOST: std::net::IpAddr = std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
 mod common;
 use common::*;
 
@@ -240,8 +241,8 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
         use futures_util::{SinkExt, StreamExt};
         use prost::Message as _;
         use tokio_tungstenite::tungstenite::Message;
-        let url = format!("ws://{}/ws/rooms/r1?token={token}", running.http);
-        let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+        let url = format!("ws://{}/ws/rooms/r1", running.http);
+        let (mut ws, _) = ws_connect(&url, Some(&token), LOCALHOST).await.unwrap();
         let next_binary = |m: Message| match m {
             Message::Binary(b) => Some(v1::MeshFrame::decode(b.as_ref()).unwrap()),
             _ => None,
@@ -499,8 +500,12 @@ async fn limits_refuse_and_the_room_goes_on() {
         .unwrap_err();
     assert!(err.to_string().contains("503"), "{err}");
     // A publish-only socket takes no subscriber slot.
-    let publish_only = format!("{ws_url}?subscribe=false&token={token}");
-    assert!(tokio_tungstenite::connect_async(publish_only).await.is_ok());
+    let publish_only = format!("{ws_url}?subscribe=false");
+    assert!(
+        ws_connect(&publish_only, Some(&token), LOCALHOST)
+            .await
+            .is_ok()
+    );
     // A slot frees when its subscriber leaves.
     drop(_first);
     let mut again = None;

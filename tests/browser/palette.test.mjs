@@ -993,9 +993,14 @@ async function serverChecks() {
   await publisher.goto(`${base}/healthz`);
   const positions = roomInfo.control_points.flatMap((c) => c.rest);
   await publisher.evaluate(
-    ({ url, positions }) => {
+    ({ url, positions, token }) => {
       window.pub = { acks: 0, errors: [], seq: 0 };
-      const ws = new WebSocket(url);
+      // The token in the subprotocols (server/src/ws.rs): base64url of its UTF-8 bytes.
+      const b64 = btoa(String.fromCharCode(...new TextEncoder().encode(token)))
+        .replace(/\+/g, "-")
+        .replace(/\//g, "_")
+        .replace(/=+$/, "");
+      const ws = new WebSocket(url, ["crease.v1", `crease.token.${b64}`]);
       window.pub.ws = ws;
       ws.onmessage = (e) => {
         const ack = JSON.parse(e.data);
@@ -1008,7 +1013,7 @@ async function serverChecks() {
         }, 100);
       };
     },
-    { url: `ws://${httpAddr}/ws/rooms/demo?subscribe=false&token=${encodeURIComponent(token)}`, positions },
+    { url: `ws://${httpAddr}/ws/rooms/demo?subscribe=false`, positions, token },
   );
   const stopPublishing = () =>
     publisher.evaluate(() => {

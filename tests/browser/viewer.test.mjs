@@ -91,7 +91,11 @@ let pageErrors = [];
 try {
   const page = context.pages()[0] ?? (await context.newPage());
   pageErrors = watchPage(page, "base page");
-  await page.goto(`${base}/?room=demo&token=${encodeURIComponent(token)}`, { waitUntil: "load" });
+  // The token in the fragment (never sent to the server); the WebSocket carries it in its
+  // subprotocols (server/src/ws.rs), never in a URL.
+  const socketUrls = [];
+  page.on("websocket", (ws) => socketUrls.push(ws.url()));
+  await page.goto(`${base}/?room=demo#token=${encodeURIComponent(token)}`, { waitUntil: "load" });
 
   let live = null;
   await check("(a) frames arrive", async () => {
@@ -107,6 +111,13 @@ try {
       `${later.frames} frames, ${later.vertexCount} vertices, ${later.bytes} bytes, model ${later.model}, ` +
       `encoding ${later.encoding} (${later.paletteReason})`
     );
+  });
+
+  await check("(a2) the publish token stays out of every URL", async () => {
+    assert.ok(socketUrls.length > 0, "no WebSocket opened");
+    for (const u of socketUrls) assert.ok(!u.includes("token"), `a WebSocket URL carries the token: ${u}`);
+    assert.ok(!page.url().includes(token), `the address bar still shows the token: ${page.url()}`);
+    return `${socketUrls.length} socket(s): ${socketUrls[0]}`;
   });
 
   await check("(b) the canvas is not blank", async () => {
@@ -395,6 +406,72 @@ try {
     return `${later.frames} frames, ${later.vertexCount} vertices, luminance stddev ${s.stddev.toFixed(1)}`;
   });
   pageErrors.push(...detailErrors);
+
+  // Banners and the room picker, each on a page of its own.
+  const other = await context.newPage();
+  pageErrors.push(...watchPage(other, "banner page"));
+  const restControls = async () => {
+    const info = await fetch(`${base}/api/rooms/demo`).then((r) => r.json());
+    return info.control_points.flatMap((c) => c.rest);
+  };
+  await check("(g) a wrong token shows the bad-token banner", async () => {
+    await other.goto(`${base}/?room=demo#token=not-the-token`, { waitUntil: "load" });
+    await waitForCrease(other, "frames", (c) => c.connected && c.frames > 0, 30_000);
+    const refusedBefore = await metric("crease_frames_refused_total");
+    const flat = await restControls();
+    await other.evaluate((flat) => window.crease.publish(flat), flat);
+    const c = await waitForCrease(other, "the refusal's ack", (c) => c.acks > 0, 10_000);
+    assert.equal(c.error, "publish refused: wrong or missing token", "window.crease.error");
+    const banner = other.locator("#banner");
+    assert.equal(await banner.getAttribute("class"), "error", "#banner class");
+    assert.equal(await banner.textContent(), "publish refused: wrong or missing token", "#banner text");
+    assert.ok(await banner.isVisible(), "#banner is visible");
+    assert.ok((await metric("crease_frames_refused_total")) > refusedBefore, "the server refused the frame");
+    // The page's query form (old links) is taken out of the address bar and still works.
+    await other.goto(`${base}/?room=demo&token=not-the-token`, { waitUntil: "load" });
+    await waitForCrease(other, "frames", (c) => c.connected && c.frames > 0, 30_000);
+    assert.ok(!other.url().includes("not-the-token"), `the address bar keeps the token: ${other.url()}`);
+    assert.equal(await other.locator("#token").inputValue(), "not-the-token", "the token field");
+    return (await banner.textContent()) ?? "";
+  });
+
+  await check("(h) a dropped socket shows the disconnect banner, then reconnects", async () => {
+    // The socket passes through to the server until the test closes it from the server side.
+    let routed = null;
+    await other.routeWebSocket(/\/ws\/rooms\//, (ws) => {
+      ws.connectToServer();
+      routed = ws;
+    });
+    await other.goto(`${base}/?room=demo`, { waitUntil: "load" });
+    const before = await waitForCrease(other, "frames", (c) => c.connected && c.frames > 0, 30_000);
+    assert.ok(routed, "the page's socket was not routed");
+    await routed.close({ code: 1011, reason: "server restarting" });
+    await waitForCrease(other, "the disconnect", (c) => !c.connected, 10_000);
+    const banner = other.locator("#banner");
+    const text = (await banner.textContent()) ?? "";
+    assert.equal(await banner.getAttribute("class"), "warn", "#banner class");
+    assert.ok(/^disconnected: server restarting — reconnecting in [0-9.]+ s$/.test(text), `#banner text: ${text}`);
+    const after = await waitForCrease(other, "the reconnection", (c) => c.connected && c.sockets > before.sockets && c.frames > before.frames, 30_000);
+    assert.equal(await banner.textContent(), "", "the banner clears on reconnection");
+    await other.unrouteAll({ behavior: "ignoreErrors" });
+    return `${text}; reconnected (socket ${after.sockets})`;
+  });
+
+  await check("(i) the room picker lists the rooms and switches to another", async () => {
+    await other.goto(`${base}/?room=demo`, { waitUntil: "load" });
+    await waitForCrease(other, "frames", (c) => c.connected && c.frames > 0, 30_000);
+    const listed = await fetch(`${base}/api/rooms`).then((r) => r.json());
+    const options = await other.locator("#room option").evaluateAll((os) => os.map((o) => o.value));
+    assert.deepEqual([...options].sort(), [...listed.rooms].sort(), "the picker's rooms");
+    const target = listed.rooms.find((r) => r !== "demo");
+    assert.ok(target, `a second room to switch to: ${JSON.stringify(listed.rooms)}`);
+    await Promise.all([other.waitForNavigation({ waitUntil: "load" }), other.selectOption("#room", target)]);
+    assert.equal(new URL(other.url()).searchParams.get("room"), target, "the page's room");
+    const c = await waitForCrease(other, `room ${target}'s frames`, (c) => c.connected && c.frames > 0, 60_000);
+    assert.equal(await other.locator("#room").inputValue(), target, "the picker shows the new room");
+    return `${options.join(", ")} -> ${target} (${c.frames} frames)`;
+  });
+  await other.close();
 
   await check("no uncaught page errors", async () => {
     assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);

@@ -308,7 +308,7 @@ window.__xrDevice = device;`,
   });
   // CREASE_XR_ENCODING=vertices|palette pins the stream's encoding (default: the viewer's choice).
   const encoding = process.env.CREASE_XR_ENCODING ? `&encoding=${process.env.CREASE_XR_ENCODING}` : "";
-  await page.goto(`${base}/?room=${ROOM}&token=${encodeURIComponent(token)}${encoding}`, { waitUntil: "load" });
+  await page.goto(`${base}/?room=${ROOM}${encoding}#token=${encodeURIComponent(token)}`, { waitUntil: "load" });
   const room = await fetch(`${base}/api/rooms/${ROOM}`).then((r) => r.json());
 
   await check("(x1) the viewer offers hand tracking in room hands", async () => {

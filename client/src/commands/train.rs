@@ -68,9 +68,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     for w in &report.fit.warnings {
         eprintln!("warning: {w}");
     }
-    model
-        .save(&args.out)
-        .with_context(|| format!("writing model {}", args.out.display()))?;
+    model.save(&args.out).context("writing the model")?;
     eprintln!(
         "wrote {}: {} bones, {} control points (vertices {:?}), method {}",
         args.out.display(),

@@ -26,9 +26,25 @@ use super::{Mesh, check_indices, first_non_finite, write_atomic};
 /// Reads the first primitive of the first mesh of a `.gltf` or `.glb` file.
 pub fn read_gltf(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
     let path = path.as_ref();
-    let at = || Location::file(path);
     let bytes = std::fs::read(path).map_err(|e| MeshError::io(path, e))?;
-    let gltf = ::gltf::Gltf::from_slice(&bytes)
+    parse_gltf(&bytes, Some(path))
+}
+
+/// The first primitive of the first mesh of the `.gltf` or `.glb` bytes `bytes`. `path` is the
+/// file they came from: errors name it, and a buffer stored in another file is read next to
+/// it. Without a `path` (bytes from the network, a fuzzer) such a buffer is an error.
+pub fn parse_gltf(bytes: &[u8], path: Option<&Path>) -> Result<Mesh, MeshError> {
+    let at = || path.map(Location::file).unwrap_or_default();
+    // gltf-json 1.4's validation indexes `accessors` with a primitive's POSITION before it
+    // has checked that index (a fuzzer's finding, `fuzz/` mesh_gltf): a panic there is a bad
+    // file, as the reader of any other malformed file would say.
+    let gltf = std::panic::catch_unwind(|| ::gltf::Gltf::from_slice(bytes))
+        .map_err(|_| {
+            MeshError::format(
+                at(),
+                "not a valid glTF file: a reference to an accessor, buffer or view that does not exist",
+            )
+        })?
         .map_err(|e| MeshError::format(at(), format!("not a valid glTF file: {e}")))?;
 
     let mut buffers: Vec<Cow<'_, [u8]>> = Vec::new();
@@ -53,6 +69,14 @@ pub fn read_gltf(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
                         MeshError::format(at(), format!("buffer {i}: data URI: {message}"))
                     })?)
                 } else {
+                    let Some(path) = path else {
+                        return Err(MeshError::format(
+                            at(),
+                            format!(
+                                "buffer {i} is in another file ({uri}), and there is no folder to read it from"
+                            ),
+                        ));
+                    };
                     let file = path
                         .parent()
                         .unwrap_or(Path::new(""))
@@ -73,7 +97,11 @@ pub fn read_gltf(path: impl AsRef<Path>) -> Result<Mesh, MeshError> {
         }
         buffers.push(data);
     }
-    mesh_from_document(&gltf.document, &buffers).map_err(|e| e.in_file(path))
+    let mesh = mesh_from_document(&gltf.document, &buffers);
+    match path {
+        Some(path) => mesh.map_err(|e| e.in_file(path)),
+        None => mesh,
+    }
 }
 
 /// The first primitive of the first mesh of `document`, whose buffers are `buffers`.

@@ -65,9 +65,9 @@ pub const SECONDS_PER_EXAMPLE: f32 = 1.0;
 pub fn export_rig_glb(rig: &Rig, path: impl AsRef<Path>) -> Result<(), ModelError> {
     let path = path.as_ref();
     let bytes = rig_to_glb(rig)?;
-    write_atomic(path, &bytes).map_err(|source| ModelError::Io {
+    write_atomic(path, &bytes).map_err(|error| ModelError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 
@@ -447,9 +447,9 @@ pub fn export_animation_glb(
 ) -> Result<(), ModelError> {
     let path = path.as_ref();
     let glb = AnimationGlb::new(triangles, rest, frames, fps)?;
-    crate::atomic::write_atomic_with(path, |out| glb.write(out)).map_err(|source| ModelError::Io {
+    crate::atomic::write_atomic_with(path, |out| glb.write(out)).map_err(|error| ModelError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 

@@ -31,13 +31,14 @@ pub use trained::{ControlPoint, DetailLayer, TrainedModel};
 #[non_exhaustive]
 pub enum ModelError {
     /// Reading or writing the file failed.
-    #[error("{}: {source}", path.display())]
+    // The OS error is in the message and not also the `source()`: an error chain printed
+    // whole (`{:#}`) would say it twice.
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The OS error.
-        #[source]
-        source: io::Error,
+        error: io::Error,
     },
     /// The bytes are not a valid container of the expected kind.
     #[error(transparent)]
@@ -63,16 +64,16 @@ pub enum ModelError {
 
 /// Writes serialised model bytes to `path` atomically, naming the path on error.
 pub(crate) fn save_bytes(path: &std::path::Path, bytes: &[u8]) -> Result<(), ModelError> {
-    file::write_atomic(path, bytes).map_err(|source| ModelError::Io {
+    file::write_atomic(path, bytes).map_err(|error| ModelError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 
 /// Reads a model file's bytes, naming the path on error.
 pub(crate) fn read_bytes(path: &std::path::Path) -> Result<Vec<u8>, ModelError> {
-    std::fs::read(path).map_err(|source| ModelError::Io {
+    std::fs::read(path).map_err(|error| ModelError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }

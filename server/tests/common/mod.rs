@@ -222,3 +222,45 @@ pub(crate) fn model_with_detail() -> TrainedModel {
     });
     model
 }
+
+/// A WebSocket on `url`, from the local address `from` (any loopback address: the server counts
+/// per client address), offering the publish `token` in `Sec-WebSocket-Protocol` when given.
+#[allow(dead_code)] // not every test binary uses it
+pub(crate) async fn ws_connect(
+    url: &str,
+    token: Option<&str>,
+    from: std::net::IpAddr,
+) -> Result<
+    (
+        tokio_tungstenite::WebSocketStream<tokio::net::TcpStream>,
+        tokio_tungstenite::tungstenite::handshake::client::Response,
+    ),
+    tokio_tungstenite::tungstenite::Error,
+> {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest as _;
+    let mut request = url.into_client_request().unwrap();
+    if let Some(token) = token {
+        let protocols = format!(
+            "{}, {}",
+            crease_server::ws::PROTOCOL,
+            crease_server::ws::token_protocol(token)
+        );
+        request
+            .headers_mut()
+            .insert("sec-websocket-protocol", protocols.parse().unwrap());
+    }
+    let host = request.uri().authority().unwrap().as_str().to_owned();
+    let socket = tcp_from(from, host.parse().unwrap()).await;
+    tokio_tungstenite::client_async(request, socket).await
+}
+
+/// A TCP connection to `to` from the local address `from`.
+#[allow(dead_code)] // not every test binary uses it
+pub(crate) async fn tcp_from(
+    from: std::net::IpAddr,
+    to: std::net::SocketAddr,
+) -> tokio::net::TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind(std::net::SocketAddr::new(from, 0)).unwrap();
+    socket.connect(to).await.unwrap()
+}

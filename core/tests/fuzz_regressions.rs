@@ -1,0 +1,42 @@
+//! Fuzz findings (`fuzz/regressions/`, README there), replayed on the stable toolchain: each
+//! input once crashed a parser; now it is refused with an error.
+#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
+
+use std::path::Path;
+
+use crease_core::mesh::gltf::parse_gltf;
+use crease_core::mesh::subdivision::{CsrError, SparseMatrix};
+
+fn finding(target: &str, name: &str) -> Vec<u8> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/regressions")
+        .join(target)
+        .join(name);
+    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// The subdivision step inside `mesh_stream/csr-offsets-out-of-order`, reduced: the second
+/// row offset is past the two entries, the third back at 2.
+#[test]
+fn mesh_stream_csr_offsets_out_of_order() {
+    let err = SparseMatrix::from_csr(2, vec![0, u32::MAX - 19, 2], vec![0, 1], vec![1.0, 1.0])
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            CsrError::RowPtr {
+                row: 2,
+                value: 2,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+}
+
+#[test]
+fn mesh_gltf_position_accessor_missing() {
+    let bytes = finding("mesh_gltf", "position-accessor-missing.gltf");
+    let err = parse_gltf(&bytes, None).unwrap_err().to_string();
+    assert!(err.contains("not a valid glTF file"), "{err}");
+}
