@@ -30,6 +30,9 @@ pub struct Metrics {
     pub rooms: Gauge,
     /// Live mesh subscriptions.
     pub subscribers: Gauge,
+    /// Tasks alive on the server's runtime, read when `/metrics` is rendered (a soak watches
+    /// it for leaks).
+    pub tasks: Gauge,
     /// The cluster's (zero on a single server).
     pub cluster: crate::cluster::ClusterMetrics,
 }
@@ -48,6 +51,7 @@ impl Default for Metrics {
             frames_out: Counter::default(),
             rooms: Gauge::default(),
             subscribers: Gauge::default(),
+            tasks: Gauge::default(),
             cluster: crate::cluster::ClusterMetrics::default(),
             registry: Registry::default(),
         };
@@ -85,6 +89,11 @@ impl Default for Metrics {
             "Live mesh subscriptions",
             m.subscribers.clone(),
         );
+        registry.register(
+            "tasks",
+            "Tasks alive on the server's async runtime",
+            m.tasks.clone(),
+        );
         Metrics { registry, ..m }
     }
 }
@@ -117,6 +126,10 @@ impl Metrics {
 
     /// The text exposition of every metric.
     pub fn render(&self) -> String {
+        if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+            self.tasks
+                .set(i64::try_from(runtime.metrics().num_alive_tasks()).unwrap_or(i64::MAX));
+        }
         let mut out = String::new();
         // Writing into a String cannot fail.
         let _ = encode(&mut out, &self.registry);

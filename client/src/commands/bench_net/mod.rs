@@ -21,6 +21,7 @@
 mod load;
 mod report;
 mod server;
+mod soak;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -143,6 +144,24 @@ pub struct BenchNetArgs {
     /// one on the PATH.
     #[arg(long, value_name = "PATH", requires = "replicas")]
     pub nats_bin: Option<PathBuf>,
+    /// Soak instead of bench: MINUTES of churn and faults against a spawned server (rooms,
+    /// reconnecting publishers with malformed frames, viewers over gRPC and WebSocket that
+    /// join, stall and leave, rooms opened and closed), sampling its RSS, fds and tasks; fails
+    /// on a panic, a non-finite mesh, a stuck room or memory growth (issue 21, RELIABILITY.md).
+    #[arg(long, value_name = "MINUTES", conflicts_with_all = ["server", "replicas"])]
+    pub soak: Option<f64>,
+    /// Soak: base rooms.
+    #[arg(long, default_value_t = 20, requires = "soak")]
+    pub soak_rooms: usize,
+    /// Soak: rooms whose viewers watch the detail level (a model with a detail layer).
+    #[arg(long, default_value_t = 2, requires = "soak")]
+    pub soak_detail_rooms: usize,
+    /// Soak: viewers (besides one checking viewer per room).
+    #[arg(long, default_value_t = 200, requires = "soak")]
+    pub soak_viewers: usize,
+    /// Soak: seconds between samples of the server.
+    #[arg(long, default_value_t = 5.0, requires = "soak")]
+    pub sample_seconds: f64,
 }
 
 /// One load shape: rooms, each with its publisher and subscribers.
@@ -191,6 +210,9 @@ fn scenarios(args: &BenchNetArgs) -> Vec<Scenario> {
 
 /// Runs `crease bench-net`.
 pub fn run(args: &BenchNetArgs) -> anyhow::Result<()> {
+    if let Some(minutes) = args.soak {
+        return soak::run(args, minutes);
+    }
     if !(args.rate.is_finite() && args.rate > 0.0 && args.rate <= 1000.0) {
         bail!(
             "--rate must be in (0, 1000] frames per second, got {}",

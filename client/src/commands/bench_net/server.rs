@@ -28,6 +28,11 @@ pub(super) struct SpawnedServer {
 }
 
 impl SpawnedServer {
+    /// Its whole log (stderr).
+    pub(super) fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default()
+    }
+
     /// The last lines of its log, for error messages.
     pub(super) fn log_tail(&self) -> String {
         let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();
@@ -85,8 +90,9 @@ pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> 
     spawn_server_with(args, &[], &random_token()).await
 }
 
-/// [`spawn_server`] with `extra` arguments (a cluster's `--nats`) and admin token `admin`.
-async fn spawn_server_with(
+/// [`spawn_server`] with `extra` arguments (a cluster's `--nats`, a soak's limits) and admin
+/// token `admin`.
+pub(super) async fn spawn_server_with(
     args: &BenchNetArgs,
     extra: &[String],
     admin_token: &str,
