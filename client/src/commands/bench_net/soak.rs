@@ -668,10 +668,11 @@ async fn viewer(
     Ok(())
 }
 
-/// Whether to stall now (about once a 20 s), and for how long.
+/// Whether to stall now (called per frame read or idle second: about once in 20 s at 60 Hz),
+/// and for how long.
 fn maybe_stall(counters: &Counters) -> Option<Duration> {
     let mut rng = rand::rng();
-    rng.random_bool(0.0025).then(|| {
+    rng.random_bool(0.0008).then(|| {
         counters.stalls.fetch_add(1, Ordering::Relaxed);
         Duration::from_secs_f64(rng.random_range(1.0..8.0))
     })
