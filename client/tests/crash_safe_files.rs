@@ -149,7 +149,7 @@ fn killed_writers_leave_the_old_model_or_the_new_one() {
     for k in 0..kills {
         std::fs::write(&target, &old).unwrap();
         let mut child = train(&examples, 6, &target).spawn().unwrap();
-        let when = if k % 3 == 0 {
+        let when = if k.is_multiple_of(3) {
             let at = full.mul_f64(rng.unit());
             std::thread::sleep(at);
             format!("{:.0} ms into the run", at.as_secs_f64() * 1e3)

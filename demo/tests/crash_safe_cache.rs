@@ -88,8 +88,8 @@ fn cache_writer_loop() {
     let a = TrainedModel::load(dir.join("a.crease")).unwrap();
     let b = TrainedModel::load(dir.join("b.crease")).unwrap();
     let cache = dir.join("cache");
-    for k in 0.. {
-        save_cache(&cache, if k % 2 == 0 { &b } else { &a }).unwrap();
+    for k in 0u64.. {
+        save_cache(&cache, if k.is_multiple_of(2) { &b } else { &a }).unwrap();
         if k == 0 {
             println!("ready");
         }

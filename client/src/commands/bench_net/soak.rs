@@ -518,9 +518,9 @@ async fn publisher(
             ticker.tick().await;
             seq += 1;
             let mut positions = control_at(&rest, r, seq, radius);
-            let bad = seq % MALFORMED_EVERY == 0;
+            let bad = seq.is_multiple_of(MALFORMED_EVERY);
             if bad {
-                if seq % (2 * MALFORMED_EVERY) == 0 {
+                if seq.is_multiple_of(2 * MALFORMED_EVERY) {
                     positions.pop(); // a wrong count
                 } else {
                     positions[0] = f32::NAN; // a NaN in a valid point
@@ -567,9 +567,21 @@ async fn checker(
 ) -> anyhow::Result<()> {
     let mut positions = Vec::new();
     while !stop.load(Ordering::Relaxed) {
-        let mut client = connect(&url, None).await?;
-        let mut sub = subscribe_encoded(&mut client, &room, level, Encoding::Vertices).await?;
-        let mut reader = StreamReader::new(&sub.first)?;
+        // A refused or failed subscription is retried: the checker must outlive the faults.
+        let subscribed = async {
+            let mut client = connect(&url, None).await?;
+            let sub = subscribe_encoded(&mut client, &room, level, Encoding::Vertices).await?;
+            let reader = StreamReader::new(&sub.first)?;
+            anyhow::Ok((sub, reader))
+        };
+        let (mut sub, mut reader) = match subscribed.await {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("soak: room {room}: the checker could not subscribe ({e:#}); retrying");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                continue;
+            }
+        };
         let mut last_frame = Instant::now();
         let mut stuck_now = false;
         loop {
