@@ -18,9 +18,8 @@ use tokio_tungstenite::tungstenite::Message;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
+use crease_server::Limits;
 use crease_server::admission::Caps;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
 
 mod common;
 use common::*;
@@ -30,19 +29,7 @@ const ONE: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 1));
 const TWO: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2));
 
 async fn serve(model: &TrainedModel, limits: Limits) -> crease_server::Running {
-    let registry = ModelRegistry::default();
-    registry.insert("tube", model.clone());
-    let state = AppState::new(
-        registry,
-        Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits,
-            ..Config::default()
-        },
-    );
-    crease_server::serve(state).await.unwrap()
+    serve_with_limits("tube", model, ADMIN, limits).await
 }
 
 /// Opens room `r` and returns its publish token.

@@ -14,8 +14,7 @@ use crease_core::model::TrainedModel;
 use crease_core::predictor::Predictor;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
-use crease_server::registry::ModelRegistry;
-use crease_server::{AppState, Config, Limits};
+use crease_server::Limits;
 
 const ADMIN: &str = "admin-secret";
 const LOCALHOST: std::net::IpAddr = std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
@@ -24,19 +23,7 @@ use common::*;
 
 /// A server on free loopback ports hosting `model` as `tube`, with the admin token and `limits`.
 async fn serve_tube(model: &TrainedModel, limits: Limits) -> crease_server::Running {
-    let registry = ModelRegistry::default();
-    registry.insert("tube", model.clone());
-    let state = AppState::new(
-        registry,
-        Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits,
-            ..Config::default()
-        },
-    );
-    crease_server::serve(state).await.unwrap()
+    serve_with_limits("tube", model, ADMIN, limits).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

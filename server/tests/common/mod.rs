@@ -159,6 +159,20 @@ pub(crate) async fn serve_model(
     model: &TrainedModel,
     admin: &str,
 ) -> crease_server::Running {
+    let limits = crease_server::Limits {
+        publish_hz: f64::INFINITY,
+        ..crease_server::Limits::default()
+    };
+    serve_with_limits(name, model, admin, limits).await
+}
+
+/// [`serve_model`] under `limits`.
+pub(crate) async fn serve_with_limits(
+    name: &str,
+    model: &TrainedModel,
+    admin: &str,
+    limits: crease_server::Limits,
+) -> crease_server::Running {
     let registry = crease_server::registry::ModelRegistry::default();
     registry.insert(name, model.clone());
     let state = crease_server::AppState::new(
@@ -167,10 +181,7 @@ pub(crate) async fn serve_model(
             grpc: "127.0.0.1:0".parse().unwrap(),
             http: "127.0.0.1:0".parse().unwrap(),
             admin_token: Some(admin.into()),
-            limits: crease_server::Limits {
-                publish_hz: f64::INFINITY,
-                ..crease_server::Limits::default()
-            },
+            limits,
             ..crease_server::Config::default()
         },
     );

@@ -35,7 +35,7 @@ impl SpawnedServer {
 
     /// The last lines of its log, for error messages.
     pub(super) fn log_tail(&self) -> String {
-        let log = std::fs::read_to_string(self.dir.join("server.log")).unwrap_or_default();
+        let log = self.log();
         let lines: Vec<&str> = log.lines().collect();
         lines[lines.len().saturating_sub(20)..].join("\n")
     }
