@@ -40,3 +40,11 @@ fn mesh_gltf_position_accessor_missing() {
     let err = parse_gltf(&bytes, None).unwrap_err().to_string();
     assert!(err.contains("not a valid glTF file"), "{err}");
 }
+
+/// A POSITION accessor of count 0 whose triangles (two indices) name vertices it lacks.
+#[test]
+fn mesh_gltf_position_count_zero() {
+    let bytes = finding("mesh_gltf", "position-count-zero.gltf");
+    let err = parse_gltf(&bytes, None).unwrap_err().to_string();
+    assert!(err.contains("POSITION accessor 0: count is 0"), "{err}");
+}

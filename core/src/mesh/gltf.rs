@@ -97,10 +97,65 @@ pub fn parse_gltf(bytes: &[u8], path: Option<&Path>) -> Result<Mesh, MeshError> 
         }
         buffers.push(data);
     }
-    let mesh = mesh_from_document(&gltf.document, &buffers);
+    // The accessors are checked before they are read (`check_accessor`); a panic of the
+    // third-party reader past those checks is still a bad file, not a crash.
+    let mesh = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        mesh_from_document(&gltf.document, &buffers)
+    }))
+    .unwrap_or_else(|_| {
+        Err(MeshError::format(
+            at(),
+            "not a valid glTF file: an accessor the glTF reader could not read",
+        ))
+    });
     match path {
         Some(path) => mesh.map_err(|e| e.in_file(path)),
         None => mesh,
+    }
+}
+
+/// Checks that `accessor` (the `what` accessor) can be read as the glTF reader reads it: at
+/// least one element, dense (no sparse part), in a buffer view, its stride no shorter than an
+/// element, its last element inside the view. gltf 1.4 computes `offset + stride * (count - 1)`
+/// unchecked (a fuzzer's finding, `fuzz/regressions/mesh_gltf/position-count-zero.gltf`: a
+/// count of 0 underflows).
+fn check_accessor(accessor: &::gltf::Accessor<'_>, what: &str) -> Result<(), MeshError> {
+    let fail = |message: String| {
+        MeshError::format(
+            Location::default(),
+            format!("{what} accessor {}: {message}", accessor.index()),
+        )
+    };
+    let count = accessor.count();
+    if count == 0 {
+        return Err(fail("count is 0".to_owned()));
+    }
+    if accessor.sparse().is_some() {
+        return Err(fail("sparse accessors are not supported".to_owned()));
+    }
+    let view = accessor
+        .view()
+        .ok_or_else(|| fail("no bufferView (all zeros) is not supported".to_owned()))?;
+    let size = accessor.size();
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(fail(format!(
+            "bufferView {} has byteStride {stride}, shorter than an element ({size} bytes)",
+            view.index()
+        )));
+    }
+    let end = stride
+        .checked_mul(count - 1)
+        .and_then(|n| n.checked_add(accessor.offset()))
+        .and_then(|n| n.checked_add(size));
+    match end {
+        Some(end) if end <= view.length() => Ok(()),
+        _ => Err(fail(format!(
+            "{count} elements from byteOffset {} with stride {stride} run past bufferView {} ({} bytes)",
+            accessor.offset(),
+            view.index(),
+            view.length()
+        ))),
     }
 }
 
@@ -144,6 +199,7 @@ fn mesh_from_document(
             },
         )));
     }
+    check_accessor(&accessor, "POSITION")?;
     let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
     let positions: Vec<Vec3> = reader
         .read_positions()
@@ -189,6 +245,7 @@ fn mesh_from_document(
                     acc.data_type()
                 )));
             }
+            check_accessor(&acc, "index")?;
             let indices: Vec<u32> = reader
                 .read_indices()
                 .ok_or_else(|| {
