@@ -7,6 +7,13 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::Parser;
+
+/// The allocator (RELIABILITY.md, the soak): glibc's malloc kept the memory of freed multi-MB
+/// messages (palette headers, keyframes) in its per-thread arenas, and a long run's resident
+/// set grew with them; mimalloc returns it.
+#[cfg(feature = "mimalloc")]
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use crease_demo::launch::{self, Config};
 use crease_server::admission::Caps;
 use crease_server::{DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
@@ -97,6 +104,18 @@ struct Args {
     /// The owner's lease in milliseconds: a replica silent this long loses its rooms to others.
     #[arg(long, value_name = "MS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_LEASE.as_millis() as u64)]
     lease_ms: u64,
+    /// Most threads of the blocking pool that runs the frames' work (prediction, encoding,
+    /// model loading). Default: 4 per core, at least 16. More threads than cores only helps
+    /// when some block for long; a pool that grows with the load costs a stack and an
+    /// allocator arena per thread (tokio's own default is 512).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    blocking_threads: Option<u16>,
+}
+
+/// The default of `--blocking-threads`.
+fn default_blocking_threads() -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    (4 * cores).max(16)
 }
 
 impl From<Args> for Config {
@@ -142,13 +161,20 @@ impl From<Args> for Config {
     }
 }
 
-#[tokio::main]
-async fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
         .init();
-    launch::run(Args::parse().into(), launch::shutdown_signal()).await
+    let args = Args::parse();
+    let blocking = args
+        .blocking_threads
+        .map_or_else(default_blocking_threads, usize::from);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .max_blocking_threads(blocking)
+        .build()?;
+    runtime.block_on(launch::run(args.into(), launch::shutdown_signal()))
 }

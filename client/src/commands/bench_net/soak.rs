@@ -17,8 +17,10 @@
 //!   threads (`/proc`) and its runtime's alive tasks (`crease_tasks` in `/metrics`).
 //!
 //! It fails (the report says why, the exit status is 1) on a server panic or exit, a non-finite
-//! mesh, a stuck room, a malformed frame accepted, or RSS growth over 5% from the sample at
-//! one sixth of the run (5 minutes of a 30-minute run) to the end.
+//! mesh, a stuck room, a malformed frame accepted, RSS growth over 5% from the sample at
+//! one sixth of the run (5 minutes of a 30-minute run) to the end, or a server that still holds
+//! more file descriptors or tasks than before the clients came, 30 s after they all left (a
+//! session that outlives its client).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -43,6 +45,14 @@ use super::server::{Target, random_token, spawn_server_with};
 const STUCK: Duration = Duration::from_secs(5);
 /// One frame in this many is malformed.
 const MALFORMED_EVERY: u64 = 100;
+/// How long the server has, once every client left, to come back to its baseline's fds and
+/// tasks (a blocking-pool thread idles out in 10 s).
+const SETTLE: Duration = Duration::from_secs(30);
+/// Above the baseline, what a settled server may still hold: the sampler's own `/metrics`
+/// connection and its tasks, a closing connection or two.
+const FD_SLACK: usize = 4;
+/// See [`FD_SLACK`].
+const TASK_SLACK: u64 = 16;
 
 /// What the soak counted; shared by its tasks.
 #[derive(Debug, Default)]
@@ -64,6 +74,9 @@ struct Counters {
     rooms_closed: AtomicU64,
     stalls: AtomicU64,
     stuck: AtomicU64,
+    /// Why well-formed frames were refused: the ack's message up to its first ':' (the field
+    /// or limit it names), and how often.
+    refusals: std::sync::Mutex<std::collections::BTreeMap<String, u64>>,
 }
 
 /// One sample of the server.
@@ -118,6 +131,8 @@ pub(super) struct SoakReport {
     pub malformed_accepted: u64,
     /// Well-formed frames refused (rate limits after a reconnection burst, ...).
     pub good_refused: u64,
+    /// Why those were refused (the ack message's first part) and how often.
+    pub good_refused_why: std::collections::BTreeMap<String, u64>,
     /// Publisher reconnections.
     pub publisher_reconnects: u64,
     /// Churn rooms opened and closed.
@@ -132,6 +147,10 @@ pub(super) struct SoakReport {
     pub server_exited: bool,
     /// RSS growth from the warm-up sample to the last, percent.
     pub rss_growth_percent: f64,
+    /// The server with its rooms open, before any client.
+    pub baseline: Sample,
+    /// The server once every client left (up to [`SETTLE`] later); `None` if it exited.
+    pub settled: Option<Sample>,
     /// The samples.
     pub samples: Vec<Sample>,
     /// Why it failed; empty when it passed.
@@ -239,6 +258,10 @@ async fn soak(
     let counters = Arc::new(Counters::default());
     let stop = Arc::new(AtomicBool::new(false));
     let started = Instant::now();
+    // The server with its rooms open and no client yet: what it must come back to.
+    let baseline = sample(pid, http, started)
+        .await
+        .context("sampling the server before the clients start")?;
     let end = started + Duration::from_secs_f64(minutes * 60.0);
     let period = Duration::from_secs_f64(1.0 / args.rate);
     let mut tasks = JoinSet::new();
@@ -334,6 +357,12 @@ async fn soak(
         eprintln!("soak: tasks still running 30 s after the end; aborted");
         tasks.abort_all();
     }
+    // Every client has left: the server must give back what their sessions held.
+    let settled = if exited {
+        None
+    } else {
+        settle(pid, http, started, &baseline).await
+    };
     let log = target.spawned.as_ref().map(|s| s.log()).unwrap_or_default();
     let panics = log.matches("panicked").count();
     let warm = samples
@@ -368,6 +397,17 @@ async fn soak(
             get(&c.malformed_accepted)
         ));
     }
+    if let Some(s) = &settled
+        && !s.within(&baseline)
+    {
+        failures.push(format!(
+            "{} fds and {} tasks held {SETTLE:?} after every client left (before the clients: {} fds, {} tasks): sessions leak",
+            s.fds,
+            s.tasks.map_or("?".to_owned(), |t| t.to_string()),
+            baseline.fds,
+            baseline.tasks.map_or("?".to_owned(), |t| t.to_string()),
+        ));
+    }
     if rss_growth_percent > 5.0 {
         failures.push(format!(
             "RSS grew {rss_growth_percent:.1}% after the warm-up"
@@ -391,6 +431,7 @@ async fn soak(
         malformed_refused: get(&c.malformed_refused),
         malformed_accepted: get(&c.malformed_accepted),
         good_refused: get(&c.good_refused),
+        good_refused_why: c.refusals.lock().unwrap_or_else(|e| e.into_inner()).clone(),
         publisher_reconnects: get(&c.reconnects),
         rooms_opened: get(&c.rooms_opened),
         rooms_closed: get(&c.rooms_closed),
@@ -398,6 +439,8 @@ async fn soak(
         panics,
         server_exited: exited,
         rss_growth_percent,
+        baseline,
+        settled,
         samples,
         failures,
     })
@@ -406,6 +449,35 @@ async fn soak(
 fn tail(log: &str) -> String {
     let lines: Vec<&str> = log.lines().collect();
     lines[lines.len().saturating_sub(20)..].join("\n")
+}
+
+impl Sample {
+    /// Whether this sample holds no more fds and tasks than `baseline` (with the slack).
+    fn within(&self, baseline: &Sample) -> bool {
+        self.fds <= baseline.fds + FD_SLACK
+            && match (self.tasks, baseline.tasks) {
+                (Some(t), Some(b)) => t <= b + TASK_SLACK,
+                _ => true,
+            }
+    }
+}
+
+/// Samples the server once a second until it is back within its `baseline`, or [`SETTLE`]
+/// has passed; the last sample (`None` once the server is gone).
+async fn settle(
+    pid: u32,
+    http: std::net::SocketAddr,
+    started: Instant,
+    baseline: &Sample,
+) -> Option<Sample> {
+    let deadline = Instant::now() + SETTLE;
+    loop {
+        let s = sample(pid, http, started).await?;
+        if s.within(baseline) || Instant::now() >= deadline {
+            return Some(s);
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
 }
 
 /// The server's RSS, fds and threads (`/proc`) and tasks (`/metrics`); `None` once it is gone.
@@ -506,7 +578,17 @@ async fn publisher(
                         (true, false) => {
                             counters.malformed_accepted.fetch_add(1, Ordering::Relaxed)
                         }
-                        (false, true) => counters.good_refused.fetch_add(1, Ordering::Relaxed),
+                        (false, true) => {
+                            let why = ack.error.as_ref().map_or("", |e| e.message.as_str());
+                            let why = why.split(':').next().unwrap_or(why).to_owned();
+                            *counters
+                                .refusals
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .entry(why)
+                                .or_default() += 1;
+                            counters.good_refused.fetch_add(1, Ordering::Relaxed)
+                        }
                         (false, false) => 0,
                     };
                 }
@@ -824,6 +906,9 @@ fn print_report(r: &SoakReport) {
         "  malformed              {} sent, {} refused, {} accepted; {} good ones refused",
         r.malformed_sent, r.malformed_refused, r.malformed_accepted, r.good_refused
     );
+    for (why, n) in &r.good_refused_why {
+        println!("    good ones refused    {n} x {why:?}");
+    }
     println!(
         "  panics {}, non-finite {}, decode errors {}, stuck {}",
         r.panics, r.non_finite, r.decode_errors, r.stuck
@@ -839,6 +924,19 @@ fn print_report(r: &SoakReport) {
             "  fds                    {} -> {}; threads {} -> {}; tasks {:?} -> {:?}",
             a.fds, b.fds, a.threads, b.threads, a.tasks, b.tasks
         );
+    }
+    let counts = |s: &Sample| {
+        format!(
+            "{} fds, {} threads, {} tasks, {:.1} MiB",
+            s.fds,
+            s.threads,
+            s.tasks.map_or("?".to_owned(), |t| t.to_string()),
+            s.rss_mib
+        )
+    };
+    println!("  before the clients     {}", counts(&r.baseline));
+    if let Some(s) = &r.settled {
+        println!("  after they left        {} ({:.0} s)", counts(s), s.t);
     }
     if r.failures.is_empty() {
         println!("  PASS");
