@@ -48,3 +48,35 @@ fn mesh_gltf_position_count_zero() {
     let err = parse_gltf(&bytes, None).unwrap_err().to_string();
     assert!(err.contains("POSITION accessor 0: count is 0"), "{err}");
 }
+
+/// `v x y z w` with a tiny (subnormal) weight: each coordinate was finite when read and
+/// infinite once divided by `w`.
+#[test]
+fn mesh_obj_weight_divides_to_infinity() {
+    let text = String::from_utf8(finding("mesh_obj", "weight-divides-to-infinity.obj")).unwrap();
+    let err = crease_core::mesh::obj::parse_obj(&text)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("line 1") && err.contains("not finite"),
+        "{err}"
+    );
+}
+
+/// A face before its vertices (a forward reference) whose later corners reach further than
+/// the first late one: only the first was checked, so corner 4 of 3 vertices went through.
+#[test]
+fn mesh_obj_forward_index_past_the_first_late_corner() {
+    let text = String::from_utf8(finding(
+        "mesh_obj",
+        "forward-index-past-the-first-late-corner.obj",
+    ))
+    .unwrap();
+    let err = crease_core::mesh::obj::parse_obj(&text)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("line 1") && err.contains("vertex 3, but there are only 3"),
+        "{err}"
+    );
+}

@@ -86,6 +86,16 @@ pub fn parse_obj(text: &str) -> Result<Mesh, MeshError> {
                     }
                     if w != 1.0 {
                         p /= w;
+                        // A tiny weight can overflow finite coordinates (fuzz finding
+                        // `mesh_obj/weight-divides-to-infinity.obj`).
+                        if let Some((axis, value)) = first_non_finite(p) {
+                            return Err(MeshError::format(
+                                at(),
+                                format!(
+                                    "vertex {vertex}: {axis} / w is {value}, not finite (w = {w})"
+                                ),
+                            ));
+                        }
                     }
                 }
                 mesh.positions.push(p);
@@ -127,8 +137,11 @@ pub fn parse_obj(text: &str) -> Result<Mesh, MeshError> {
                 }
                 for k in 1..face.len() - 1 {
                     let t = [face[0], face[k], face[k + 1]];
-                    if let Some(&late) = t.iter().find(|&&v| v as usize >= count) {
-                        forward.push((line_no, mesh.triangles.len(), u64::from(late)));
+                    // The furthest corner, not the first late one (fuzz finding
+                    // `mesh_obj/forward-index-past-the-first-late-corner.obj`).
+                    let furthest = t.iter().copied().max().unwrap_or(0);
+                    if furthest as usize >= count {
+                        forward.push((line_no, mesh.triangles.len(), u64::from(furthest)));
                     }
                     mesh.triangles.push(t);
                 }
