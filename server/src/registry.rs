@@ -14,6 +14,8 @@ use crease_core::mesh::subdivision::LoopSubdivision;
 use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{BonePalette, skin_lbs};
 use crease_proto::{Level, PaletteParts, model_info, palette_topology_message, v1};
+use prost::Message as _;
+use prost::bytes::Bytes;
 
 /// One loaded model.
 #[derive(Debug)]
@@ -41,6 +43,9 @@ pub struct LoadedModel {
     /// The first message of a palette stream per level, built on first need and shared by
     /// every room and subscriber on this model (its arrays are `Bytes`).
     palette: [OnceLock<Result<v1::MeshFrame, String>>; 2],
+    /// The same messages encoded, for the WebSocket (a detail header is 11.5 MB on the demo
+    /// hand: encoding it per subscriber made RSS swing by tens of MiB under the soak).
+    palette_encoded: [OnceLock<Result<Bytes, String>>; 2],
 }
 
 /// A mesh (the base, or the detail layer's) in a spatial streaming order
@@ -163,6 +168,16 @@ impl LoadedModel {
             })
             .clone()
     }
+
+    /// [`LoadedModel::palette_topology`] as protobuf bytes, encoded once and shared.
+    ///
+    /// # Errors
+    /// As [`LoadedModel::palette_topology`].
+    pub fn palette_topology_encoded(&self, level: Level) -> Result<Bytes, String> {
+        self.palette_encoded[level as usize]
+            .get_or_init(|| Ok(Bytes::from(self.palette_topology(level)?.encode_to_vec())))
+            .clone()
+    }
 }
 
 /// The box around the rest mesh and the rig's training poses.
@@ -258,6 +273,7 @@ impl ModelRegistry {
             spatial: OnceLock::new(),
             detail_spatial: OnceLock::new(),
             palette: [OnceLock::new(), OnceLock::new()],
+            palette_encoded: [OnceLock::new(), OnceLock::new()],
             model: Arc::new(model),
         });
         self.write().insert(name.to_owned(), Arc::clone(&loaded));

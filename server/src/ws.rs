@@ -199,14 +199,19 @@ async fn session(
         let out = out.clone();
         let frames =
             crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), channel, subscription);
+        let model = Arc::clone(&room.model);
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {
-                if out
-                    .send(Message::Binary(msg.encode_to_vec().into()))
-                    .await
-                    .is_err()
-                {
+                // A palette header is shared encoded (the model encoded it once); the rest is
+                // small and encoded here.
+                let bytes = match &msg.body {
+                    Some(v1::mesh_frame::Body::PaletteTopology(_)) => model
+                        .palette_topology_encoded(channel.level)
+                        .unwrap_or_else(|_| msg.encode_to_vec().into()),
+                    _ => msg.encode_to_vec().into(),
+                };
+                if out.send(Message::Binary(bytes)).await.is_err() {
                     break;
                 }
             }

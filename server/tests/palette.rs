@@ -69,3 +69,69 @@ async fn palette_streams_match_vertex_streams_at_both_levels() {
         );
     }
 }
+
+/// The WebSocket sends a palette header the model encoded once: every subscriber gets the
+/// bytes of the header gRPC sends, at its own level.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn websocket_palette_headers_are_the_grpc_headers_encoded() {
+    use futures_util::StreamExt as _;
+    use prost::Message as _;
+    use tokio_tungstenite::tungstenite::Message;
+
+    let model = tube_with_posed_detail();
+    let running = common::serve_model("tube", &model, ADMIN).await;
+    let mut client =
+        crease_proto::v1::crease_client::CreaseClient::connect(format!("http://{}", running.grpc))
+            .await
+            .unwrap();
+    let open = crease_proto::v1::OpenRoomRequest {
+        room: "headers".into(),
+        model: "tube".into(),
+        ..Default::default()
+    };
+    client.open_room(common::authed(open, ADMIN)).await.unwrap();
+    for (level, query) in [
+        (crease_proto::v1::Level::Base, "base"),
+        (crease_proto::v1::Level::Detail, "detail"),
+    ] {
+        let grpc_first = client
+            .subscribe(crease_proto::v1::SubscribeRequest {
+                room: "headers".into(),
+                level: level as i32,
+                encoding: crease_proto::v1::Encoding::Palette as i32,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .message()
+            .await
+            .unwrap()
+            .unwrap();
+        assert!(matches!(
+            grpc_first.body,
+            Some(crease_proto::v1::mesh_frame::Body::PaletteTopology(_))
+        ));
+        let url = format!(
+            "ws://{}/ws/rooms/headers?level={query}&encoding=palette",
+            running.http
+        );
+        for _ in 0..2 {
+            let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str())
+                .await
+                .unwrap();
+            let Some(Ok(Message::Binary(bytes))) = ws.next().await else {
+                panic!("{query}: no binary first message");
+            };
+            assert_eq!(
+                crease_proto::v1::MeshFrame::decode(bytes.as_ref()).unwrap(),
+                grpc_first,
+                "{query}"
+            );
+            assert_eq!(
+                bytes.as_ref(),
+                grpc_first.encode_to_vec().as_slice(),
+                "{query}"
+            );
+        }
+    }
+}

@@ -17,10 +17,10 @@
 //!   threads (`/proc`) and its runtime's alive tasks (`crease_tasks` in `/metrics`).
 //!
 //! It fails (the report says why, the exit status is 1) on a server panic or exit, a non-finite
-//! mesh, a stuck room, a malformed frame accepted, RSS growth over 5% from the sample at
-//! one sixth of the run (5 minutes of a 30-minute run) to the end, or a server that still holds
-//! more file descriptors or tasks than before the clients came, 30 s after they all left (a
-//! session that outlives its client).
+//! mesh, a stuck room, a malformed frame accepted, RSS growth over 5% from the minute that
+//! ends one sixth of the run (5 minutes of a 30-minute run) to the last minute (peaks
+//! compared), or a server that still holds more file descriptors or tasks than before the
+//! clients came, 30 s after they all left (a session that outlives its client).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -53,6 +53,9 @@ const SETTLE: Duration = Duration::from_secs(30);
 const FD_SLACK: usize = 4;
 /// See [`FD_SLACK`].
 const TASK_SLACK: u64 = 16;
+
+/// RSS is compared as the peak over this many seconds (`SoakReport::rss_warm_mib`).
+const RSS_WINDOW_S: f64 = 60.0;
 
 /// What the soak counted; shared by its tasks.
 #[derive(Debug, Default)]
@@ -92,6 +95,9 @@ pub(super) struct Sample {
     pub threads: usize,
     /// Alive tasks on its runtime (`crease_tasks`).
     pub tasks: Option<u64>,
+    /// Live mesh subscriptions (`crease_subscribers`): the viewers watching and the checkers,
+    /// if none outlives its client.
+    pub subscribers: Option<u64>,
 }
 
 /// The soak's report (`--json`).
@@ -145,7 +151,14 @@ pub(super) struct SoakReport {
     pub panics: usize,
     /// See `panics`.
     pub server_exited: bool,
-    /// RSS growth from the warm-up sample to the last, percent.
+    /// The highest RSS over the minute that ends the warm-up (one sixth of the run: 5 minutes
+    /// of 30) and over the run's last minute, MiB. Peaks, not single samples: a detail
+    /// palette header is an 11.5 MB message, so RSS swings by tens of MiB between samples as
+    /// viewers join and leave; what must not grow is the envelope.
+    pub rss_warm_mib: f64,
+    /// See `rss_warm_mib`.
+    pub rss_end_mib: f64,
+    /// From `rss_warm_mib` to `rss_end_mib`, percent.
     pub rss_growth_percent: f64,
     /// The server with its rooms open, before any client.
     pub baseline: Sample,
@@ -330,12 +343,20 @@ async fn soak(
             break;
         };
         eprintln!(
-            "soak {:6.0} s: rss {:.1} MiB, {} fds, {} threads, tasks {}, frames {}, joins {}, malformed refused {}/{}",
+            "soak {:6.0} s: rss {:.1} MiB, {} fds, {} threads, tasks {}, subscribers {} (watching {}), frames {}, joins {}, malformed refused {}/{}",
             sample.t,
             sample.rss_mib,
             sample.fds,
             sample.threads,
             sample.tasks.map_or("?".to_owned(), |t| t.to_string()),
+            sample.subscribers.map_or("?".to_owned(), |t| t.to_string()),
+            {
+                let leaves = counters.leaves.load(Ordering::Relaxed);
+                counters
+                    .joins
+                    .load(Ordering::Relaxed)
+                    .saturating_sub(leaves)
+            },
             counters.frames_seen.load(Ordering::Relaxed),
             counters.joins.load(Ordering::Relaxed),
             counters.malformed_refused.load(Ordering::Relaxed),
@@ -365,13 +386,12 @@ async fn soak(
     };
     let log = target.spawned.as_ref().map(|s| s.log()).unwrap_or_default();
     let panics = log.matches("panicked").count();
-    let warm = samples
-        .iter()
-        .find(|s| s.t >= minutes * 60.0 / 6.0)
-        .or(samples.first());
-    let rss_growth_percent = match (warm, samples.last()) {
-        (Some(a), Some(b)) if a.rss_mib > 0.0 => 100.0 * (b.rss_mib - a.rss_mib) / a.rss_mib,
-        _ => 0.0,
+    let rss_warm_mib = rss_peak(&samples, minutes * 60.0 / 6.0);
+    let rss_end_mib = rss_peak(&samples, samples.last().map_or(0.0, |s| s.t));
+    let rss_growth_percent = if rss_warm_mib > 0.0 {
+        100.0 * (rss_end_mib - rss_warm_mib) / rss_warm_mib
+    } else {
+        0.0
     };
     let c = &counters;
     let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
@@ -438,12 +458,23 @@ async fn soak(
         stuck: get(&c.stuck),
         panics,
         server_exited: exited,
+        rss_warm_mib,
+        rss_end_mib,
         rss_growth_percent,
         baseline,
         settled,
         samples,
         failures,
     })
+}
+
+/// The highest RSS of the samples in the minute up to `t` seconds (0 with none).
+fn rss_peak(samples: &[Sample], t: f64) -> f64 {
+    samples
+        .iter()
+        .filter(|s| s.t > t - RSS_WINDOW_S && s.t <= t)
+        .map(|s| s.rss_mib)
+        .fold(0.0, f64::max)
 }
 
 fn tail(log: &str) -> String {
@@ -496,18 +527,30 @@ async fn sample(pid: u32, http: std::net::SocketAddr, started: Instant) -> Optio
     let rss_kib = field("VmRSS:")?;
     let threads = field("Threads:").unwrap_or(0.0) as usize;
     let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count());
-    let tasks = metric(http, "crease_tasks").await;
+    let metrics = metrics(http).await.unwrap_or_default();
     Some(Sample {
         t: started.elapsed().as_secs_f64(),
         rss_mib: rss_kib / 1024.0,
         fds,
         threads,
-        tasks,
+        tasks: metric(&metrics, "crease_tasks"),
+        subscribers: metric(&metrics, "crease_subscribers"),
     })
 }
 
-/// One value of the server's `/metrics` (plain HTTP/1.1 GET).
-async fn metric(http: std::net::SocketAddr, name: &str) -> Option<u64> {
+/// One value of a `/metrics` text.
+fn metric(body: &str, name: &str) -> Option<u64> {
+    body.lines()
+        .find(|l| l.starts_with(name) && l[name.len()..].starts_with(' '))?
+        .rsplit(' ')
+        .next()?
+        .parse::<f64>()
+        .ok()
+        .map(|v| v as u64)
+}
+
+/// The server's `/metrics` text (plain HTTP/1.1 GET).
+async fn metrics(http: std::net::SocketAddr) -> Option<String> {
     use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
     let mut s = tokio::net::TcpStream::connect(http).await.ok()?;
     s.write_all(b"GET /metrics HTTP/1.1\r\nhost: x\r\nconnection: close\r\n\r\n")
@@ -518,13 +561,7 @@ async fn metric(http: std::net::SocketAddr, name: &str) -> Option<u64> {
         .await
         .ok()?
         .ok()?;
-    body.lines()
-        .find(|l| l.starts_with(name) && l[name.len()..].starts_with(' '))?
-        .rsplit(' ')
-        .next()?
-        .parse::<f64>()
-        .ok()
-        .map(|v| v as u64)
+    Some(body)
 }
 
 /// A room's publisher: `rate` frames a second, reconnecting every 10-40 s, one malformed frame
@@ -874,17 +911,7 @@ async fn churn(
 
 fn print_report(r: &SoakReport) {
     let first = r.samples.first();
-    let warm = r
-        .samples
-        .iter()
-        .find(|s| s.t >= r.minutes * 60.0 / 6.0)
-        .or(first);
     let last = r.samples.last();
-    let rss = |s: Option<&Sample>| {
-        s.map_or("?".to_owned(), |s| {
-            format!("{:.1} MiB at {:.0} s", s.rss_mib, s.t)
-        })
-    };
     println!("soak: {:.1} min, model {}", r.minutes, r.model);
     println!(
         "  rooms                  {} base + {} detail (+{} opened and {} closed)",
@@ -914,9 +941,10 @@ fn print_report(r: &SoakReport) {
         r.panics, r.non_finite, r.decode_errors, r.stuck
     );
     println!(
-        "  RSS                    {} (warm), {} (end): {:+.1}%",
-        rss(warm),
-        rss(last),
+        "  RSS (peak of a minute) {:.1} MiB at {:.0} s (warm), {:.1} MiB at the end: {:+.1}%",
+        r.rss_warm_mib,
+        r.minutes * 60.0 / 6.0,
+        r.rss_end_mib,
         r.rss_growth_percent
     );
     if let (Some(a), Some(b)) = (first, last) {
