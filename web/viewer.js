@@ -397,6 +397,12 @@ function onMeshFrame(f) {
 
 function onAck(ack) {
   state.acks += 1;
+  // ABORTED (10): a newer frame of the room won while this one waited for the pipeline
+  // (latest wins, the server's mailbox); the room is at the newer frame, nothing to show.
+  if (ack.error && ack.error.code === 10) {
+    state.superseded = (state.superseded ?? 0) + 1;
+    return;
+  }
   if (!ack.error) {
     state.residual = ack.control_residual;
     state.residualCapture = ack.control_residual_capture ?? null;

@@ -58,6 +58,9 @@ pub enum ErrorCode {
     /// In a cluster: the room's owner cannot be reached now (it died and its room is not
     /// adopted yet, or this replica lost the cluster); the publisher retries.
     Unavailable,
+    /// A newer frame reached the room while this one waited for the pipeline (latest wins):
+    /// nothing to fix, the room is at the newer frame.
+    Aborted,
 }
 
 impl ErrorCode {
@@ -70,6 +73,7 @@ impl ErrorCode {
             ErrorCode::ResourceExhausted => 8,
             ErrorCode::Internal => 13,
             ErrorCode::Unavailable => 14,
+            ErrorCode::Aborted => 10,
         }
     }
 
@@ -82,6 +86,7 @@ impl ErrorCode {
             ErrorCode::ResourceExhausted,
             ErrorCode::Internal,
             ErrorCode::Unavailable,
+            ErrorCode::Aborted,
         ]
         .into_iter()
         .find(|c| c.wire() == code)
@@ -163,7 +168,7 @@ mod tests {
     #[test]
     fn codes_are_the_google_rpc_integers() {
         // google/rpc/code.proto: INVALID_ARGUMENT 3, NOT_FOUND 5, PERMISSION_DENIED 7,
-        // RESOURCE_EXHAUSTED 8, INTERNAL 13.
+        // RESOURCE_EXHAUSTED 8, ABORTED 10, INTERNAL 13, UNAVAILABLE 14.
         let pairs = [
             (ErrorCode::InvalidArgument, 3, tonic::Code::InvalidArgument),
             (ErrorCode::NotFound, 5, tonic::Code::NotFound),
@@ -179,6 +184,7 @@ mod tests {
             ),
             (ErrorCode::Internal, 13, tonic::Code::Internal),
             (ErrorCode::Unavailable, 14, tonic::Code::Unavailable),
+            (ErrorCode::Aborted, 10, tonic::Code::Aborted),
         ];
         for (code, wire, grpc) in pairs {
             assert_eq!(code.wire(), wire);

@@ -45,6 +45,10 @@ pub enum PublishError {
     /// In a cluster: the room's owner does not answer now, or its model cannot be had here.
     #[error("unavailable: {0}")]
     Unavailable(String),
+    /// A newer frame reached the room while this one waited for the pipeline: latest wins
+    /// (`crate::mailbox`); the room is at the newer frame.
+    #[error("superseded: room {0:?} took a newer frame while this one waited (latest wins)")]
+    Superseded(String),
     /// In a cluster: the owner refused the frame this replica forwarded (its code and message,
     /// as the owner's ack carried them).
     #[error("{}", .0.message)]
@@ -67,9 +71,9 @@ impl From<PipelineError> for PublishError {
         match e {
             PipelineError::Wire(e) => PublishError::Wire(e),
             e @ PipelineError::Predict(_) => PublishError::Predict(e.to_string()),
-            e @ (PipelineError::Codec(_) | PipelineError::Palette(_)) => {
-                PublishError::Internal(e.to_string())
-            }
+            e @ (PipelineError::Codec(_)
+            | PipelineError::Palette(_)
+            | PipelineError::Panicked(_)) => PublishError::Internal(e.to_string()),
         }
     }
 }
@@ -84,6 +88,7 @@ impl PublishError {
             PublishError::Wire(_) | PublishError::Predict(_) => ErrorCode::InvalidArgument,
             PublishError::Internal(_) => ErrorCode::Internal,
             PublishError::Unavailable(_) => ErrorCode::Unavailable,
+            PublishError::Superseded(_) => ErrorCode::Aborted,
             PublishError::Forwarded(e) => {
                 ErrorCode::from_wire(e.code).unwrap_or(ErrorCode::Internal)
             }
@@ -155,6 +160,9 @@ fn count(state: &AppState, done: &Result<Published, PublishError>) {
             }
             m.frame_latency.observe(f64::from(p.latency_us) * 1e-6);
             m.frame_confidence.observe(f64::from(p.confidence));
+        }
+        Err(PublishError::Superseded(_)) => {
+            m.frames_superseded.inc();
         }
         Err(_) => {
             m.frames_refused.inc();
@@ -243,17 +251,21 @@ async fn admit_and_process(
     process(room, frame, received).await
 }
 
-/// Runs `frame` through `room`'s pipeline on the blocking pool (the hand-off every publish
-/// path and the batches share), its failure as a [`PublishError`].
+/// Runs `frame` through `room`'s pipeline on the blocking pool, latest wins
+/// ([`Room::submit`]; the hand-off every publish path and the batches share), its failure as
+/// a [`PublishError`]. A batch's private room gets one frame at a time, so none is superseded.
 pub(crate) async fn process(
     room: Arc<Room>,
     frame: v1::ControlFrame,
     received: Instant,
 ) -> Result<Published, PublishError> {
-    tokio::task::spawn_blocking(move || room.process(&frame, received))
-        .await
-        .map_err(|e| PublishError::Internal(e.to_string()))?
-        .map_err(PublishError::from)
+    match room.submit(frame, received).await {
+        Ok(Some(result)) => result.map_err(PublishError::from),
+        Ok(None) => Err(PublishError::Superseded(room.id.clone())),
+        Err(_) => Err(PublishError::Internal(
+            "the room's pipeline stopped before this frame ran".into(),
+        )),
+    }
 }
 
 /// The gRPC ack of frame `seq`'s outcome.
@@ -291,13 +303,14 @@ mod tests {
             )),
             PublishError::Predict("prediction: bad".into()),
             PublishError::Internal("boom".into()),
+            PublishError::Superseded("x".into()),
         ]
     }
 
     #[test]
     fn each_refusal_maps_once_per_transport() {
         // google.rpc.Code integers, as the acks always carried them.
-        let codes = [5, 7, 8, 3, 3, 13];
+        let codes = [5, 7, 8, 3, 3, 13, 10];
         let grpc = [
             tonic::Code::NotFound,
             tonic::Code::PermissionDenied,
@@ -305,6 +318,7 @@ mod tests {
             tonic::Code::InvalidArgument,
             tonic::Code::InvalidArgument,
             tonic::Code::Internal,
+            tonic::Code::Aborted,
         ];
         for ((e, code), grpc) in all().iter().zip(codes).zip(grpc) {
             let a = ack(4, &Err(clone(e)));
@@ -377,6 +391,7 @@ mod tests {
             PublishError::Predict(m) => PublishError::Predict(m.clone()),
             PublishError::Internal(m) => PublishError::Internal(m.clone()),
             PublishError::Unavailable(m) => PublishError::Unavailable(m.clone()),
+            PublishError::Superseded(r) => PublishError::Superseded(r.clone()),
             PublishError::Forwarded(e) => PublishError::Forwarded(e.clone()),
         }
     }

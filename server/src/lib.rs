@@ -35,6 +35,7 @@ pub mod frames;
 pub mod grpc;
 pub mod http;
 pub mod ingest;
+pub(crate) mod mailbox;
 pub mod metrics;
 pub mod pipeline;
 pub mod registry;

@@ -15,6 +15,8 @@ pub struct Metrics {
     pub frames_published: Counter,
     /// Control frames refused (bad field, unknown room, wrong token).
     pub frames_refused: Counter,
+    /// Control frames superseded by a newer one of their room while they waited (`mailbox`).
+    pub frames_superseded: Counter,
     /// Frames whose detail layer was synthesised (only while someone watches it).
     pub detail_frames: Counter,
     /// Seconds from a control frame's arrival to its meshes being ready.
@@ -43,6 +45,7 @@ impl Default for Metrics {
         let m = Metrics {
             frames_published: Counter::default(),
             frames_refused: Counter::default(),
+            frames_superseded: Counter::default(),
             detail_frames: Counter::default(),
             // 25 µs to ~51 ms.
             frame_latency: Histogram::new(exponential_buckets(25e-6, 2.0, 12)),
@@ -65,6 +68,11 @@ impl Default for Metrics {
             "frames_refused",
             "Control frames refused (bad field, unknown room, wrong token)",
             m.frames_refused.clone(),
+        );
+        registry.register(
+            "frames_superseded",
+            "Control frames a newer frame of their room superseded while they waited (latest wins)",
+            m.frames_superseded.clone(),
         );
         registry.register(
             "detail_frames",

@@ -132,6 +132,9 @@ pub enum PipelineError {
     /// A palette frame could not be encoded (a non-finite transform: a server bug).
     #[error("palette encoding: {0}")]
     Palette(#[from] PaletteError),
+    /// The pipeline panicked on this frame (a server bug; the room goes on).
+    #[error("the pipeline panicked: {0}")]
+    Panicked(String),
 }
 
 /// Errors of building a pipeline.

@@ -16,6 +16,7 @@ pub use crate::session::{RoomFull, new_token, valid_room_id};
 pub use crease_proto::{Encoding, Level};
 
 use crate::fanout::{self, Fanout, LocalFanout};
+use crate::mailbox::{Mailbox, Outcome};
 use crate::pipeline::{Pipeline, PipelineError};
 use crate::registry::LoadedModel;
 use crate::session::{CountGuard, Session};
@@ -59,6 +60,8 @@ pub struct Room {
     session: Session,
     pipeline: Pipeline,
     fanout: Arc<dyn Fanout>,
+    /// Control frames waiting for the pipeline, latest wins ([`Room::submit`]).
+    mailbox: Mailbox<(v1::ControlFrame, Instant), Result<Published, PipelineError>>,
 }
 
 impl std::fmt::Debug for Room {
@@ -118,6 +121,7 @@ impl Room {
                 session: Session::new(),
                 pipeline,
                 fanout: fanout.unwrap_or_else(|| Arc::new(LocalFanout::default())),
+                mailbox: Mailbox::default(),
             })
         })
         .await
@@ -200,6 +204,38 @@ impl Room {
     ///
     /// # Errors
     /// The pipeline's.
+    /// Hands `frame` to the pipeline, latest wins (`crate::mailbox`): the outcome comes once
+    /// it ran, or `None` when a newer frame superseded it while it waited. The room's frames
+    /// run one after another on the blocking pool, on one thread at a time; a panic in the
+    /// pipeline is that frame's error ([`PipelineError::Panicked`]), and the room goes on.
+    pub(crate) fn submit(
+        self: &Arc<Self>,
+        frame: v1::ControlFrame,
+        received: Instant,
+    ) -> Outcome<Result<Published, PipelineError>> {
+        let (outcome, start) = self.mailbox.submit((frame, received));
+        if start {
+            let room = Arc::clone(self);
+            tokio::task::spawn_blocking(move || {
+                while let Some(((frame, received), done)) = room.mailbox.next() {
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        room.process(&frame, received)
+                    }))
+                    .unwrap_or_else(|panic| {
+                        let why = panic
+                            .downcast_ref::<&str>()
+                            .map(|s| (*s).to_owned())
+                            .or_else(|| panic.downcast_ref::<String>().cloned())
+                            .unwrap_or_default();
+                        Err(PipelineError::Panicked(why))
+                    });
+                    let _ = done.send(Some(result));
+                }
+            });
+        }
+        outcome
+    }
+
     pub(crate) fn process(
         &self,
         frame: &v1::ControlFrame,

@@ -929,3 +929,101 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
     let bits = check_decoded(&mut decoder, &topology, &data, &want);
     assert_eq!(bits, 14);
 }
+
+/// Four publishers flood one room at once (each sends its next frame as soon as the last is
+/// acked, as fast as the room predicts): every frame is either predicted (an ok ack) or
+/// superseded by a newer frame of the room while it waited (ABORTED, latest wins: the
+/// server's `mailbox`), never refused otherwise or left unanswered; the metrics count the
+/// same; and a subscriber ends on the last frame predicted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
+    use futures_util::StreamExt as _;
+    let model = Arc::new(model());
+    let running = serve_tube(
+        &model,
+        Limits {
+            publish_hz: f64::INFINITY,
+            ..Limits::default()
+        },
+    )
+    .await;
+    let url = format!("http://{}", running.grpc);
+    let mut client = CreaseClient::connect(url.clone()).await.unwrap();
+    let open = v1::OpenRoomRequest {
+        room: "flood".into(),
+        model: "tube".into(),
+        ..Default::default()
+    };
+    let token = client
+        .open_room(authed(open, ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    const PER_PUBLISHER: u64 = 150;
+    let mut publishers = Vec::new();
+    for p in 0..4u64 {
+        let (url, token, model) = (url.clone(), token.clone(), Arc::clone(&model));
+        publishers.push(tokio::spawn(async move {
+            let mut client = CreaseClient::connect(url).await.unwrap();
+            let (tx, rx) = tokio::sync::mpsc::channel(1);
+            let mut acks = client
+                .publish(authed(
+                    tokio_stream::wrappers::ReceiverStream::new(rx),
+                    &token,
+                ))
+                .await
+                .unwrap()
+                .into_inner();
+            let (mut ok, mut superseded) = (0u64, 0u64);
+            for k in 0..PER_PUBLISHER {
+                let seq = p * 1000 + k;
+                tx.send(control_frame(&model, "flood", seq, 0.001 * k as f32))
+                    .await
+                    .unwrap();
+                let ack = acks.next().await.unwrap().unwrap();
+                assert_eq!(ack.seq, seq);
+                match &ack.error {
+                    None => ok += 1,
+                    Some(e) if e.code == 10 => {
+                        assert!(
+                            e.message.starts_with("superseded: room \"flood\""),
+                            "{}",
+                            e.message
+                        );
+                        superseded += 1;
+                    }
+                    Some(e) => panic!("frame {seq} refused: {e:?}"),
+                }
+            }
+            (ok, superseded)
+        }));
+    }
+    let (mut ok, mut superseded) = (0, 0);
+    for p in publishers {
+        let (o, s) = p.await.unwrap();
+        assert!(o > 0, "a publisher had none of its frames predicted");
+        ok += o;
+        superseded += s;
+    }
+    eprintln!(
+        "{ok} predicted, {superseded} superseded of {}",
+        4 * PER_PUBLISHER
+    );
+    assert_eq!(ok + superseded, 4 * PER_PUBLISHER);
+    let (_, metrics) = http_get(running.http, "/metrics").await;
+    assert_eq!(metric(&metrics, "crease_frames_published_total"), ok as f64);
+    assert_eq!(
+        metric(&metrics, "crease_frames_superseded_total"),
+        superseded as f64
+    );
+    assert_eq!(metric(&metrics, "crease_frames_refused_total"), 0.0);
+    let room = client
+        .get_room(v1::GetRoomRequest {
+            room: "flood".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(room.published, ok, "{room:?}");
+}

@@ -57,6 +57,9 @@ const TASK_SLACK: u64 = 16;
 /// RSS is compared as the peak over this many seconds (`SoakReport::rss_warm_mib`).
 const RSS_WINDOW_S: f64 = 60.0;
 
+/// google.rpc.Code ABORTED: the ack of a frame a newer one superseded.
+const ABORTED: i32 = 10;
+
 /// What the soak counted; shared by its tasks.
 #[derive(Debug, Default)]
 struct Counters {
@@ -72,6 +75,7 @@ struct Counters {
     malformed_refused: AtomicU64,
     malformed_accepted: AtomicU64,
     good_refused: AtomicU64,
+    superseded: AtomicU64,
     reconnects: AtomicU64,
     rooms_opened: AtomicU64,
     rooms_closed: AtomicU64,
@@ -98,6 +102,9 @@ pub(super) struct Sample {
     /// Live mesh subscriptions (`crease_subscribers`): the viewers watching and the checkers,
     /// if none outlives its client.
     pub subscribers: Option<u64>,
+    /// Control frames the server predicted so far (`crease_frames_published_total`): its
+    /// throughput between samples.
+    pub published: Option<u64>,
 }
 
 /// The soak's report (`--json`).
@@ -139,6 +146,9 @@ pub(super) struct SoakReport {
     pub good_refused: u64,
     /// Why those were refused (the ack message's first part) and how often.
     pub good_refused_why: std::collections::BTreeMap<String, u64>,
+    /// Frames a newer one of their room superseded while they waited for the pipeline
+    /// (ABORTED acks; latest wins when the server cannot keep up).
+    pub superseded: u64,
     /// Publisher reconnections.
     pub publisher_reconnects: u64,
     /// Churn rooms opened and closed.
@@ -343,7 +353,7 @@ async fn soak(
             break;
         };
         eprintln!(
-            "soak {:6.0} s: rss {:.1} MiB, {} fds, {} threads, tasks {}, subscribers {} (watching {}), frames {}, joins {}, malformed refused {}/{}",
+            "soak {:6.0} s: rss {:.1} MiB, {} fds, {} threads, tasks {}, subscribers {} (watching {}), predicted {}, frames {}, joins {}, malformed refused {}/{}, superseded {}",
             sample.t,
             sample.rss_mib,
             sample.fds,
@@ -357,10 +367,12 @@ async fn soak(
                     .load(Ordering::Relaxed)
                     .saturating_sub(leaves)
             },
+            sample.published.map_or("?".to_owned(), |t| t.to_string()),
             counters.frames_seen.load(Ordering::Relaxed),
             counters.joins.load(Ordering::Relaxed),
             counters.malformed_refused.load(Ordering::Relaxed),
             counters.malformed_sent.load(Ordering::Relaxed),
+            counters.superseded.load(Ordering::Relaxed),
         );
         samples.push(sample);
     }
@@ -452,6 +464,7 @@ async fn soak(
         malformed_accepted: get(&c.malformed_accepted),
         good_refused: get(&c.good_refused),
         good_refused_why: c.refusals.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+        superseded: get(&c.superseded),
         publisher_reconnects: get(&c.reconnects),
         rooms_opened: get(&c.rooms_opened),
         rooms_closed: get(&c.rooms_closed),
@@ -535,6 +548,7 @@ async fn sample(pid: u32, http: std::net::SocketAddr, started: Instant) -> Optio
         threads,
         tasks: metric(&metrics, "crease_tasks"),
         subscribers: metric(&metrics, "crease_subscribers"),
+        published: metric(&metrics, "crease_frames_published_total"),
     })
 }
 
@@ -610,6 +624,12 @@ async fn publisher(
                         .lock()
                         .unwrap_or_else(|e| e.into_inner())
                         .remove(&ack.seq);
+                    // ABORTED: a newer frame of the room won while this one waited (latest
+                    // wins, the server's `mailbox`); neither accepted nor refused.
+                    if ack.error.as_ref().is_some_and(|e| e.code == ABORTED) {
+                        counters.superseded.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    }
                     match (was_bad, ack.error.is_some()) {
                         (true, true) => counters.malformed_refused.fetch_add(1, Ordering::Relaxed),
                         (true, false) => {
@@ -926,8 +946,8 @@ fn print_report(r: &SoakReport) {
         r.frames_received, r.frames_decoded
     );
     println!(
-        "  control frames         {} sent, {} reconnections",
-        r.control_frames_sent, r.publisher_reconnects
+        "  control frames         {} sent, {} reconnections, {} superseded (latest wins)",
+        r.control_frames_sent, r.publisher_reconnects, r.superseded
     );
     println!(
         "  malformed              {} sent, {} refused, {} accepted; {} good ones refused",
