@@ -111,6 +111,54 @@ fn fit_writes_rig_gltf_and_json() {
     );
 }
 
+/// `crease train --export-gltf` writes the trained model's own rig (not a new fit): the GLB is
+/// the one `export_rig_glb` makes from the rig inside the saved model, byte for byte, and
+/// loads with the `gltf` crate with one joint per bone.
+#[test]
+fn train_exports_the_models_rig_as_gltf() {
+    let dir = tempfile::tempdir().unwrap();
+    let frames = write_examples(dir.path());
+    let model_path = dir.path().join("bar.crease");
+    let glb_path = dir.path().join("bar-train.glb");
+    let out = crease()
+        .args(["train", "--examples"])
+        .arg(dir.path())
+        .args([
+            "--bones",
+            "2",
+            "--control-points",
+            "0,79,40",
+            "--no-detail",
+            "--out",
+        ])
+        .arg(&model_path)
+        .arg("--export-gltf")
+        .arg(&glb_path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let model = crease_core::model::TrainedModel::load(&model_path).unwrap();
+    let again = dir.path().join("again.glb");
+    crease_core::model::export_rig_glb(&model.rig, &again).unwrap();
+    assert_eq!(
+        std::fs::read(&glb_path).unwrap(),
+        std::fs::read(&again).unwrap(),
+        "the exported GLB is not the model's rig"
+    );
+    let (doc, _, _) = gltf::import(&glb_path).expect("glb loads");
+    let skin = doc.skins().next().expect("one skin");
+    assert_eq!(skin.joints().count(), model.rig.bone_count);
+    let anim = doc.animations().next().expect("one animation");
+    assert_eq!(
+        anim.channels().next().unwrap().sampler().input().count(),
+        frames
+    );
+}
+
 #[test]
 fn fit_errors_name_the_problem() {
     let out = crease()

@@ -35,6 +35,10 @@ pub struct Config {
     pub drain: Duration,
     /// Join this cluster (`--nats`); the demo room, if any, stays local to this replica.
     pub cluster: Option<crease_server::cluster::ClusterOptions>,
+    /// [`run`] writes its banner and progress lines as `info` events (target
+    /// `crease_demo::banner`) rather than plain lines on stderr: with `--log-format json`,
+    /// stderr stays one JSON object per line.
+    pub banner_in_log: bool,
 }
 
 impl Default for Config {
@@ -50,6 +54,7 @@ impl Default for Config {
             // Long enough for an ack in flight, short enough for a container's grace period.
             drain: Duration::from_secs(5),
             cluster: None,
+            banner_in_log: false,
         }
     }
 }
@@ -301,12 +306,17 @@ pub async fn run(
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let token_chosen = config.demo_token.is_some();
     let drain = config.drain;
-    let started = start(config, Arc::new(|line: &str| eprintln!("{line}"))).await?;
+    let say: Progress = if config.banner_in_log {
+        Arc::new(|line: &str| tracing::info!(target: "crease_demo::banner", "{line}"))
+    } else {
+        Arc::new(|line: &str| eprintln!("{line}"))
+    };
+    let started = start(config, Arc::clone(&say)).await?;
     for line in started.banner(token_chosen) {
-        eprintln!("{line}");
+        say(&line);
     }
     shutdown.await;
-    eprintln!("shutting down");
+    say("shutting down");
     started.running.shutdown(drain).await?;
     Ok(())
 }

@@ -110,6 +110,20 @@ struct Args {
     /// allocator arena per thread (tokio's own default is 512).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     blocking_threads: Option<u16>,
+    /// How the log is written on stderr: `text` (for people) or `json` (one JSON object per
+    /// line, for log collectors; the start-up banner becomes events too). The level comes from
+    /// RUST_LOG (default `info`).
+    #[arg(long, value_enum, value_name = "FORMAT", default_value_t = LogFormat::Text, env = "CREASE_LOG_FORMAT")]
+    log_format: LogFormat,
+}
+
+/// `--log-format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum LogFormat {
+    /// Human-readable lines.
+    Text,
+    /// JSON lines: `timestamp`, `level`, `target` and the event's fields (`message` among them).
+    Json,
 }
 
 /// The default of `--blocking-threads`.
@@ -152,6 +166,7 @@ impl From<Args> for Config {
             cache: args.cache,
             demo_token: args.demo_token,
             demo_rate: args.demo_rate,
+            banner_in_log: args.log_format == LogFormat::Json,
             cluster: args.nats.map(|url| crease_server::cluster::ClusterOptions {
                 lease: std::time::Duration::from_millis(args.lease_ms.max(100)),
                 ..crease_server::cluster::ClusterOptions::new(&url, args.replica_id)
@@ -162,13 +177,16 @@ impl From<Args> for Config {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    tracing_subscriber::fmt()
+    let args = Args::parse();
+    let log = tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
-        .with_writer(std::io::stderr)
-        .init();
-    let args = Args::parse();
+        .with_writer(std::io::stderr);
+    match args.log_format {
+        LogFormat::Text => log.init(),
+        LogFormat::Json => log.json().flatten_event(true).init(),
+    }
     let blocking = args
         .blocking_threads
         .map_or_else(default_blocking_threads, usize::from);

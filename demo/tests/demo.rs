@@ -263,4 +263,55 @@ fn demo_trains_animates_and_serves() {
     let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
     assert!(status.success(), "exit {status}: {rest}");
     assert!(rest.contains("shutting down"), "{rest}");
+
+    // `--log-format json`: every stderr line a JSON object, the banner among them.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
+        .args(["--grpc", "127.0.0.1:0", "--http", "127.0.0.1:0", "--cache"])
+        .arg(cache.path())
+        .args(["--log-format", "json"])
+        .env("RUST_LOG", "info")
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let mut events = Vec::new();
+    let viewer = loop {
+        let mut line = String::new();
+        assert!(
+            stderr.read_line(&mut line).unwrap() > 0,
+            "server exited: {events:#?}"
+        );
+        let event: serde_json::Value = serde_json::from_str(&line)
+            .unwrap_or_else(|e| panic!("not a JSON line ({e}): {line:?}"));
+        for field in ["timestamp", "level", "target", "message"] {
+            assert!(event.get(field).is_some(), "no {field:?}: {line}");
+        }
+        let message = event["message"].as_str().unwrap().to_owned();
+        events.push(event);
+        if message.contains(&format!("/?room={DEMO_ROOM}")) {
+            break message;
+        }
+    };
+    assert!(viewer.starts_with("demo: room"), "{viewer}");
+    assert!(
+        events.iter().any(|e| e["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("crease-server: gRPC on ")),
+        "{events:#?}"
+    );
+    Command::new("kill")
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    let status = child.wait().unwrap();
+    let mut rest = String::new();
+    let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
+    assert!(status.success(), "exit {status}: {rest}");
+    for line in rest.lines() {
+        let event: serde_json::Value = serde_json::from_str(line)
+            .unwrap_or_else(|e| panic!("not a JSON line ({e}): {line:?}"));
+        assert!(event.get("level").is_some(), "{line}");
+    }
+    assert!(rest.contains("\"message\":\"shutting down\""), "{rest}");
 }

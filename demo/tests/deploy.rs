@@ -540,6 +540,140 @@ fn dockerfile_builds_every_member_on_a_matching_toolchain() {
     );
 }
 
+/// The paths under `/node_modules/` that web/index.html's import map names.
+fn import_map_modules() -> Vec<String> {
+    let html = read("web/index.html");
+    html.split("\"/node_modules/")
+        .skip(1)
+        .map(|rest| rest[..rest.find('"').expect("a closing quote")].to_owned())
+        .collect()
+}
+
+/// The image installs the viewer's packages from web/'s lockfile (`npm ci`), the runtime
+/// stage copies them beside web/, a local `node_modules` stays out of the build context, and
+/// the stage's RUN, run here outside Docker on the files it copies, gives every module the
+/// import map names.
+#[test]
+fn the_image_installs_the_viewers_packages_from_the_lockfile() {
+    let docker = Dockerfile::read();
+    let web = docker
+        .stages
+        .iter()
+        .find(|s| {
+            s.iter()
+                .any(|i| i.keyword == "COPY" && i.args.contains("web/package-lock.json"))
+        })
+        .expect("Dockerfile: no stage copies web/package-lock.json (the viewer's packages)");
+    let from = &Dockerfile::one(web, "FROM").args;
+    let words: Vec<&str> = from.split_whitespace().collect();
+    let name = match words.as_slice() {
+        [_, as_, name] if as_.eq_ignore_ascii_case("as") => *name,
+        _ => panic!("Dockerfile: the packages' stage FROM {from}: want `FROM image AS name`"),
+    };
+    let workdir = Dockerfile::one(web, "WORKDIR").args.clone();
+    let runs: Vec<&Instruction> = web.iter().filter(|i| i.keyword == "RUN").collect();
+    assert!(
+        runs.iter().any(|r| r.args.contains("npm ci")),
+        "Dockerfile: stage {name} should `npm ci` (the lockfile's versions)"
+    );
+    assert!(
+        !runs.iter().any(|r| r.args.contains("npm install")),
+        "Dockerfile: stage {name} runs `npm install`, which may move off the lockfile"
+    );
+
+    // The runtime stage copies them where --web serves /node_modules from.
+    let runtime = docker.runtime();
+    let entrypoint = Dockerfile::exec_form(Dockerfile::one(runtime, "ENTRYPOINT"));
+    let served = flag_value(&entrypoint, "--web").expect("ENTRYPOINT --web");
+    let wanted = format!(
+        "--from={name} {}/node_modules {}/node_modules",
+        workdir.trim_end_matches('/'),
+        served.trim_end_matches('/')
+    );
+    assert!(
+        runtime.iter().any(|i| i.keyword == "COPY"
+            && i.args.split_whitespace().collect::<Vec<_>>().join(" ") == wanted),
+        "Dockerfile: the runtime stage should COPY {wanted}"
+    );
+    // A developer's web/node_modules would otherwise ride along in `COPY web/`.
+    assert!(
+        read(".dockerignore")
+            .lines()
+            .any(|l| l.trim() == "**/node_modules/" || l.trim() == "**/node_modules"),
+        ".dockerignore: **/node_modules/ (a bare node_modules/ matches only the root one)"
+    );
+
+    // The stage, outside Docker: its COPY sources into a folder standing for WORKDIR, then its
+    // RUN lines there.
+    if std::process::Command::new("npm")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("skipped running stage {name}: no npm on PATH (Debian: apt-get install npm)");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for copy in web.iter().filter(|i| i.keyword == "COPY") {
+        let words: Vec<&str> = copy.args.split_whitespace().collect();
+        let (dest, sources) = words.split_last().expect("COPY src... dest");
+        assert!(
+            *dest == "./" || *dest == ".",
+            "Dockerfile: stage {name} copies to {dest}; this test copies into WORKDIR only"
+        );
+        for src in sources {
+            let from = repo().join(src);
+            std::fs::copy(&from, dir.path().join(from.file_name().unwrap()))
+                .unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+        }
+    }
+    for run in &runs {
+        let out = std::process::Command::new("bash")
+            .args(["-o", "pipefail", "-c", &run.args])
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "RUN {} in stage {name}: {}\n{}",
+            run.args,
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let modules = import_map_modules();
+    assert!(
+        modules.len() >= 3,
+        "web/index.html's import map: {modules:?}"
+    );
+    for m in &modules {
+        let path = dir.path().join("node_modules").join(m);
+        assert!(
+            if m.ends_with('/') {
+                path.is_dir()
+            } else {
+                path.is_file()
+            },
+            "the import map names /node_modules/{m}, which stage {name} does not install"
+        );
+    }
+    // The locked versions, as web/package.json pins them.
+    let package: serde_json::Value = serde_json::from_str(&read("web/package.json")).unwrap();
+    for (dep, version) in package["dependencies"].as_object().unwrap() {
+        let installed: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(
+                dir.path()
+                    .join("node_modules")
+                    .join(dep)
+                    .join("package.json"),
+            )
+            .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(&installed["version"], version, "{dep}");
+    }
+}
+
 /// The `--long` flags in `crease-server --help`.
 fn help_flags() -> BTreeSet<String> {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_crease-server"))

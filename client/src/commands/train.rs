@@ -30,6 +30,11 @@ pub struct TrainArgs {
     /// Where to write the model (atomically).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// Also write the trained model's rig (rest mesh, bones, weights, one keyframe per
+    /// example) as a skinned glTF binary, as `crease fit --export-gltf` does for a fitted rig:
+    /// the same rig the model predicts with, not a new fit.
+    #[arg(long, value_name = "FILE.glb")]
+    pub export_gltf: Option<PathBuf>,
     /// Print one JSON object with the training report on stdout.
     #[arg(long)]
     pub json: bool,
@@ -77,6 +82,11 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         model.controls.iter().map(|c| c.vertex).collect::<Vec<_>>(),
         model.method
     );
+    if let Some(glb) = &args.export_gltf {
+        crease_core::model::export_rig_glb(&model.rig, glb)
+            .with_context(|| format!("writing glTF {}", glb.display()))?;
+        eprintln!("wrote {}", glb.display());
+    }
     if let Some(c) = &report.control_selection {
         eprintln!(
             "control points by leave-one-out: {:?} (swaps {:?}; LOO {:.4e} -> {:.4e}; {:.1} s)",
