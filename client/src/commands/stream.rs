@@ -98,6 +98,9 @@ struct Report {
     frames_sent: u64,
     acknowledged: u64,
     refused: u64,
+    /// Frames another publisher's newer frame superseded while they waited for the room's
+    /// pipeline (ABORTED acks: latest wins); neither acknowledged nor refused.
+    superseded: u64,
     rate_hz: f64,
     seconds: f64,
     server_latency_us_p50: u32,
@@ -260,6 +263,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             round_trips.push(at.elapsed().as_micros() as u64);
         }
         match ack.error {
+            // google.rpc.Code ABORTED: superseded, not refused.
+            Some(e) if e.code == 10 => report.superseded += 1,
             Some(e) => {
                 report.refused += 1;
                 // The first refusals say why; a flood of the same (a rate limit) is counted.
@@ -282,7 +287,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         }
     }
     report.seconds = start.elapsed().as_secs_f64();
-    report.frames_sent = report.acknowledged + report.refused;
+    report.frames_sent = report.acknowledged + report.refused + report.superseded;
     (report.invalid_in_frames, report.frames_with_invalid) =
         sender.await.context("the sender stopped")?;
     latencies.sort_unstable();
@@ -301,12 +306,13 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             .map(|s| report.control_residual_rms_model / f64::from(s))
     };
     println!(
-        "{} frames in {:.2} s ({:.1} frames/s): {} acknowledged, {} refused; server latency p50 {} µs p99 {} µs, round trip p50 {} µs p99 {} µs",
+        "{} frames in {:.2} s ({:.1} frames/s): {} acknowledged, {} refused, {} superseded; server latency p50 {} µs p99 {} µs, round trip p50 {} µs p99 {} µs",
         report.frames_sent,
         report.seconds,
         report.frames_sent as f64 / report.seconds.max(1e-9),
         report.acknowledged,
         report.refused,
+        report.superseded,
         report.server_latency_us_p50,
         report.server_latency_us_p99,
         report.round_trip_us_p50,
