@@ -2,16 +2,15 @@
 //! skinned glTF, and prints the JSON summary the issue specifies.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
+mod common;
+
 use std::path::Path;
-use std::process::Command;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::model::Rig;
 
-fn crease() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_crease"))
-}
+use common::crease;
 
 /// A bent bar: two rigid halves rotating about the middle, written as OBJ files.
 fn write_examples(dir: &Path) -> usize {
@@ -120,26 +119,15 @@ fn train_exports_the_models_rig_as_gltf() {
     let frames = write_examples(dir.path());
     let model_path = dir.path().join("bar.crease");
     let glb_path = dir.path().join("bar-train.glb");
-    let out = crease()
-        .args(["train", "--examples"])
-        .arg(dir.path())
-        .args([
-            "--bones",
-            "2",
-            "--control-points",
-            "0,79,40",
-            "--no-detail",
-            "--out",
-        ])
-        .arg(&model_path)
-        .arg("--export-gltf")
-        .arg(&glb_path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
+    common::run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(dir.path())
+            .args(["--bones", "2", "--control-points", "0,79,40", "--no-detail"])
+            .arg("--out")
+            .arg(&model_path)
+            .arg("--export-gltf")
+            .arg(&glb_path),
     );
     let model = crease_core::model::TrainedModel::load(&model_path).unwrap();
     let again = dir.path().join("again.glb");

@@ -17,6 +17,41 @@ use crease_hand::surface::Resolution;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 
+/// `crease-server` on free loopback ports with the demo cached in `cache`, `extra` flags and
+/// `RUST_LOG=rust_log`; its stderr, line by line.
+fn spawn_server(
+    cache: &std::path::Path,
+    extra: &[&str],
+    rust_log: &str,
+) -> (std::process::Child, BufReader<std::process::ChildStderr>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
+        .args(["--grpc", "127.0.0.1:0", "--http", "127.0.0.1:0", "--cache"])
+        .arg(cache)
+        .args(extra)
+        .env("RUST_LOG", rust_log)
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("crease-server starts");
+    let stderr = BufReader::new(child.stderr.take().expect("stderr is piped"));
+    (child, stderr)
+}
+
+/// SIGTERM, which must end the server cleanly; the rest of its stderr.
+fn stop_server(
+    mut child: std::process::Child,
+    mut stderr: BufReader<std::process::ChildStderr>,
+) -> String {
+    Command::new("kill")
+        .arg(child.id().to_string())
+        .status()
+        .expect("kill runs");
+    let status = child.wait().expect("crease-server is waited for");
+    let mut rest = String::new();
+    let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
+    assert!(status.success(), "exit {status}: {rest}");
+    rest
+}
+
 /// Largest distance between two control-point lists, flat xyz against points.
 fn max_distance(flat: &[f32], points: &[Vec3]) -> f32 {
     assert_eq!(flat.len(), points.len() * 3);
@@ -129,14 +164,7 @@ fn demo_trains_animates_and_serves() {
     );
 
     // The binary with no model folder: the demo, loaded from the cache.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
-        .args(["--grpc", "127.0.0.1:0", "--http", "127.0.0.1:0", "--cache"])
-        .arg(cache.path())
-        .env("RUST_LOG", "warn")
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let (child, mut stderr) = spawn_server(cache.path(), &[], "warn");
     let mut log = String::new();
     let (grpc, http) = loop {
         let mut line = String::new();
@@ -254,26 +282,11 @@ fn demo_trains_animates_and_serves() {
     assert!(get("/no-such-file.js").starts_with("HTTP/1.1 404"));
 
     // SIGTERM (what a container runtime sends): a clean exit.
-    Command::new("kill")
-        .arg(child.id().to_string())
-        .status()
-        .unwrap();
-    let status = child.wait().unwrap();
-    let mut rest = String::new();
-    let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
-    assert!(status.success(), "exit {status}: {rest}");
+    let rest = stop_server(child, stderr);
     assert!(rest.contains("shutting down"), "{rest}");
 
     // `--log-format json`: every stderr line a JSON object, the banner among them.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
-        .args(["--grpc", "127.0.0.1:0", "--http", "127.0.0.1:0", "--cache"])
-        .arg(cache.path())
-        .args(["--log-format", "json"])
-        .env("RUST_LOG", "info")
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let (child, mut stderr) = spawn_server(cache.path(), &["--log-format", "json"], "info");
     let mut events = Vec::new();
     let viewer = loop {
         let mut line = String::new();
@@ -300,14 +313,7 @@ fn demo_trains_animates_and_serves() {
             .starts_with("crease-server: gRPC on ")),
         "{events:#?}"
     );
-    Command::new("kill")
-        .arg(child.id().to_string())
-        .status()
-        .unwrap();
-    let status = child.wait().unwrap();
-    let mut rest = String::new();
-    let _ = std::io::Read::read_to_string(&mut stderr, &mut rest);
-    assert!(status.success(), "exit {status}: {rest}");
+    let rest = stop_server(child, stderr);
     for line in rest.lines() {
         let event: serde_json::Value = serde_json::from_str(line)
             .unwrap_or_else(|e| panic!("not a JSON line ({e}): {line:?}"));

@@ -41,11 +41,17 @@ pub struct LoadedModel {
     /// cannot be built, which the predictor then reports).
     detail_spatial: OnceLock<Option<SpatialStream>>,
     /// The first message of a palette stream per level, built on first need and shared by
-    /// every room and subscriber on this model (its arrays are `Bytes`).
-    palette: [OnceLock<Result<v1::MeshFrame, String>>; 2],
-    /// The same messages encoded, for the WebSocket (a detail header is 11.5 MB on the demo
-    /// hand: encoding it per subscriber made RSS swing by tens of MiB under the soak).
-    palette_encoded: [OnceLock<Result<Bytes, String>>; 2],
+    /// every room and subscriber on this model.
+    palette: [OnceLock<Result<PaletteMessage, String>>; 2],
+}
+
+/// A palette stream's first message, and the same encoded: the WebSocket sends the bytes (a
+/// detail header is 11.5 MB on the demo hand: encoding it per subscriber made RSS swing by
+/// tens of MiB under the soak), gRPC the message (its arrays are `Bytes`, so clones share).
+#[derive(Clone, Debug)]
+struct PaletteMessage {
+    message: v1::MeshFrame,
+    encoded: Bytes,
 }
 
 /// A mesh (the base, or the detail layer's) in a spatial streaming order
@@ -133,6 +139,19 @@ impl LoadedModel {
     /// A message saying why the header cannot be built (no detail layer, a subdivision or a
     /// regressor that does not fit the mesh).
     pub fn palette_topology(&self, level: Level) -> Result<v1::MeshFrame, String> {
+        self.palette_message(level).map(|p| p.message.clone())
+    }
+
+    /// [`LoadedModel::palette_topology`] as protobuf bytes, encoded once with it and shared.
+    ///
+    /// # Errors
+    /// As [`LoadedModel::palette_topology`].
+    pub fn palette_topology_encoded(&self, level: Level) -> Result<Bytes, String> {
+        self.palette_message(level).map(|p| p.encoded.clone())
+    }
+
+    /// The header of `level` and its encoding, built (and encoded) by the first call.
+    fn palette_message(&self, level: Level) -> Result<&PaletteMessage, String> {
         self.palette[level as usize]
             .get_or_init(|| {
                 let m = &self.model;
@@ -158,25 +177,18 @@ impl LoadedModel {
                             .map_err(|e| e.to_string())?
                     }
                 };
-                palette_topology_message(PaletteParts {
+                let message = palette_topology_message(PaletteParts {
                     model: &self.name,
                     level,
                     bounds: self.pose_bounds,
                     header: &header,
                 })
-                .map_err(|e| format!("palette header: {e}"))
+                .map_err(|e| format!("palette header: {e}"))?;
+                let encoded = Bytes::from(message.encode_to_vec());
+                Ok(PaletteMessage { message, encoded })
             })
-            .clone()
-    }
-
-    /// [`LoadedModel::palette_topology`] as protobuf bytes, encoded once and shared.
-    ///
-    /// # Errors
-    /// As [`LoadedModel::palette_topology`].
-    pub fn palette_topology_encoded(&self, level: Level) -> Result<Bytes, String> {
-        self.palette_encoded[level as usize]
-            .get_or_init(|| Ok(Bytes::from(self.palette_topology(level)?.encode_to_vec())))
-            .clone()
+            .as_ref()
+            .map_err(Clone::clone)
     }
 }
 
@@ -273,7 +285,6 @@ impl ModelRegistry {
             spatial: OnceLock::new(),
             detail_spatial: OnceLock::new(),
             palette: [OnceLock::new(), OnceLock::new()],
-            palette_encoded: [OnceLock::new(), OnceLock::new()],
             model: Arc::new(model),
         });
         self.write().insert(name.to_owned(), Arc::clone(&loaded));

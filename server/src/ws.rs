@@ -203,8 +203,8 @@ async fn session(
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {
-                // A palette header is shared encoded (the model encoded it once); the rest is
-                // small and encoded here.
+                // A palette header is sent as the model encoded it (once, with the header, on
+                // the blocking pool: `first_message`); the rest is small and encoded here.
                 let bytes = match &msg.body {
                     Some(v1::mesh_frame::Body::PaletteTopology(_)) => model
                         .palette_topology_encoded(channel.level)

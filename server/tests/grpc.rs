@@ -939,14 +939,7 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
 async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
     use futures_util::StreamExt as _;
     let model = Arc::new(model());
-    let running = serve_tube(
-        &model,
-        Limits {
-            publish_hz: f64::INFINITY,
-            ..Limits::default()
-        },
-    )
-    .await;
+    let running = serve_model("tube", &model, ADMIN).await;
     let url = format!("http://{}", running.grpc);
     let mut client = CreaseClient::connect(url.clone()).await.unwrap();
     let open = v1::OpenRoomRequest {

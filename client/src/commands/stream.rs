@@ -16,6 +16,7 @@ use anyhow::{Context, bail};
 use crease_core::mesh::Mesh;
 use crease_hand::render::{View, contact_sheet};
 use crease_mocap::RetargetStats;
+use crease_proto::errors::ErrorCode;
 use crease_proto::{control_frame, v1};
 use serde::Serialize;
 
@@ -263,8 +264,10 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             round_trips.push(at.elapsed().as_micros() as u64);
         }
         match ack.error {
-            // google.rpc.Code ABORTED: superseded, not refused.
-            Some(e) if e.code == 10 => report.superseded += 1,
+            // Superseded by another publisher's newer frame (latest wins), not refused.
+            Some(e) if ErrorCode::from_wire(e.code) == Some(ErrorCode::Aborted) => {
+                report.superseded += 1;
+            }
             Some(e) => {
                 report.refused += 1;
                 // The first refusals say why; a flood of the same (a rate limit) is counted.

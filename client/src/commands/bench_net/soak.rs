@@ -29,6 +29,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
+use crease_proto::errors::ErrorCode;
 use crease_proto::{Encoding, v1};
 use futures_util::StreamExt as _;
 use prost::Message as _;
@@ -56,9 +57,6 @@ const TASK_SLACK: u64 = 16;
 
 /// RSS is compared as the peak over this many seconds (`SoakReport::rss_warm_mib`).
 const RSS_WINDOW_S: f64 = 60.0;
-
-/// google.rpc.Code ABORTED: the ack of a frame a newer one superseded.
-const ABORTED: i32 = 10;
 
 /// What the soak counted; shared by its tasks.
 #[derive(Debug, Default)]
@@ -398,7 +396,7 @@ async fn soak(
     };
     let log = target.spawned.as_ref().map(|s| s.log()).unwrap_or_default();
     let panics = log.matches("panicked").count();
-    let rss_warm_mib = rss_peak(&samples, minutes * 60.0 / 6.0);
+    let rss_warm_mib = rss_peak(&samples, warm_up_s(minutes));
     let rss_end_mib = rss_peak(&samples, samples.last().map_or(0.0, |s| s.t));
     let rss_growth_percent = if rss_warm_mib > 0.0 {
         100.0 * (rss_end_mib - rss_warm_mib) / rss_warm_mib
@@ -479,6 +477,11 @@ async fn soak(
         samples,
         failures,
     })
+}
+
+/// The end of the warm-up, seconds: one sixth of a run of `minutes` (5 minutes of 30).
+fn warm_up_s(minutes: f64) -> f64 {
+    minutes * 60.0 / 6.0
 }
 
 /// The highest RSS of the samples in the minute up to `t` seconds (0 with none).
@@ -626,7 +629,11 @@ async fn publisher(
                         .remove(&ack.seq);
                     // ABORTED: a newer frame of the room won while this one waited (latest
                     // wins, the server's `mailbox`); neither accepted nor refused.
-                    if ack.error.as_ref().is_some_and(|e| e.code == ABORTED) {
+                    if ack
+                        .error
+                        .as_ref()
+                        .is_some_and(|e| ErrorCode::from_wire(e.code) == Some(ErrorCode::Aborted))
+                    {
                         counters.superseded.fetch_add(1, Ordering::Relaxed);
                         continue;
                     }
@@ -963,7 +970,7 @@ fn print_report(r: &SoakReport) {
     println!(
         "  RSS (peak of a minute) {:.1} MiB at {:.0} s (warm), {:.1} MiB at the end: {:+.1}%",
         r.rss_warm_mib,
-        r.minutes * 60.0 / 6.0,
+        warm_up_s(r.minutes),
         r.rss_end_mib,
         r.rss_growth_percent
     );
