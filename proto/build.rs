@@ -4,7 +4,14 @@
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed=crease");
-    let fds = protox::compile(["crease/v1/crease.proto", "crease/v1/cluster.proto"], ["."])?;
+    let fds = protox::compile(
+        [
+            "crease/v1/crease.proto",
+            "crease/v1/cluster.proto",
+            "crease/v1/take.proto",
+        ],
+        ["."],
+    )?;
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
     std::fs::write(
         out.join("crease_descriptor.bin"),

@@ -11,6 +11,8 @@
 //! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
 //! - [`commands::watch`], [`commands::stream`], [`commands::room`], [`commands::retarget`]:
 //!   watching and publishing into rooms, managing them, marker recordings to control frames.
+//! - [`commands::take`]: `crease take` — a room's recordings: start, stop, list, download,
+//!   replay, export as glTF.
 //! - [`commands::decode_stream`]: `crease decode-stream` — a recorded stream decoded by the
 //!   core (the reference decoder other clients are checked against).
 //! - [`commands::bench_net`]: `crease bench-net` — the network load benchmark (its load,
@@ -71,6 +73,8 @@ pub enum Command {
     Retarget(commands::retarget::RetargetArgs),
     /// Open, inspect or close rooms on a server.
     Room(commands::room::RoomArgs),
+    /// Record a room's takes on a server; list, download, replay and export them (glTF).
+    Take(commands::take::TakeArgs),
     /// Publish a live capture source (VMC over OSC, OptiTrack NatNet) into a retargeting room.
     Bridge(commands::bridge::BridgeArgs),
     /// Decode a recorded mesh stream (`watch --record`; vertex or palette) with the Rust core
@@ -97,6 +101,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Watch(args) => commands::watch::run(&args),
         Command::Stream(args) => commands::stream::run(&args),
         Command::Room(args) => commands::room::run(&args),
+        Command::Take(args) => commands::take::run(&args),
         Command::Bridge(args) => commands::bridge::run(&args),
         Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),

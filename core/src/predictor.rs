@@ -467,6 +467,46 @@ impl Predictor {
         Ok(())
     }
 
+    /// Puts a recorded frame into `ctx`: its controls (as the prediction used them) and its
+    /// bone transforms, as [`Predictor::predict_transforms`] would have left them, without
+    /// predicting or solving. [`Predictor::skin`] and [`Predictor::predict_detail`] then give
+    /// that frame's meshes: what `crease take export` does with a take's frames.
+    ///
+    /// # Errors
+    /// [`PredictError::ControlCount`] / [`PredictError::RotationCount`] when the counts do not
+    /// fit the model.
+    pub fn load_frame(
+        &self,
+        ctx: &mut FrameContext,
+        controls: &[Vec3],
+        transforms: &[RigidTransform],
+    ) -> Result<(), PredictError> {
+        self.check_control_count(controls)?;
+        if transforms.len() != self.model.rig.bone_count {
+            return Err(PredictError::RotationCount {
+                expected: self.model.rig.bone_count,
+                got: transforms.len(),
+            });
+        }
+        for (held, &c) in ctx.controls.iter_mut().zip(controls) {
+            if c.is_finite() {
+                *held = c;
+            }
+        }
+        for (((r, t), out), x) in ctx
+            .rotations
+            .iter_mut()
+            .zip(ctx.translations.iter_mut())
+            .zip(ctx.transforms.iter_mut())
+            .zip(transforms)
+        {
+            *r = x.rotation;
+            *t = x.translation;
+            *out = *x;
+        }
+        Ok(())
+    }
+
     /// Given rotations (one per bone) and the context's current controls, solves translations
     /// (FKY08 eq. 11) and sets the context's transforms: the "oracle rotations" path of the
     /// evaluation and the second half of [`Predictor::predict_transforms`].

@@ -229,7 +229,18 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
         ));
     }
     let tls = config.server.tls.is_some();
-    let state = AppState::new(models, config.server);
+    let mut server = config.server;
+    // Takes go to the cache folder's `takes/` unless the operator chose a folder.
+    if server.takes.is_none() {
+        server.takes = Some(
+            config
+                .cache
+                .clone()
+                .unwrap_or_else(default_cache_dir)
+                .join("takes"),
+        );
+    }
+    let state = AppState::new(models, server);
     if let Some(options) = config.cluster {
         crease_server::join_cluster(&state, options).await?;
     }

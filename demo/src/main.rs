@@ -35,6 +35,10 @@ struct Args {
     /// may name (`crease room open --map-name NAME`) instead of sending the map.
     #[arg(long, value_name = "DIR")]
     maps: Option<PathBuf>,
+    /// Folder the rooms record their takes into (`crease take start`). Default: `takes/` in
+    /// the cache folder (--cache).
+    #[arg(long, value_name = "DIR")]
+    takes: Option<PathBuf>,
     /// Where the demo model is cached. Default: $CREASE_CACHE_DIR, else $XDG_CACHE_HOME/crease,
     /// else ~/.cache/crease.
     #[arg(long, value_name = "DIR")]
@@ -155,6 +159,7 @@ impl From<Args> for Config {
                 },
                 web: args.web.or_else(launch::source_tree_web),
                 maps: args.maps,
+                takes: args.takes,
                 tls: args
                     .tls_cert
                     .zip(args.tls_key)

@@ -1,7 +1,9 @@
 //! The JSON forms of the HTTP side, one serde mapping each: control frames a WebSocket
 //! publisher sends as text ([`JsonControlFrame`]), the acks it gets back ([`JsonAck`]), and the
 //! room documents of `GET /api/rooms` ([`RoomList`]) and `GET /api/rooms/{id}`
-//! ([`RoomDocument`]), which the browser viewer reads.
+//! ([`RoomDocument`]), which the browser viewer reads; the takes of `GET /api/takes`
+//! ([`TakeList`]), a take's frames for the viewer's player ([`TakeFrames`]) and its private
+//! replay room ([`ReplayRoom`]).
 //!
 //! The shapes are frozen by the viewer (`web/viewer.js`) and the tests pinning them: the room
 //! document's keys come in alphabetical order and its floats as the `f64` widening of the `f32`
@@ -14,7 +16,7 @@ use crate::{WireError, encode_valid_mask, v1};
 
 /// A control frame as JSON: `{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...],
 /// "valid": [true, ...]}`, `valid` optional (every point valid), `seq` and the time 0 when absent.
-#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, Serialize)]
 pub struct JsonControlFrame {
     /// The publisher's sequence number.
     #[serde(default)]
@@ -443,4 +445,119 @@ mod tests {
             "{e}"
         );
     }
+}
+
+/// A take in [`TakeList`] (`v1::TakeInfo`, with the duration in seconds).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct TakeSummary {
+    /// The take's id.
+    pub take: String,
+    /// The room it recorded.
+    pub room: String,
+    /// Its label.
+    pub name: String,
+    /// The room's model.
+    pub model: String,
+    /// The model's SHA-256 (hex).
+    pub model_sha256: String,
+    /// When recording began, microseconds since the Unix epoch.
+    pub started_unix_us: i64,
+    /// Whole frames.
+    pub frames: u64,
+    /// From its start to its last frame's arrival, seconds.
+    pub duration_s: f64,
+    /// The file's size.
+    pub bytes: u64,
+    /// Still recording.
+    pub recording: bool,
+    /// Ends in part of a frame (the server died while recording it).
+    pub truncated: bool,
+}
+
+impl From<&v1::TakeInfo> for TakeSummary {
+    fn from(t: &v1::TakeInfo) -> Self {
+        TakeSummary {
+            take: t.take.clone(),
+            room: t.room.clone(),
+            name: t.name.clone(),
+            model: t.model.clone(),
+            model_sha256: t.model_sha256.clone(),
+            started_unix_us: t.started_unix_us,
+            frames: t.frames,
+            duration_s: t.duration_us as f64 * 1e-6,
+            bytes: t.bytes,
+            recording: t.recording,
+            truncated: t.truncated,
+        }
+    }
+}
+
+/// `GET /api/takes[?room=ID]`: `{"takes": [...]}`, newest first.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct TakeList {
+    /// The takes.
+    pub takes: Vec<TakeSummary>,
+}
+
+/// `GET /api/takes/{id}/frames`: what the viewer's player publishes into its replay room:
+/// every whole frame as the JSON control frame a WebSocket publisher sends, and its time in
+/// seconds after the first (`take::keyframe_times`).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct TakeFrames {
+    /// The take's id.
+    pub take: String,
+    /// The room it recorded, and its model.
+    pub room: String,
+    /// The model.
+    pub model: String,
+    /// Seconds after the first frame, one per frame, strictly increasing.
+    pub times: Vec<f64>,
+    /// The frames, as recorded.
+    pub frames: Vec<JsonControlFrame>,
+}
+
+impl TakeFrames {
+    /// The JSON form of `take`.
+    pub fn new(take: &crate::take::Take) -> TakeFrames {
+        let header = take.header();
+        let room = header.room.clone().unwrap_or_default();
+        let controls = header.controls as usize;
+        let markers = room.retarget.as_ref().map_or(0, |r| r.markers.len());
+        let flags = |mask: &[u8], n: usize| {
+            (!mask.is_empty()).then(|| (0..n).map(|i| crate::valid_bit(mask, i)).collect())
+        };
+        TakeFrames {
+            take: header.take.clone(),
+            room: room.room.clone(),
+            model: room.model.clone(),
+            times: crate::take::keyframe_times(take),
+            frames: take
+                .frames
+                .iter()
+                .map(|f| {
+                    let c = f.frame.clone().unwrap_or_default();
+                    JsonControlFrame {
+                        seq: c.seq,
+                        capture_time_us: c.capture_time_us,
+                        valid: flags(&c.valid, controls),
+                        markers_valid: flags(&c.markers_valid, markers),
+                        positions: c.positions,
+                        markers: c.markers,
+                    }
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `POST /api/takes/{id}/replay`: the private room opened to play the take back in, and its
+/// publish token (the viewer publishes the take's frames into it).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct ReplayRoom {
+    /// The room's id (not listed in `GET /api/rooms`).
+    pub room: String,
+    /// Its publish token.
+    pub publish_token: String,
+    /// The take.
+    pub take: String,
 }

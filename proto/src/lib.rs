@@ -18,6 +18,8 @@
 //!   [`Level`], [`Encoding`], [`model_info`].
 //! - [`json`]: the JSON the WebSocket and `/api/rooms` speak: control frames in, acks out,
 //!   room documents, one serde mapping each.
+//! - [`take`]: take files (issue 22; `take.proto`): writing a room's recorded frames, reading
+//!   them back up to the last whole frame, and exporting them as glTF.
 //! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
 //!   integers), error acks, and the batch error status that names its frame in a field.
 
@@ -27,6 +29,7 @@ pub mod errors;
 pub mod json;
 pub mod mesh;
 pub mod palette;
+pub mod take;
 
 pub use control::{
     control_frame, encode_valid_mask, read_control_frame, read_marker_frame, valid_bit,

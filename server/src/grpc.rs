@@ -19,12 +19,16 @@ use crate::fanout::Channel;
 use crate::ingest;
 use crate::registry::LoadedModel;
 use crate::room::{Room, RoomOptions, StreamSettings};
+use crate::takes::service as takes;
 use crate::{AddRoomError, AppState};
 
 /// The largest message the server sends: what it sends is its own (a limit on requests,
 /// `limits.message_bytes`, protects it from clients), and a detail palette header is one
 /// message of several MB (11.5 MB for the demo hand's 151K-vertex detail layer).
 pub const MAX_SENT_MESSAGE_BYTES: usize = 256 << 20;
+
+/// The largest chunk of a `GetTake` stream.
+const TAKE_CHUNK_BYTES: usize = 1 << 20;
 
 /// Frames buffered per response stream before the sender waits (acks, batch frames).
 const STREAM_BUFFER: usize = 4;
@@ -160,31 +164,7 @@ impl Crease for CreaseService {
         self.require_admin(&req)?;
         let r = req.into_inner();
         let model = self.model(&r.model)?;
-        let beta = (r.beta != 0.0).then_some(r.beta);
-        let filter = r.filter.map(OneEuroParams::from);
-        if let Some(f) = filter
-            && !f.is_valid()
-        {
-            return Err(Status::invalid_argument(format!(
-                "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
-                f.min_cutoff_hz, f.beta, f.d_cutoff_hz
-            )));
-        }
-        let options = RoomOptions {
-            beta,
-            filter,
-            refine: refinement(r.refine)?,
-        };
-        let capture = match r.retarget {
-            None => None,
-            Some(spec) => {
-                let maps = self.state.config.maps.clone();
-                let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(&model))
-                    .await
-                    .map_err(|e| Status::invalid_argument(e.to_string()))?;
-                Some(Arc::new(spec))
-            }
-        };
+        let (options, capture) = room_options(&self.state, &r, &model).await?;
         let room = match self.state.cluster() {
             Some(cluster) => {
                 Arc::clone(cluster)
@@ -335,6 +315,62 @@ impl Crease for CreaseService {
             crate::stream::batch(Arc::clone(&self.state), room, level, r.frames),
         )))
     }
+
+    async fn start_take(
+        &self,
+        req: Request<v1::StartTakeRequest>,
+    ) -> Result<Response<v1::TakeInfo>, Status> {
+        self.require_admin(&req)?;
+        let r = req.into_inner();
+        takes::start(&self.state, &r.room, r.name)
+            .await
+            .map(Response::new)
+            .map_err(|e| e.status())
+    }
+
+    async fn stop_take(
+        &self,
+        req: Request<v1::StopTakeRequest>,
+    ) -> Result<Response<v1::TakeInfo>, Status> {
+        self.require_admin(&req)?;
+        takes::stop(&self.state, &req.get_ref().room)
+            .await
+            .map(Response::new)
+            .map_err(|e| e.status())
+    }
+
+    async fn list_takes(
+        &self,
+        req: Request<v1::ListTakesRequest>,
+    ) -> Result<Response<v1::ListTakesResponse>, Status> {
+        let takes = takes::list(&self.state, req.into_inner().room)
+            .await
+            .map_err(|e| e.status())?;
+        Ok(Response::new(v1::ListTakesResponse { takes }))
+    }
+
+    type GetTakeStream = BoxStream<v1::TakeChunk>;
+
+    async fn get_take(
+        &self,
+        req: Request<v1::GetTakeRequest>,
+    ) -> Result<Response<Self::GetTakeStream>, Status> {
+        let bytes = takes::bytes(&self.state, req.into_inner().take)
+            .await
+            .map_err(|e| e.status())?;
+        let bytes = prost::bytes::Bytes::from(bytes);
+        let chunks: Vec<Result<v1::TakeChunk, Status>> = (0..bytes.len())
+            .step_by(TAKE_CHUNK_BYTES)
+            .map(|at| {
+                Ok(v1::TakeChunk {
+                    data: bytes
+                        .slice(at..(at + TAKE_CHUNK_BYTES).min(bytes.len()))
+                        .to_vec(),
+                })
+            })
+            .collect();
+        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
 }
 
 /// `stream`, holding `permit` (a stream slot) until it is dropped.
@@ -346,6 +382,44 @@ fn holding<T: Send + 'static>(
         let _held = &permit;
         item
     }))
+}
+
+/// What an `OpenRoomRequest` asks of the room, checked: its [`RoomOptions`] (beta, filter,
+/// refinement) and, for a retargeting room, its capture (the marker map resolved).
+///
+/// # Errors
+/// INVALID_ARGUMENT naming the field.
+pub(crate) async fn room_options(
+    state: &AppState,
+    r: &v1::OpenRoomRequest,
+    model: &Arc<LoadedModel>,
+) -> Result<(RoomOptions, Option<Arc<crate::capture::CaptureSpec>>), Status> {
+    let beta = (r.beta != 0.0).then_some(r.beta);
+    let filter = r.filter.map(OneEuroParams::from);
+    if let Some(f) = filter
+        && !f.is_valid()
+    {
+        return Err(Status::invalid_argument(format!(
+            "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
+            f.min_cutoff_hz, f.beta, f.d_cutoff_hz
+        )));
+    }
+    let options = RoomOptions {
+        beta,
+        filter,
+        refine: refinement(r.refine)?,
+    };
+    let capture = match r.retarget.clone() {
+        None => None,
+        Some(spec) => {
+            let maps = state.config.maps.clone();
+            let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(model))
+                .await
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            Some(Arc::new(spec))
+        }
+    };
+    Ok((options, capture))
 }
 
 /// A request's refinement, checked (`refine: ...` names the field in the error).

@@ -1,6 +1,10 @@
 //! The HTTP side: `GET /healthz` (the process is up), `GET /readyz` (models loaded and not
 //! shutting down: send traffic), `GET /metrics` (Prometheus), `/ws/rooms/{id}` (WebSocket,
-//! [`crate::ws`]), and the static files of the browser viewer (`Config::web`) at `/`.
+//! [`crate::ws`]), the rooms (`/api/rooms`, `/api/rooms/{id}`), the takes (issue 22:
+//! `GET /api/takes[?room=ID]`, `GET /api/takes/{id}` the file, `.../frames` as JSON for the
+//! viewer's player, `.../glb` as a skinned glTF animation, `POST .../replay` opens a private
+//! room to play it back in; [`crate::takes::service`]), and the static files of the browser
+//! viewer (`Config::web`) at `/`.
 
 use std::sync::Arc;
 
@@ -10,7 +14,7 @@ use axum::http::{StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
-use crease_proto::json::{RoomDocument, RoomList, RoomOwner};
+use crease_proto::json::{RoomDocument, RoomList, RoomOwner, TakeList, TakeSummary};
 
 use crate::AppState;
 
@@ -24,6 +28,11 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/ws/rooms/{id}", get(crate::ws::room_socket))
         .route("/api/rooms", get(rooms))
         .route("/api/rooms/{id}", get(room_info))
+        .route("/api/takes", get(takes_list))
+        .route("/api/takes/{id}", get(take_file))
+        .route("/api/takes/{id}/frames", get(take_frames))
+        .route("/api/takes/{id}/glb", get(take_glb))
+        .route("/api/takes/{id}/replay", axum::routing::post(take_replay))
         .with_state(state);
     match web {
         // `index.html` for directories; anything else missing is a plain 404.
@@ -66,8 +75,9 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         .rooms
         .read()
         .unwrap_or_else(|e| e.into_inner())
-        .keys()
-        .cloned()
+        .values()
+        .filter(|r| !r.is_private())
+        .map(|r| r.id.clone())
         .collect();
     ids.sort();
     axum::Json(RoomList {
@@ -106,4 +116,91 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         )],
         state.metrics.render(),
     )
+}
+
+/// `?room=ID` of `GET /api/takes`.
+#[derive(Debug, serde::Deserialize)]
+struct TakesQuery {
+    #[serde(default)]
+    room: String,
+}
+
+/// A take operation's error as a plain-text response.
+fn take_error(e: &crate::takes::service::TakeOpError) -> axum::response::Response {
+    (e.http_status(), format!("{e}\n")).into_response()
+}
+
+/// `GET /api/takes[?room=ID]`: the takes, newest first ([`TakeList`]).
+async fn takes_list(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Query(q): axum::extract::Query<TakesQuery>,
+) -> axum::response::Response {
+    match crate::takes::service::list(&state, q.room).await {
+        Ok(takes) => axum::Json(TakeList {
+            takes: takes.iter().map(TakeSummary::from).collect(),
+        })
+        .into_response(),
+        Err(e) => take_error(&e),
+    }
+}
+
+/// `GET /api/takes/{id}`: the take file up to its last whole frame.
+async fn take_file(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(id): axum::extract::Path<String>,
+) -> axum::response::Response {
+    match crate::takes::service::bytes(&state, id.clone()).await {
+        Ok(bytes) => attachment("application/octet-stream", &format!("{id}.take"), bytes),
+        Err(e) => take_error(&e),
+    }
+}
+
+/// `GET /api/takes/{id}/frames`: [`crease_proto::json::TakeFrames`].
+async fn take_frames(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(id): axum::extract::Path<String>,
+) -> axum::response::Response {
+    match crate::takes::service::frames(&state, id).await {
+        Ok(frames) => axum::Json(frames).into_response(),
+        Err(e) => take_error(&e),
+    }
+}
+
+/// `GET /api/takes/{id}/glb`: the take as a skinned glTF animation.
+async fn take_glb(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(id): axum::extract::Path<String>,
+) -> axum::response::Response {
+    match crate::takes::service::glb(&state, id.clone()).await {
+        Ok(bytes) => attachment("model/gltf-binary", &format!("{id}.glb"), bytes),
+        Err(e) => take_error(&e),
+    }
+}
+
+/// `POST /api/takes/{id}/replay`: a private room to play the take in
+/// ([`crease_proto::json::ReplayRoom`]).
+async fn take_replay(
+    State(state): State<Arc<AppState>>,
+    axum::extract::Path(id): axum::extract::Path<String>,
+) -> axum::response::Response {
+    match crate::takes::service::open_replay(&state, id).await {
+        Ok(room) => axum::Json(room).into_response(),
+        Err(e) => take_error(&e),
+    }
+}
+
+/// `bytes` as a download named `file` (ids are `[A-Za-z0-9_-]`, so the name needs no quoting
+/// beyond the quotes).
+fn attachment(content_type: &'static str, file: &str, bytes: Vec<u8>) -> axum::response::Response {
+    (
+        [
+            (header::CONTENT_TYPE, content_type.to_owned()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("attachment; filename=\"{file}\""),
+            ),
+        ],
+        bytes,
+    )
+        .into_response()
 }

@@ -19,6 +19,8 @@
 //!   models fetched from it).
 //! - [`cluster`]: rooms across replicas over NATS (`--nats`): the room registry, relayed
 //!   frames, forwarded controls, leases and failover, models in the cluster's store.
+//! - [`takes`]: a room's recordings (issue 22) in the takes folder: the recorder in the
+//!   pipeline, its writer thread, listing and reading takes.
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
 //!   Prometheus metrics.
 //! - [`serve`]: binds the listeners and runs until shut down.
@@ -42,6 +44,7 @@ pub mod registry;
 pub mod room;
 pub mod session;
 pub mod stream;
+pub mod takes;
 pub mod ws;
 
 use std::collections::HashMap;
@@ -113,6 +116,8 @@ pub struct Config {
     pub tls: Option<TlsFiles>,
     /// Folder of marker maps (`*.toml`) a retargeting room may name (`Retarget.map_name`).
     pub maps: Option<std::path::PathBuf>,
+    /// Folder rooms record their takes into (`StartTake`); `None`: no takes.
+    pub takes: Option<std::path::PathBuf>,
 }
 
 /// A TLS certificate chain and its private key, PEM files.
@@ -173,6 +178,7 @@ impl Default for Config {
             web: None,
             tls: None,
             maps: None,
+            takes: None,
         }
     }
 }
@@ -196,6 +202,8 @@ pub struct AppState {
     pub connections: Arc<admission::Admission>,
     /// Long-lived calls held, per client address (`Limits::streams`).
     pub streams: Arc<admission::Admission>,
+    /// The takes folder (`Config::takes`), or why it cannot be used.
+    takes: Option<Result<takes::Takes, String>>,
 }
 
 impl AppState {
@@ -205,7 +213,14 @@ impl AppState {
         let streams = admission::Admission::new("streams", config.limits.streams);
         let mut metrics = metrics::Metrics::default();
         metrics.register_admission(&connections, &streams);
+        let takes = config.takes.as_ref().map(|dir| {
+            takes::Takes::new(dir).map_err(|e| {
+                tracing::error!(error = %e, "takes folder unusable: rooms cannot record");
+                e.to_string()
+            })
+        });
         Arc::new(Self {
+            takes,
             models,
             rooms: RwLock::new(HashMap::new()),
             config,
@@ -215,6 +230,32 @@ impl AppState {
             connections,
             streams,
         })
+    }
+
+    /// The takes folder.
+    ///
+    /// # Errors
+    /// [`takes::TakeError::NoFolder`] without one; [`takes::TakeError::Io`] when it could not
+    /// be created.
+    pub fn takes(&self) -> Result<&takes::Takes, takes::TakeError> {
+        match &self.takes {
+            None => Err(takes::TakeError::NoFolder),
+            Some(Ok(takes)) => Ok(takes),
+            Some(Err(why)) => Err(takes::TakeError::Io {
+                path: self.config.takes.clone().unwrap_or_default(),
+                error: std::io::Error::other(why.clone()),
+            }),
+        }
+    }
+
+    /// The ids of the takes rooms of this server record now.
+    pub fn recording_takes(&self) -> Vec<String> {
+        self.rooms
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter_map(|r| r.pipeline().take_info().map(|t| t.take))
+            .collect()
     }
 
     /// The cluster this server joined, if any.

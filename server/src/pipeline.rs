@@ -19,6 +19,9 @@
 //! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
 //! executor.
 //!
+//! While the room records a take (`crate::takes`), every frame that predicted is recorded
+//! once it is through: the control frame, the controls used and the bone transforms.
+//!
 //! Frames are handed to the fan-out as [`MeshUpdate`](crate::frames::MeshUpdate)s taken from a small pool per level
 //! (`crate::frames`): after warm-up a frame allocates nothing, even while a slow subscriber
 //! still holds an older frame.
@@ -43,6 +46,7 @@ use crate::capture::{Capture, CaptureSpec};
 use crate::fanout::{Channel, Fanout};
 use crate::frames::FramePool;
 use crate::registry::LoadedModel;
+use crate::takes::Recorder;
 
 /// Quantisation box margin around the box of the model's training poses, as a fraction of its
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
@@ -174,6 +178,8 @@ struct State {
     filters: Vec<OneEuro>,
     /// The previous frame's capture time and arrival, for the filter's time step.
     last_time: Option<(i64, Instant)>,
+    /// The take being recorded (`crate::takes`), if any.
+    take: Option<Recorder>,
 }
 
 /// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter and
@@ -351,6 +357,7 @@ impl Pipeline {
                 targets: Vec::new(),
                 filters: filter.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]),
                 last_time: None,
+                take: None,
             }),
             model,
             indices: [OnceLock::new(), OnceLock::new()],
@@ -368,6 +375,31 @@ impl Pipeline {
     /// A retargeting room's map and markers.
     pub fn capture(&self) -> Option<&CaptureSpec> {
         self.capture.as_deref()
+    }
+
+    /// Starts recording into `recorder` (`crate::takes`); gives it back when a take runs.
+    pub(crate) fn start_take(&self, recorder: Recorder) -> Result<(), Recorder> {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        if state.take.is_some() {
+            return Err(recorder);
+        }
+        state.take = Some(recorder);
+        Ok(())
+    }
+
+    /// Stops the take, if one runs, and hands it over (to [`Recorder::finish`]).
+    pub(crate) fn stop_take(&self) -> Option<Recorder> {
+        self.state
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take
+            .take()
+    }
+
+    /// The running take's summary, if one runs.
+    pub fn take_info(&self) -> Option<crease_proto::v1::TakeInfo> {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.take.as_ref().map(Recorder::info)
     }
 
     /// The control-point filter.
@@ -598,6 +630,14 @@ impl Pipeline {
         }
         if !detail_vertices {
             clear(fanout, &mut state.live, Channel::vertices(Level::Detail));
+        }
+        if let Some(take) = &mut state.take {
+            take.record(
+                frame,
+                received,
+                state.ctx.controls(),
+                state.ctx.transforms(),
+            );
         }
         Ok(Published {
             held: held as u32,

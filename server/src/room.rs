@@ -62,6 +62,8 @@ pub struct Room {
     fanout: Arc<dyn Fanout>,
     /// Control frames waiting for the pipeline, latest wins ([`Room::submit`]).
     mailbox: Mailbox<(v1::ControlFrame, Instant), Result<Published, PipelineError>>,
+    /// A private room (a take's replay, `crate::takes`): not listed in `/api/rooms`.
+    private: bool,
 }
 
 impl std::fmt::Debug for Room {
@@ -122,10 +124,35 @@ impl Room {
                 pipeline,
                 fanout: fanout.unwrap_or_else(|| Arc::new(LocalFanout::default())),
                 mailbox: Mailbox::default(),
+                private: false,
             })
         })
         .await
         .map_err(|e| RoomError::Panicked(e.to_string()))?
+    }
+
+    /// Makes this a private room: open to whoever knows its id, not listed.
+    pub fn private(mut self) -> Self {
+        self.private = true;
+        self
+    }
+
+    /// Whether the room is private ([`Room::private`]).
+    pub fn is_private(&self) -> bool {
+        self.private
+    }
+
+    /// The room's settings as the request that would open it again: id, model, beta,
+    /// filter, retargeting, refinement (no token). What a take's header keeps.
+    pub fn settings(&self) -> v1::OpenRoomRequest {
+        v1::OpenRoomRequest {
+            room: self.id.clone(),
+            model: self.model.name.clone(),
+            beta: self.beta(),
+            filter: self.filter().map(v1::MarkerFilter::from),
+            retarget: self.pipeline.capture().map(|c| c.wire().clone()),
+            refine: self.refinement().map(v1::Refine::from),
+        }
     }
 
     /// In a cluster: whether another replica predicts this room (this one relays its frames

@@ -15,6 +15,7 @@ pub mod retarget;
 pub mod room;
 pub mod stream;
 pub mod synth;
+pub mod take;
 pub mod train;
 pub mod training_args;
 pub mod watch;

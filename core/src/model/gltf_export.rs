@@ -57,6 +57,7 @@ use json::validation::{Checked, USize64};
 use super::ModelError;
 use super::file::write_atomic;
 use super::rig::Rig;
+use crate::runtime::skin::RigidTransform;
 
 /// Seconds between consecutive example keyframes: slow enough to see each pose in a viewer.
 pub const SECONDS_PER_EXAMPLE: f32 = 1.0;
@@ -92,6 +93,69 @@ pub fn bone_centres(rig: &Rig) -> Vec<Vec3> {
 
 /// The GLB bytes [`export_rig_glb`] writes.
 pub fn rig_to_glb(rig: &Rig) -> Result<Vec<u8>, ModelError> {
+    let times: Vec<f32> = (0..rig.examples.len())
+        .map(|i| i as f32 * SECONDS_PER_EXAMPLE)
+        .collect();
+    let transforms: Vec<RigidTransform> = rig
+        .examples
+        .iter()
+        .flat_map(|e| e.transforms.iter().copied())
+        .collect();
+    skinned_glb(rig, "examples", &times, &transforms)
+}
+
+/// `rig`'s mesh and joints (as [`rig_to_glb`]) with an animation `name` of one keyframe per
+/// frame instead of the examples: keyframe `f` at `times[f]` seconds puts bone `b` at
+/// `transforms[f * bones + b]` (what `crease take export` writes: a take's predicted bone
+/// transforms, so the base layer exactly, at a few dozen bytes per bone per frame).
+///
+/// # Errors
+/// [`ModelError::Export`] when `times` is empty, not strictly increasing or not finite, when
+/// `transforms` is not `times.len()` frames of the rig's bones, or holds a non-finite value;
+/// what [`rig_to_glb`] refuses.
+pub fn skinned_animation_to_glb(
+    rig: &Rig,
+    name: &str,
+    times: &[f32],
+    transforms: &[RigidTransform],
+) -> Result<Vec<u8>, ModelError> {
+    let export = |m: String| Err(ModelError::Export(m));
+    if times.is_empty() {
+        return export("an animation needs at least one keyframe".into());
+    }
+    if !times.iter().all(|t| t.is_finite()) || !times.windows(2).all(|w| w[0] < w[1]) {
+        return export("keyframe times must be finite and strictly increasing".into());
+    }
+    if transforms.len() != times.len() * rig.bone_count {
+        return export(format!(
+            "{} transforms for {} keyframes of {} bones: expected {}",
+            transforms.len(),
+            times.len(),
+            rig.bone_count,
+            times.len() * rig.bone_count
+        ));
+    }
+    if let Some(i) = transforms
+        .iter()
+        .position(|t| !(t.rotation.is_finite() && t.translation.is_finite()))
+    {
+        return export(format!(
+            "keyframe {} bone {}: a non-finite transform",
+            i / rig.bone_count,
+            i % rig.bone_count
+        ));
+    }
+    skinned_glb(rig, name, times, transforms)
+}
+
+/// The skinned GLB of `rig` with animation `name` (none when `times` is empty); `transforms`
+/// holds `times.len()` frames of `rig.bone_count` transforms.
+fn skinned_glb(
+    rig: &Rig,
+    name: &str,
+    times: &[f32],
+    transforms: &[RigidTransform],
+) -> Result<Vec<u8>, ModelError> {
     rig.validate()?;
     let n = rig.rest.vertex_count();
     if n == 0 || rig.rest.triangles.is_empty() {
@@ -248,8 +312,13 @@ pub fn rig_to_glb(rig: &Rig) -> Result<Vec<u8>, ModelError> {
     });
     root.scene = Some(scene);
 
-    if !rig.examples.is_empty() {
-        push_animation(&mut root, &mut bin, rig, &centres, &joint_nodes);
+    if !times.is_empty() {
+        let animation = Keyframes {
+            name,
+            times,
+            transforms,
+        };
+        push_animation(&mut root, &mut bin, &animation, &centres, &joint_nodes);
     }
 
     root.asset = json::Asset {
@@ -280,36 +349,42 @@ pub fn rig_to_glb(rig: &Rig) -> Result<Vec<u8>, ModelError> {
     glb.to_vec().map_err(|e| ModelError::Export(e.to_string()))
 }
 
-/// The example animation: per joint one translation and one rotation sampler, keyframe `e` at
-/// `e * SECONDS_PER_EXAMPLE`.
+/// An animation's keyframes: `times[f]` seconds, bone `b` at `transforms[f * bones + b]`.
+struct Keyframes<'a> {
+    name: &'a str,
+    times: &'a [f32],
+    transforms: &'a [RigidTransform],
+}
+
+/// The animation: per joint one translation and one rotation sampler over the keyframes.
 fn push_animation(
     root: &mut json::Root,
     bin: &mut Vec<u8>,
-    rig: &Rig,
+    animation: &Keyframes<'_>,
     centres: &[Vec3],
     joint_nodes: &[json::Index<json::Node>],
 ) {
-    let e = rig.examples.len();
-    let times: Vec<f32> = (0..e).map(|i| i as f32 * SECONDS_PER_EXAMPLE).collect();
-    let last = times[e - 1];
+    let e = animation.times.len();
+    let bones = centres.len();
+    let (first, last) = (animation.times[0], animation.times[e - 1]);
     let input = push_accessor(
         root,
         bin,
-        &flat_f32(times),
+        &flat_f32(animation.times.iter().copied()),
         e,
         F32,
         json::accessor::Type::Scalar,
         None,
-        Some((vec![0.0], vec![last])),
+        Some((vec![first], vec![last])),
     );
-    let mut samplers = Vec::with_capacity(2 * centres.len());
-    let mut channels = Vec::with_capacity(2 * centres.len());
+    let mut samplers = Vec::with_capacity(2 * bones);
+    let mut channels = Vec::with_capacity(2 * bones);
     for (b, (&c, &node)) in centres.iter().zip(joint_nodes).enumerate() {
         let mut translations = Vec::with_capacity(3 * e);
         let mut rotations = Vec::with_capacity(4 * e);
         let mut prev = glam::Quat::IDENTITY;
-        for ex in &rig.examples {
-            let t = ex.transforms[b];
+        for frame in animation.transforms.chunks_exact(bones) {
+            let t = frame[b];
             // Keep consecutive keys in one hemisphere so LINEAR slerps the short way; q and -q
             // are the same rotation, so the keyframes themselves are unchanged.
             let q = if t.rotation.dot(prev) < 0.0 {
@@ -359,7 +434,7 @@ fn push_animation(
         extensions: None,
         extras: Default::default(),
         channels,
-        name: Some("examples".into()),
+        name: Some(animation.name.into()),
         samplers,
     });
 }

@@ -1,0 +1,301 @@
+//! The take operations both transports call (gRPC `StartTake` / `StopTake` / `ListTakes` /
+//! `GetTake`, HTTP `/api/takes...`): each looks the room or take up, does its file work on the
+//! blocking pool, and fails with one [`TakeOpError`] that knows its gRPC and HTTP status.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use crease_proto::json::{ReplayRoom, TakeFrames};
+use crease_proto::{take, v1};
+
+use super::TakeError;
+use crate::ingest::PublishError;
+use crate::room::Room;
+use crate::{AddRoomError, AppState};
+
+/// Most private replay rooms open at once (each also counts against `Limits::rooms`).
+pub const MAX_REPLAY_ROOMS: usize = 8;
+
+/// A replay room nobody watched for this long is closed.
+pub const REPLAY_IDLE: Duration = Duration::from_secs(30);
+
+/// Why a take operation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum TakeOpError {
+    /// The take's or the folder's.
+    #[error(transparent)]
+    Take(#[from] TakeError),
+    /// The room's lookup.
+    #[error(transparent)]
+    Room(#[from] PublishError),
+    /// The take's model is not here, or not the one it was recorded on.
+    #[error("{0}")]
+    Model(String),
+    /// The replay room could not be opened.
+    #[error("replay room: {0}")]
+    Open(String),
+    /// Too many replay rooms.
+    #[error("replay rooms: {0} open, the limit; try again when one closes")]
+    Replays(usize),
+    /// The blocking task panicked (a server bug).
+    #[error("take: {0}")]
+    Panicked(String),
+}
+
+impl TakeOpError {
+    /// The gRPC status.
+    pub fn status(&self) -> tonic::Status {
+        match self {
+            TakeOpError::Take(e) => e.status(),
+            TakeOpError::Room(e) => e.status(),
+            TakeOpError::Model(m) => tonic::Status::failed_precondition(m.clone()),
+            TakeOpError::Open(m) => tonic::Status::invalid_argument(format!("replay room: {m}")),
+            TakeOpError::Replays(_) => tonic::Status::resource_exhausted(self.to_string()),
+            TakeOpError::Panicked(_) => tonic::Status::internal(self.to_string()),
+        }
+    }
+
+    /// The HTTP status.
+    pub fn http_status(&self) -> axum::http::StatusCode {
+        use axum::http::StatusCode;
+        match self {
+            TakeOpError::Take(e) => e.http_status(),
+            TakeOpError::Room(e) => e.http_status(),
+            TakeOpError::Model(_) => StatusCode::CONFLICT,
+            TakeOpError::Open(_) => StatusCode::BAD_REQUEST,
+            TakeOpError::Replays(_) => StatusCode::TOO_MANY_REQUESTS,
+            TakeOpError::Panicked(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+}
+
+/// Runs `f` on the blocking pool.
+async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T, TakeOpError> + Send + 'static,
+) -> Result<T, TakeOpError> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| TakeOpError::Panicked(e.to_string()))?
+}
+
+/// The room `id`, predicted here (in a cluster, a room another replica owns records there).
+async fn local_room(state: &Arc<AppState>, id: &str) -> Result<Arc<Room>, TakeOpError> {
+    let room = state.find_room(id).await?;
+    if room.relays() {
+        let owner = state
+            .cluster()
+            .and_then(|c| c.owner_of(id))
+            .unwrap_or_default();
+        return Err(TakeError::Elsewhere {
+            room: id.to_owned(),
+            owner,
+        }
+        .into());
+    }
+    Ok(room)
+}
+
+/// Starts recording room `id` (labelled `name`).
+///
+/// # Errors
+/// [`TakeOpError`]: no such room, no takes folder, a take running, the file.
+pub async fn start(
+    state: &Arc<AppState>,
+    id: &str,
+    name: String,
+) -> Result<v1::TakeInfo, TakeOpError> {
+    let room = local_room(state, id).await?;
+    if let Some(t) = room.pipeline().take_info() {
+        return Err(TakeError::Recording {
+            room: room.id.clone(),
+            take: t.take,
+        }
+        .into());
+    }
+    let state = Arc::clone(state);
+    blocking(move || {
+        let takes = state.takes()?;
+        let m = &room.model;
+        let recorder = takes.start(
+            room.settings(),
+            &name,
+            m.sha256(),
+            m.model.rig.bone_count,
+            m.model.controls.len(),
+        )?;
+        let info = recorder.info();
+        match room.pipeline().start_take(recorder) {
+            Ok(()) => {
+                tracing::info!(room = %room.id, take = %info.take, "take started");
+                Ok(info)
+            }
+            // Another StartTake won the race: this one's file goes.
+            Err(recorder) => {
+                recorder.discard();
+                Err(TakeError::Recording {
+                    room: room.id.clone(),
+                    take: room
+                        .pipeline()
+                        .take_info()
+                        .map(|t| t.take)
+                        .unwrap_or_default(),
+                }
+                .into())
+            }
+        }
+    })
+    .await
+}
+
+/// Stops room `id`'s take and returns it.
+///
+/// # Errors
+/// [`TakeOpError`]: no such room, nothing recording, the file.
+pub async fn stop(state: &Arc<AppState>, id: &str) -> Result<v1::TakeInfo, TakeOpError> {
+    let room = local_room(state, id).await?;
+    let recorder = room
+        .pipeline()
+        .stop_take()
+        .ok_or_else(|| TakeError::NotRecording(id.to_owned()))?;
+    let info = blocking(move || Ok(recorder.finish()?)).await?;
+    tracing::info!(room = %id, take = %info.take, frames = info.frames, "take stopped");
+    Ok(info)
+}
+
+/// The takes of room `room` (every take when empty), newest first.
+///
+/// # Errors
+/// [`TakeError::NoFolder`].
+pub async fn list(state: &Arc<AppState>, room: String) -> Result<Vec<v1::TakeInfo>, TakeOpError> {
+    let state = Arc::clone(state);
+    blocking(move || {
+        let recording = state.recording_takes();
+        let room = (!room.is_empty()).then_some(room.as_str());
+        Ok(state.takes()?.list(room, &recording))
+    })
+    .await
+}
+
+/// Take `id`'s file up to its last whole record.
+///
+/// # Errors
+/// [`TakeError::NoTake`], the file's.
+pub async fn bytes(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpError> {
+    let state = Arc::clone(state);
+    blocking(move || Ok(state.takes()?.bytes(&id)?)).await
+}
+
+/// Take `id`'s frames as the viewer's player wants them.
+///
+/// # Errors
+/// [`TakeError::NoTake`], the file's.
+pub async fn frames(state: &Arc<AppState>, id: String) -> Result<TakeFrames, TakeOpError> {
+    let state = Arc::clone(state);
+    blocking(move || Ok(TakeFrames::new(&state.takes()?.read(&id)?))).await
+}
+
+/// Take `id` read whole, with its model (loaded here, and the one it was recorded on).
+fn take_and_model(
+    state: &AppState,
+    id: &str,
+) -> Result<(take::Take, Arc<crate::registry::LoadedModel>), TakeOpError> {
+    let take = state.takes()?.read(id)?;
+    let name = take
+        .header()
+        .room
+        .as_ref()
+        .map(|r| r.model.clone())
+        .unwrap_or_default();
+    let model = state.models.get(&name).ok_or_else(|| {
+        TakeOpError::Model(format!(
+            "take {id:?} was recorded on model {name:?}, which this server has not loaded"
+        ))
+    })?;
+    take::check_model(&take, &model.model, model.sha256())
+        .map_err(|e| TakeOpError::Model(format!("take {id:?}: {e}")))?;
+    Ok((take, model))
+}
+
+/// Take `id` as a skinned glTF animation ([`take::skinned_glb`]) with the server's copy of its
+/// model.
+///
+/// # Errors
+/// [`TakeError::NoTake`], the model missing or changed, the export's.
+pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpError> {
+    let state = Arc::clone(state);
+    blocking(move || {
+        let (take, model) = take_and_model(&state, &id)?;
+        take::skinned_glb(&take, &model.model)
+            .map_err(|e| TakeOpError::Model(format!("take {id:?}: {e}")))
+    })
+    .await
+}
+
+/// Opens a private room (`replay-<random>`) with take `id`'s settings for a viewer to play the
+/// take back in; closed once nobody watched it for [`REPLAY_IDLE`].
+///
+/// # Errors
+/// [`TakeError::NoTake`], the model missing or changed, [`TakeOpError::Replays`], the room's.
+pub async fn open_replay(state: &Arc<AppState>, id: String) -> Result<ReplayRoom, TakeOpError> {
+    let replays = state
+        .rooms
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .values()
+        .filter(|r| r.is_private())
+        .count();
+    if replays >= MAX_REPLAY_ROOMS {
+        return Err(TakeOpError::Replays(replays));
+    }
+    let (take, model) = {
+        let state = Arc::clone(state);
+        let id = id.clone();
+        blocking(move || take_and_model(&state, &id)).await?
+    };
+    let settings = take.header().room.clone().unwrap_or_default();
+    let (options, capture) = crate::grpc::room_options(state, &settings, &model)
+        .await
+        .map_err(|s| TakeOpError::Open(s.message().to_owned()))?;
+    let room_id = format!("replay-{}", &crate::session::new_token()[..12]);
+    let room = Room::open(&room_id, model, options, state.config.stream)
+        .await
+        .map_err(|e| TakeOpError::Open(e.to_string()))?
+        .private();
+    let room = match capture {
+        Some(spec) => room.with_capture(spec),
+        None => room,
+    };
+    let room = state.add_room(room).map_err(|e| match e {
+        AddRoomError::Exists(_) | AddRoomError::Limit(_) => TakeOpError::Open(e.to_string()),
+    })?;
+    tracing::info!(room = %room.id, take = %id, "replay room opened");
+    close_when_idle(Arc::downgrade(state), room.id.clone());
+    Ok(ReplayRoom {
+        room: room.id.clone(),
+        publish_token: room.token().unwrap_or_default().to_owned(),
+        take: id,
+    })
+}
+
+/// Closes private room `id` once it had no subscriber for [`REPLAY_IDLE`].
+fn close_when_idle(state: std::sync::Weak<AppState>, id: String) {
+    const TICK: Duration = Duration::from_secs(1);
+    tokio::spawn(async move {
+        let mut idle = Duration::ZERO;
+        loop {
+            tokio::time::sleep(TICK).await;
+            let Some(state) = state.upgrade() else { return };
+            let Some(room) = state.room(&id) else { return };
+            idle = if room.subscriber_count() == 0 {
+                idle + TICK
+            } else {
+                Duration::ZERO
+            };
+            if idle >= REPLAY_IDLE || state.is_closing() {
+                state.remove_room(&id);
+                tracing::info!(room = %id, "replay room closed: nobody watched it");
+                return;
+            }
+        }
+    });
+}
