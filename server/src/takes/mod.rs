@@ -319,7 +319,13 @@ fn info_of(path: &Path, recording: &[String]) -> Result<v1::TakeInfo, TakeError>
             path: path.to_path_buf(),
             error,
         })?;
-    Ok(info(&scan, bytes, recording))
+    let mut info = info(&scan, bytes, recording);
+    // The id is the file's stem (a copied or renamed file is its own take).
+    if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
+        info.take = stem.to_owned();
+        info.recording = recording.iter().any(|r| r == stem);
+    }
+    Ok(info)
 }
 
 /// A take's summary.
