@@ -262,13 +262,17 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     if let Some(dir) = &args.report {
         let progress = Progress::new(0);
-        let test = test_set.as_ref().map(|(_, t)| (t.base.frames(), t.base.names()));
+        let test = test_set
+            .as_ref()
+            .map(|(_, t)| (t.base.frames(), t.base.names()));
         let page = super::report::write_eval(
             dir,
             &super::report::EvalReport {
                 source,
                 train: input,
-                test: test.as_ref().map(|(frames, names)| HeldOut { names, frames }),
+                test: test
+                    .as_ref()
+                    .map(|(frames, names)| HeldOut { names, frames }),
                 options: &options,
                 tables: &tables,
                 json: &json,

@@ -103,17 +103,21 @@ pub(super) fn eval_table(protocol: &str, table: &Value, rows: &[&str], highlight
                 _ => html.push_str("<td></td>"),
             }
         }
-        let selected = stats
-            .get("selected")
-            .and_then(Value::as_array)
-            .map_or(String::new(), |picks| {
-                let mut text: Vec<String> = picks.iter().take(3).map(candidate).collect();
-                if picks.len() > 3 {
-                    text.push(format!("… ({} folds)", picks.len()));
-                }
-                text.join("; ")
-            });
-        html.push_str(&format!("<td class=\"text\">{}</td></tr>\n", escape(&selected)));
+        let selected =
+            stats
+                .get("selected")
+                .and_then(Value::as_array)
+                .map_or(String::new(), |picks| {
+                    let mut text: Vec<String> = picks.iter().take(3).map(candidate).collect();
+                    if picks.len() > 3 {
+                        text.push(format!("… ({} folds)", picks.len()));
+                    }
+                    text.join("; ")
+                });
+        html.push_str(&format!(
+            "<td class=\"text\">{}</td></tr>\n",
+            escape(&selected)
+        ));
     }
     html.push_str("</tbody></table>\n");
     html
@@ -172,8 +176,7 @@ fn flatten(v: &Value, path: String, out: &mut String) {
             }
         }
         Value::Array(a)
-            if a.len() <= MAX_LISTED_ARRAY
-                && a.iter().all(|x| !x.is_object() && !x.is_array()) =>
+            if a.len() <= MAX_LISTED_ARRAY && a.iter().all(|x| !x.is_object() && !x.is_array()) =>
         {
             if a.is_empty() {
                 out.push_str(&row("<td class=\"text\">(none)</td>".to_owned()));

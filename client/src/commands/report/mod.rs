@@ -95,7 +95,11 @@ fn shown_method(table: &EvalTable, methods: &[Method]) -> Option<Method> {
         .iter()
         .copied()
         .filter(|m| table.contains_key(m.name()))
-        .min_by(|a, b| table[a.name()].rms_mean.total_cmp(&table[b.name()].rms_mean))
+        .min_by(|a, b| {
+            table[a.name()]
+                .rms_mean
+                .total_cmp(&table[b.name()].rms_mean)
+        })
 }
 
 /// The control points' `(vertex, name)`: the given names when there is one per point.
@@ -126,7 +130,7 @@ fn heat_maps(
     let mut html = String::new();
     for (k, pose) in poses.iter().enumerate() {
         let file = format!("{stem}-{}.png", k + 1);
-        let title = format!("{}  rms {:.3e}", pose.name, pose.rms);
+        let title = format!("{}  rms {:.3e}", short_name(&pose.name), pose.rms);
         renders::heat_map(
             &dir.join(&file),
             triangles,
@@ -141,9 +145,9 @@ fn heat_maps(
             .get(k)
             .is_none_or(|e| (e - pose.rms).abs() <= 1e-9 * e.abs().max(1e-12));
         let note = match evaluated.get(k) {
-            Some(e) if !agrees => format!(
-                " (the evaluation measured {e:.4e}; this retraining differs in rounding)"
-            ),
+            Some(e) if !agrees => {
+                format!(" (the evaluation measured {e:.4e}; this retraining differs in rounding)")
+            }
             _ => String::new(),
         };
         html.push_str(&html::figure(
@@ -152,7 +156,7 @@ fn heat_maps(
             &format!(
                 "{what} #{}: <b>{}</b>, RMS {:.4e}{note}, largest vertex error {:.3e}. Left: the true shape; middle and right: the prediction, coloured by per-vertex error (colour scale shared by these pictures, top at {:.3e}).",
                 k + 1,
-                html::escape(&pose.name),
+                html::escape(&short_name(&pose.name)),
                 pose.rms,
                 max,
                 top
@@ -268,11 +272,10 @@ fn controls_figure(
 /// The stage timings figure.
 fn timings_figure(dir: &Path, items: &[(String, f64)], what: &str) -> anyhow::Result<String> {
     let file = "timings.svg";
-    plots::timings(&dir.join(file), "stage timings", items)?;
-    let list: Vec<String> = items
-        .iter()
-        .map(|(k, s)| format!("{k} {s:.2} s"))
-        .collect();
+    plots::hbars(&dir.join(file), "stage timings", "seconds", items, &|s| {
+        format!("{s:.2} s")
+    })?;
+    let list: Vec<String> = items.iter().map(|(k, s)| format!("{k} {s:.2} s")).collect();
     Ok(html::figure(
         file,
         "stage timings",
@@ -317,11 +320,11 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                     .collect::<Vec<_>>()
                     .join(", "),
             ),
+            ("bones asked".into(), options.train.fit.bones.to_string()),
             (
-                "bones asked".into(),
-                options.train.fit.bones.to_string(),
+                "errors".into(),
+                "RMS vertex distance, the rest mesh's largest bounding-box side = 1".into(),
             ),
-            ("errors".into(), "RMS vertex distance, the rest mesh's largest bounding-box side = 1".into()),
         ]),
     )];
     // The first trained model's base and a pose set, for the control layout and the grid.
@@ -372,7 +375,7 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                     &names
                         .iter()
                         .enumerate()
-                        .map(|(i, n)| format!("{i} {n}"))
+                        .map(|(i, n)| format!("{i} {}", short_name(n)))
                         .collect::<Vec<_>>()
                         .join(", ")
                 )
@@ -391,6 +394,7 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                 method.name()
             ),
         );
+        let had_first = first.is_some();
         let (shown, bones_title, bones_caption): (Vec<Pose>, String, String) = match *protocol {
             "test" => {
                 let test = r.test.context("a test table without test frames")?;
@@ -472,24 +476,41 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                 let worst_pose: Vec<&Pose> = shown.iter().take(1).collect();
                 bone_plot(
                     &dir.join(&file),
-                    &format!(
-                        "{}: per-bone rotation error, worst fold",
-                        method.name()
-                    ),
+                    &format!("{}: per-bone rotation error, worst fold", method.name()),
                     &worst_pose,
                 )?;
                 let caption = format!(
                     "Per-bone rotation error of <b>{}</b> on the worst leave-one-out fold ({}; each fold fits its own bones, so bones do not correspond across folds): the angle between each predicted bone rotation and the oracle's.",
                     method.name(),
-                    html::escape(worst_pose.first().map_or("", |p| p.name.as_str()))
+                    html::escape(
+                        &worst_pose
+                            .first()
+                            .map_or(String::new(), |p| short_name(&p.name))
+                    )
                 );
                 (shown, file, caption)
             }
         };
         report_timings.push((
-            format!("report: {protocol} poses"),
+            format!("report: {protocol} poses (retraining)"),
             t.elapsed().as_secs_f64(),
         ));
+        if let (false, Some((base, _, _))) = (had_first, &first) {
+            let f = &base.report;
+            let model = if *protocol == "test" {
+                ""
+            } else {
+                ", 1st fold"
+            };
+            report_timings.extend([
+                (format!("  of which: bone fit{model}"), f.fit.seconds),
+                (
+                    format!("  of which: control points{model}"),
+                    f.controls_seconds,
+                ),
+                (format!("  of which: edge skin{model}"), f.edges_seconds),
+            ]);
+        }
         let evaluated: Vec<f64> = worst.iter().map(|&k| stats.frames[k]).collect();
         body.push_str(&format!(
             "<h3>The {} worst {what}s of {}</h3>\n",
@@ -504,7 +525,11 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
             what,
             &evaluated,
         )?);
-        body.push_str(&html::figure(&bones_title, "per-bone rotation error", &bones_caption));
+        body.push_str(&html::figure(
+            &bones_title,
+            "per-bone rotation error",
+            &bones_caption,
+        ));
         let title = match *protocol {
             "test" => "Held-out test set",
             _ => "Leave-one-out",
@@ -539,21 +564,15 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
             body.push_str("<p>No model selection in this run (give <code>--select</code> to score kernel x kappa x beta).</p>\n");
         }
         sections.push(html::section("selection", "Model selection", &body));
-        let controls = named_controls(&base.control_vertices, options.train.control_names.as_deref());
+        let controls = named_controls(
+            &base.control_vertices,
+            options.train.control_names.as_deref(),
+        );
         sections.push(html::section(
             "controls",
             "Control points",
             &controls_figure(dir, rest, &controls)?,
         ));
-        let f = &base.report;
-        report_timings.splice(
-            0..0,
-            [
-                ("report model: bone fit".to_owned(), f.fit.seconds),
-                ("report model: control points".to_owned(), f.controls_seconds),
-                ("report model: edge skin".to_owned(), f.edges_seconds),
-            ],
-        );
     }
     let mut items: Vec<(String, f64)> = r.timings.to_vec();
     items.extend(report_timings);
@@ -636,15 +655,14 @@ pub fn write_train(
     }
     let pose_seconds = t.elapsed().as_secs_f64();
     let mut body = String::new();
-    let labels: Vec<String> = all.iter().map(|p| short_name(&p.name)).collect();
     let errors: Vec<f64> = all.iter().map(|p| p.rms).collect();
-    plots::bars(
+    let items: Vec<(String, f64)> = all.iter().map(|p| (short_name(&p.name), p.rms)).collect();
+    plots::hbars(
         &dir.join("poses.svg"),
-        "model's RMS error on each training pose",
-        ("training pose", "RMS error"),
-        &labels,
-        &errors,
-        None,
+        "the model's RMS error on each training pose",
+        "RMS error",
+        &items,
+        &|e| format!("{e:.3e}"),
     )?;
     body.push_str(&html::figure(
         "poses.svg",
@@ -653,7 +671,10 @@ pub fn write_train(
     ));
     let worst = poses::worst(&errors, WORST);
     let mut by_pose: Vec<Option<Pose>> = Vec::new();
-    let refs: Vec<&Pose> = all.iter().filter(|p| !p.bone_error_deg.is_empty()).collect();
+    let refs: Vec<&Pose> = all
+        .iter()
+        .filter(|p| !p.bone_error_deg.is_empty())
+        .collect();
     if !refs.is_empty() {
         bone_plot(
             &dir.join("bones.svg"),
@@ -709,8 +730,9 @@ pub fn write_train(
             "fit.svg",
             "bone fit convergence",
             &format!(
-                "The proxy-bone fit's RMS error per step (clustering rounds, then alternations), log scale; it stopped: {:?}, {} bones.",
-                report.fit.stop, report.fit.bones
+                "The proxy-bone fit's RMS error per step (clustering rounds, then alternations), log scale; it stopped: {}, {} bones.",
+                r.json["fit"]["stop"].as_str().unwrap_or("?"),
+                report.fit.bones
             ),
         ));
     }

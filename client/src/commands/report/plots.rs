@@ -8,10 +8,11 @@ use std::path::Path;
 use anyhow::{Context, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::renders::heat_color;
 
-/// Plot text.
+/// Plot text. (The SVG backend writes a size of `s` as `s / 1.24` pixels.)
 const FONT: &str = "sans-serif";
 /// Bar colour.
 const BAR: RGBColor = RGBColor(70, 110, 170);
@@ -52,11 +53,16 @@ pub(super) fn short(value: f64) -> String {
         format!("{value:.2e}")
     } else {
         let digits = (2 - a.log10().floor() as i32).max(0) as usize;
-        format!("{value:.digits$}")
+        let text = format!("{value:.digits$}");
+        if text.contains('.') {
+            text.trim_end_matches('0').trim_end_matches('.').to_owned()
+        } else {
+            text
+        }
     }
 }
 
-/// A vertical bar per value (`labels[i]` under bar `i` when there are few enough), with an
+/// A vertical bar per value (short `labels[i]` under bar `i`, every few when there are many), with an
 /// optional dot per bar (e.g. the maximum over frames above a mean).
 pub(super) fn bars(
     path: &Path,
@@ -75,12 +81,11 @@ pub(super) fn bars(
         .fold(0.0f64, f64::max);
     let top = if top > 0.0 { top * 1.08 } else { 1.0 };
     let width = (420 + 9 * n as u32).clamp(560, 1100);
-    let rotate = labels.iter().any(|l| l.len() > 3) && n > 1;
     svg(path, (width, 360), |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 18))
+            .caption(title, (FONT, 22))
             .margin(12)
-            .x_label_area_size(if rotate { 110 } else { 40 })
+            .x_label_area_size(40)
             .y_label_area_size(70)
             .build_cartesian_2d(-0.5f64..n as f64 - 0.5, 0f64..top)
             .map_err(|e| anyhow!("{e}"))?;
@@ -99,15 +104,7 @@ pub(super) fn bars(
             .x_labels(n.div_ceil(every) + 1)
             .x_label_formatter(&label)
             .y_label_formatter(&|y| short(*y))
-            .label_style((FONT, 12));
-        if rotate {
-            mesh.x_label_style(
-                (FONT, 11)
-                    .into_font()
-                    .transform(FontTransform::Rotate270)
-                    .color(&BLACK),
-            );
-        }
+            .label_style((FONT, 15));
         mesh.draw().map_err(|e| anyhow!("{e}"))?;
         chart
             .draw_series(values.iter().enumerate().map(|(i, &v)| {
@@ -129,7 +126,7 @@ pub(super) fn bars(
                 .configure_series_labels()
                 .border_style(BLACK)
                 .background_style(WHITE.mix(0.9))
-                .label_font((FONT, 12))
+                .label_font((FONT, 15))
                 .draw()
                 .map_err(|e| anyhow!("{e}"))?;
         }
@@ -137,14 +134,21 @@ pub(super) fn bars(
     })
 }
 
-/// Horizontal bars, one per `(label, seconds)`, the value written at each bar's end.
-pub(super) fn timings(path: &Path, title: &str, items: &[(String, f64)]) -> anyhow::Result<()> {
+/// Horizontal bars, one per `(label, value)`, the value written at each bar's end by `text`,
+/// the first item at the top.
+pub(super) fn hbars(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    items: &[(String, f64)],
+    text: &dyn Fn(f64) -> String,
+) -> anyhow::Result<()> {
     let n = items.len().max(1);
     let top = items.iter().map(|i| i.1).fold(0.0f64, f64::max);
     let top = if top > 0.0 { top * 1.25 } else { 1.0 };
-    svg(path, (760, 70 + 34 * n as u32), |root| {
+    svg(path, (760, 70 + 26 * n as u32), |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(title, (FONT, 18))
+            .caption(title, (FONT, 22))
             .margin(12)
             .x_label_area_size(36)
             .y_label_area_size(200)
@@ -161,25 +165,25 @@ pub(super) fn timings(path: &Path, title: &str, items: &[(String, f64)]) -> anyh
         };
         chart
             .configure_mesh()
-            .x_desc("seconds")
+            .x_desc(x_desc)
             .disable_y_mesh()
             .y_labels(n + 1)
             .y_label_formatter(&label)
             .x_label_formatter(&|x| short(*x))
-            .label_style((FONT, 12))
+            .label_style((FONT, 15))
             .draw()
             .map_err(|e| anyhow!("{e}"))?;
         // First item at the top.
         chart
             .draw_series(items.iter().enumerate().map(|(i, (_, s))| {
                 let y = (n - 1 - i) as f64;
-                Rectangle::new([(0.0, y - 0.35), (s.max(0.0), y + 0.35)], BAR.filled())
+                Rectangle::new([(0.0, y - 0.32), (s.max(0.0), y + 0.32)], BAR.filled())
             }))
             .map_err(|e| anyhow!("{e}"))?;
         chart
             .draw_series(items.iter().enumerate().map(|(i, (_, s))| {
                 let y = (n - 1 - i) as f64;
-                Text::new(format!(" {s:.2} s"), (s.max(0.0), y + 0.2), (FONT, 12))
+                Text::new(format!(" {}", text(*s)), (s.max(0.0), y + 0.2), (FONT, 15))
             }))
             .map_err(|e| anyhow!("{e}"))?;
         Ok(())
@@ -208,6 +212,16 @@ pub(super) fn lines(
     if x1 - x0 < 1e-12 {
         x1 = x0 + 1.0;
     }
+    // Room on the right for the legend, clear of the lines.
+    let whole = series
+        .iter()
+        .all(|s| s.1.iter().all(|p| p.0.fract() == 0.0));
+    let x1 = if series.len() > 1 {
+        x1 + (x1 - x0) * 0.3
+    } else {
+        x1
+    };
+    let x0 = if whole { x0 - 0.3 } else { x0 };
     let (lo, hi) = if log_y {
         (y0 / 1.3, y1 * 1.3)
     } else {
@@ -216,11 +230,10 @@ pub(super) fn lines(
     svg(path, (860, 380), |root| {
         let mut builder = ChartBuilder::on(root);
         builder
-            .caption(title, (FONT, 18))
+            .caption(title, (FONT, 22))
             .margin(12)
             .x_label_area_size(40)
-            .y_label_area_size(76)
-            .right_y_label_area_size(10);
+            .y_label_area_size(76);
         let style = |i: usize| SERIES[i % SERIES.len()];
         macro_rules! draw {
             ($chart:expr) => {{
@@ -230,7 +243,17 @@ pub(super) fn lines(
                     .x_desc(x_desc)
                     .y_desc(y_desc)
                     .y_label_formatter(&|y| short(*y))
-                    .label_style((FONT, 12))
+                    .y_labels(12)
+                    .x_label_formatter(&|x| {
+                        if !whole {
+                            short(*x)
+                        } else if x.fract() != 0.0 {
+                            String::new()
+                        } else {
+                            format!("{}", *x as i64)
+                        }
+                    })
+                    .label_style((FONT, 15))
                     .draw()
                     .map_err(|e| anyhow!("{e}"))?;
                 for (i, (name, pts)) in series.iter().enumerate() {
@@ -257,7 +280,7 @@ pub(super) fn lines(
                         .position(SeriesLabelPosition::UpperRight)
                         .border_style(BLACK)
                         .background_style(WHITE.mix(0.9))
-                        .label_font((FONT, 12))
+                        .label_font((FONT, 15))
                         .draw()
                         .map_err(|e| anyhow!("{e}"))?;
                 }
@@ -291,10 +314,16 @@ pub(super) fn selection_grid(
     betas: &[f32],
     values: &[Vec<Vec<f64>>],
 ) -> anyhow::Result<()> {
-    let finite = || values.iter().flatten().flatten().copied().filter(|v| v.is_finite() && *v > 0.0);
+    let finite = || {
+        values
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .filter(|v| v.is_finite() && *v > 0.0)
+    };
     let lo = finite().fold(f64::MAX, f64::min);
     let hi = finite().fold(f64::MIN, f64::max);
-    let best = finite().fold(f64::MAX, f64::min);
     let norm = |v: f64| -> f32 {
         if !(v.is_finite() && v > 0.0) {
             return 1.0;
@@ -304,85 +333,121 @@ pub(super) fn selection_grid(
         }
         ((v.ln() - lo.ln()) / (hi.ln() - lo.ln())) as f32
     };
-    let (rows, cols) = (kernels.len().max(1), kappas.len().max(1));
-    let panel_w = 90 + 62 * cols as u32;
-    let width = 190 + panel_w * betas.len().max(1) as u32;
-    let height = 120 + 30 * rows as u32;
+    let (rows, cols, panels) = (
+        kernels.len().max(1),
+        kappas.len().max(1),
+        betas.len().max(1),
+    );
+    // One chart: the panels side by side, one empty column between them.
+    let stride = cols + 1;
+    let columns = panels * stride - 1;
+    let width = 200 + 64 * columns as u32;
+    let height = 150 + 28 * rows as u32;
     svg(path, (width, height), |root| {
-        let root = root
-            .titled(title, (FONT, 18))
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, (FONT, 22))
+            .margin(12)
+            .margin_top(30)
+            .x_label_area_size(44)
+            .y_label_area_size(150)
+            .build_cartesian_2d(
+                (0..columns as i32 - 1).into_segmented(),
+                (0..rows as i32).into_segmented(),
+            )
             .map_err(|e| anyhow!("{e}"))?;
-        let (labels, panels) = root.split_horizontally(190);
-        // Kernel names once, on the left, level with the panels' rows.
-        let top = 40.0;
-        let row_h = (height as f64 - 30.0 - top - 50.0) / rows as f64;
-        for (r, name) in kernels.iter().enumerate() {
-            let y = top + row_h * (r as f64 + 0.5);
-            labels
-                .draw(&Text::new(
-                    name.clone(),
-                    (8, y as i32),
-                    (FONT, 12).into_font().color(&BLACK),
-                ))
-                .map_err(|e| anyhow!("{e}"))?;
-        }
-        let areas = panels.split_evenly((1, betas.len().max(1)));
-        for (b, (area, beta)) in areas.iter().zip(betas).enumerate() {
-            let mut chart = ChartBuilder::on(area)
-                .caption(format!("beta {beta}"), (FONT, 14))
-                .margin_left(4)
-                .margin_right(4)
-                .x_label_area_size(50)
-                .y_label_area_size(0)
-                .build_cartesian_2d(0f64..cols as f64, 0f64..rows as f64)
-                .map_err(|e| anyhow!("{e}"))?;
+        let kappa_of = |v: &SegmentValue<i32>| -> String {
+            match v {
+                SegmentValue::CenterOf(c) if (*c as usize) % stride < cols => {
+                    format!("{:e}", kappas[*c as usize % stride])
+                }
+                _ => String::new(),
+            }
+        };
+        let kernel_of = |v: &SegmentValue<i32>| -> String {
+            match v {
+                // First kernel at the top.
+                SegmentValue::CenterOf(r) if (*r as usize) < rows => {
+                    kernels[rows - 1 - *r as usize].clone()
+                }
+                _ => String::new(),
+            }
+        };
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_labels(columns)
+            .y_labels(rows)
+            .x_label_formatter(&kappa_of)
+            .y_label_formatter(&kernel_of)
+            .x_desc("kappa (one panel per beta)")
+            .label_style((FONT, 15))
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+        let best = finite().fold(f64::MAX, f64::min);
+        let cell = |c: usize, r: usize| {
+            (
+                SegmentValue::Exact(c as i32),
+                SegmentValue::Exact((rows - 1 - r) as i32 + 1),
+            )
+        };
+        let corner = |c: usize, r: usize| {
+            (
+                SegmentValue::Exact(c as i32 + 1),
+                SegmentValue::Exact((rows - 1 - r) as i32),
+            )
+        };
+        let center = |c: usize, r: usize| {
+            (
+                SegmentValue::CenterOf(c as i32),
+                SegmentValue::CenterOf((rows - 1 - r) as i32),
+            )
+        };
+        let centered = Pos::new(HPos::Center, VPos::Center);
+        for (b, beta) in betas.iter().enumerate() {
+            let first = b * stride;
             chart
-                .configure_mesh()
-                .disable_mesh()
-                .disable_y_axis()
-                .x_labels(cols * 2 + 1)
-                .x_label_formatter(&|x| {
-                    let i = x - 0.5;
-                    if (i - i.round()).abs() > 1e-6 || i < 0.0 || i.round() as usize >= cols {
-                        return String::new();
-                    }
-                    format!("{:e}", kappas[i.round() as usize])
-                })
-                .x_desc("kappa")
-                .label_style((FONT, 11))
-                .draw()
+                .draw_series(std::iter::once(Text::new(
+                    format!("beta {beta}"),
+                    (
+                        SegmentValue::Exact(first as i32),
+                        SegmentValue::Exact(rows as i32),
+                    ),
+                    (FONT, 17)
+                        .into_font()
+                        .color(&BLACK)
+                        .pos(Pos::new(HPos::Left, VPos::Bottom)),
+                )))
                 .map_err(|e| anyhow!("{e}"))?;
             for (r, row) in values.iter().enumerate() {
-                // First kernel at the top.
-                let y = (rows - 1 - r) as f64;
-                for (c, cell) in row.iter().enumerate() {
-                    let v = cell.get(b).copied().unwrap_or(f64::NAN);
+                for (k, kappa_cells) in row.iter().enumerate() {
+                    let v = kappa_cells.get(b).copied().unwrap_or(f64::NAN);
+                    let c = first + k;
                     let [red, green, blue] = heat_color(norm(v));
-                    let x = c as f64;
                     chart
                         .draw_series(std::iter::once(Rectangle::new(
-                            [(x, y), (x + 1.0, y + 1.0)],
+                            [cell(c, r), corner(c, r)],
                             RGBColor(red, green, blue).filled(),
                         )))
                         .map_err(|e| anyhow!("{e}"))?;
                     if v == best {
                         chart
                             .draw_series(std::iter::once(Rectangle::new(
-                                [(x + 0.04, y + 0.06), (x + 0.96, y + 0.94)],
+                                [cell(c, r), corner(c, r)],
                                 BLACK.stroke_width(3),
                             )))
                             .map_err(|e| anyhow!("{e}"))?;
                     }
                     let ink = if norm(v) > 0.6 { WHITE } else { BLACK };
+                    let text = if v.is_finite() {
+                        format!("{v:.2e}")
+                    } else {
+                        "failed".to_owned()
+                    };
                     chart
                         .draw_series(std::iter::once(Text::new(
-                            if v.is_finite() {
-                                format!("{v:.2e}")
-                            } else {
-                                "failed".to_owned()
-                            },
-                            (x + 0.08, y + 0.7),
-                            (FONT, 10).into_font().color(&ink),
+                            text,
+                            center(c, r),
+                            (FONT, 12).into_font().color(&ink).pos(centered),
                         )))
                         .map_err(|e| anyhow!("{e}"))?;
                 }
@@ -403,5 +468,7 @@ mod tests {
         assert_eq!(short(123.4), "123");
         assert_eq!(short(0.01234), "0.0123");
         assert_eq!(short(1.5e-5), "1.50e-5");
+        assert_eq!(short(0.001), "0.001");
+        assert_eq!(short(2.0), "2");
     }
 }

@@ -62,9 +62,10 @@ fn bounds(sets: &[&[Vec3]]) -> (Vec3, Vec3) {
     sets.iter()
         .flat_map(|s| s.iter())
         .filter(|p| p.is_finite())
-        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), &p| {
-            (lo.min(p), hi.max(p))
-        })
+        .fold(
+            (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        )
 }
 
 /// One pose's error heat map, written as PNG to `path`: three views in a row (the true shape
@@ -157,13 +158,17 @@ pub(super) fn control_layout(
                 continue;
             };
             let hidden = projected.iter().any(|q| {
-                (q.x - p.x).abs() < 2.5 && (q.y - p.y).abs() < 2.5 && q.z < p.z - 0.02 * box_size(box_)
+                (q.x - p.x).abs() < 2.5
+                    && (q.y - p.y).abs() < 2.5
+                    && q.z < p.z - 0.02 * box_size(box_)
             });
             let color = marker_color(i);
             dot(&mut tile, p.x, p.y, 6.0, color, hidden);
-            let (x, y) = (p.x as u32 + 8, (p.y as u32).saturating_sub(4));
-            tile.draw_text(x + 1, y + 1, label, BACKGROUND, 1);
-            tile.draw_text(x, y, label, color, 1);
+            let (x, y) = (p.x as u32 + 9, (p.y as u32).saturating_sub(7));
+            for (dx, dy) in [(0, 1), (2, 1), (1, 0), (1, 2)] {
+                tile.draw_text(x + dx, y + dy, label, BACKGROUND, 2);
+            }
+            tile.draw_text(x + 1, y + 1, label, INK, 2);
         }
         tile.draw_text(6, 6, name, INK, 2);
         sheet.blit(&tile, k as u32 * tile_size, 0);
@@ -227,6 +232,9 @@ mod tests {
         assert_eq!(heat_color(-1.0), heat_color(0.0));
         // Redder as the error grows: the green channel falls monotonically after the grey.
         let greens: Vec<u8> = (0..=20).map(|i| heat_color(i as f32 / 20.0)[1]).collect();
-        assert!(greens.windows(2).skip(5).all(|w| w[1] <= w[0]), "{greens:?}");
+        assert!(
+            greens.windows(2).skip(5).all(|w| w[1] <= w[0]),
+            "{greens:?}"
+        );
     }
 }
