@@ -99,9 +99,9 @@ fn check_images(dir: &Path, html: &str) -> Vec<String> {
         let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         if src.ends_with(".png") {
             let decoder = png::Decoder::new(std::io::Cursor::new(&bytes));
-            let mut reader = decoder.read_info().unwrap();
-            let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-            let info = reader.next_frame(&mut buf).unwrap();
+            let mut reader = decoder.read_info().expect("a well-formed report");
+            let mut buf = vec![0; reader.output_buffer_size().expect("a well-formed report")];
+            let info = reader.next_frame(&mut buf).expect("a well-formed report");
             assert_eq!(info.color_type, png::ColorType::Rgb, "{src}");
             let px: Vec<[u8; 3]> = buf[..info.buffer_size()]
                 .chunks_exact(3)
@@ -126,7 +126,7 @@ fn check_images(dir: &Path, html: &str) -> Vec<String> {
                 assert!(warm > 1000, "{src}: only {warm} heat-coloured pixels");
             }
         } else if src.ends_with(".svg") {
-            let text = String::from_utf8(bytes).unwrap();
+            let text = String::from_utf8(bytes).expect("a well-formed report");
             assert!(text.starts_with("<svg"), "{src}: not an SVG");
             let drawn: usize = ["<rect", "<polyline", "<circle", "<path", "<line"]
                 .iter()
@@ -157,25 +157,32 @@ fn check_eval_numbers(html: &str, json: &Value) {
     let mut seen = BTreeSet::new();
     for c in &cells {
         let (p, r, k) = (
-            c.get("protocol").unwrap(),
-            c.get("row").unwrap(),
-            c.get("key").unwrap(),
+            c.get("protocol").expect("a well-formed report"),
+            c.get("row").expect("a well-formed report"),
+            c.get("key").expect("a well-formed report"),
         );
         let stats = &json[p][r];
         let want = if k == "frames" {
-            stats["frames"].as_array().unwrap().len() as f64
+            stats["frames"]
+                .as_array()
+                .expect("a well-formed report")
+                .len() as f64
         } else {
             stats[k]
                 .as_f64()
                 .unwrap_or_else(|| panic!("{p}/{r}/{k} not in --json"))
         };
-        let got: f64 = c.get("value").unwrap().parse().unwrap();
+        let got: f64 = c
+            .get("value")
+            .expect("a well-formed report")
+            .parse()
+            .expect("a well-formed report");
         assert_eq!(got.to_bits(), want.to_bits(), "{p}/{r}/{k}");
         check_text(c, want);
         seen.insert(format!("{p}/{r}/{k}"));
     }
-    for (p, rows) in json.as_object().unwrap() {
-        for r in rows.as_object().unwrap().keys() {
+    for (p, rows) in json.as_object().expect("a well-formed report") {
+        for r in rows.as_object().expect("a well-formed report").keys() {
             for k in ["rms_mean", "rms_max", "us_per_frame", "frames"] {
                 assert!(
                     seen.contains(&format!("{p}/{r}/{k}")),
@@ -189,37 +196,46 @@ fn check_eval_numbers(html: &str, json: &Value) {
 /// The pictured method of each protocol is the evaluated method with the lowest mean error,
 /// and its first heat map shows its worst pose, whose RMS the caption gives.
 fn check_worst(html: &str, json: &Value, methods: &[&str]) {
-    for (protocol, rows) in json.as_object().unwrap() {
+    for (protocol, rows) in json.as_object().expect("a well-formed report") {
         let best = methods
             .iter()
             .min_by(|a, b| {
                 rows[**a]["rms_mean"]
                     .as_f64()
-                    .unwrap()
-                    .total_cmp(&rows[**b]["rms_mean"].as_f64().unwrap())
+                    .expect("a well-formed report")
+                    .total_cmp(
+                        &rows[**b]["rms_mean"]
+                            .as_f64()
+                            .expect("a well-formed report"),
+                    )
             })
-            .unwrap();
+            .expect("a well-formed report");
         let table = &html[html
             .find(&format!(
                 "<table class=\"results\" data-protocol=\"{protocol}\""
             ))
-            .unwrap()..];
-        let shown = &table[table.find("<tr class=\"shown\"><th>").unwrap() + 22..];
+            .expect("a well-formed report")..];
+        let shown = &table[table
+            .find("<tr class=\"shown\"><th>")
+            .expect("a well-formed report")
+            + 22..];
         assert!(
             shown.starts_with(&format!("{best}<")),
             "{protocol}: {shown:.40}"
         );
         let worst = rows[*best]["frames"]
             .as_array()
-            .unwrap()
+            .expect("a well-formed report")
             .iter()
-            .map(|v| v.as_f64().unwrap())
+            .map(|v| v.as_f64().expect("a well-formed report"))
             .fold(0.0, f64::max);
         let figure = &html[html
             .find(&format!("src=\"{protocol}-worst-1.png\""))
-            .unwrap()..];
-        let rms = &figure[figure.find(", RMS ").unwrap() + 6..];
-        let rms: f64 = rms[..rms.find([',', ' ']).unwrap()].parse().unwrap();
+            .expect("a well-formed report")..];
+        let rms = &figure[figure.find(", RMS ").expect("a well-formed report") + 6..];
+        let rms: f64 = rms[..rms.find([',', ' ']).expect("a well-formed report")]
+            .parse()
+            .expect("a well-formed report");
         assert!(
             (rms - worst).abs() <= 1e-4 * worst,
             "{protocol}: the first heat map's RMS {rms} is not the worst pose's {worst}"

@@ -68,6 +68,9 @@ fn bounds(sets: &[&[Vec3]]) -> (Vec3, Vec3) {
         )
 }
 
+/// One view of a picture: positions, vertex colours, view, label.
+type Tile<'a> = (&'a [Vec3], &'a [[u8; 3]], View, &'a str);
+
 /// One pose's error heat map, written as PNG to `path`: three views in a row (the true shape
 /// in grey from the front, the prediction coloured by `vertex_error` from the front and the
 /// side), `title` above, a colour bar from 0 to `scale_max` below (errors as a fraction of the
@@ -88,7 +91,7 @@ pub(super) fn heat_map(
         .collect();
     let grey = vec![GREY; truth.len()];
     let box_ = bounds(&[truth, predicted]);
-    let tiles: [(&[Vec3], &[[u8; 3]], View, &str); 3] = [
+    let tiles: [Tile<'_>; 3] = [
         (truth, &grey, VIEWS[0].0, "truth, front"),
         (predicted, &colors, VIEWS[0].0, "error, front"),
         (predicted, &colors, VIEWS[1].0, "error, side"),
