@@ -4,7 +4,8 @@
 # demo), then runs tests/browser/viewer.test.mjs and tests/browser/palette.test.mjs (palette
 # streams on the GPU against `crease decode-stream`; playwright-core driving Debian's
 # /usr/bin/chromium) and tests/browser/webxr.test.mjs (WebXR hands in room `hands`, through
-# Meta's WebXR emulator iwer) against it.
+# Meta's WebXR emulator iwer) against it, and tests/browser/report.test.mjs (the --report pages of
+# crease eval and crease train, written here).
 # Called by .ci/run; runs alone from anywhere:
 #   bash tests/browser/run.sh
 # Uses ${CARGO_TARGET_DIR:-target} for the build, the demo cache (demo-cache/, trained once,
@@ -69,6 +70,27 @@ for encoding in "" vertices; do
     CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work${encoding:+/$encoding}" CHROMIUM="$chromium_bin" \
         CREASE_XR_ENCODING="$encoding" node tests/browser/webxr.test.mjs || failed=1
 done
+
+# Issue 22: the --report pages of crease eval (horse split, generated hand) and crease train,
+# each beside its --json output, opened by report.test.mjs (pictures load and are not blank,
+# table numbers equal --json).
+echo "== training and evaluation reports in headless chromium"
+reports="$work/report-horse,$work/report-hand,$work/report-horse-train"
+for r in ${reports//,/ }; do rm -rf "$r" && mkdir -p "$r"; done
+small=(--bones 20 --methods global,local)
+if [[ -f ../shared/data/horse/reference.obj ]]; then
+    "$bin/crease" eval --examples bench/horse/train.toml --test bench/horse/test.toml "${small[@]}" --select \
+        --json --report "$work/report-horse" >"$work/report-horse/stdout.json" || failed=1
+    "$bin/crease" train --examples bench/horse/train.toml --bones 20 --select --out "$work/report-horse-train/horse.crease" \
+        --json --report "$work/report-horse-train" >"$work/report-horse-train/stdout.json" || failed=1
+else
+    echo "skipped the horse reports: ../shared/data/horse is missing"
+    reports="$work/report-hand"
+fi
+"$bin/crease" eval --hands extrapolation --hand-test 6 "${small[@]}" --loo \
+    --json --report "$work/report-hand" >"$work/report-hand/stdout.json" || failed=1
+CREASE_REPORTS="$reports" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+    node tests/browser/report.test.mjs || failed=1
 
 echo "== stop crease-server"
 stop_server

@@ -44,11 +44,57 @@ pub fn train_layers(
     progress: &mut dyn FnMut(&IterationStat),
     detail_progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(TrainedModel, TrainReport), TrainError> {
+    train_layers_with(
+        input,
+        detailed,
+        options,
+        TrainProgress {
+            fit: progress,
+            detail: detail_progress,
+            select: &|_, _| {},
+        },
+    )
+}
+
+/// The progress callbacks of [`train_layers_with`].
+pub struct TrainProgress<'a> {
+    /// The bone fit's steps.
+    pub fit: &'a mut dyn FnMut(&IterationStat),
+    /// `(done, total)` of the detailed examples' resampling.
+    pub detail: &'a mut dyn FnMut(usize, usize),
+    /// `(done, folds)` of model selection's leave-one-out folds (from worker threads).
+    pub select: &'a (dyn Fn(usize, usize) + Sync),
+}
+
+impl std::fmt::Debug for TrainProgress<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TrainProgress")
+    }
+}
+
+/// [`train_layers`] that also reports model selection's progress.
+pub fn train_layers_with(
+    input: TrainInput<'_>,
+    detailed: Option<DetailFrames<'_>>,
+    options: &TrainOptions,
+    progress: TrainProgress<'_>,
+) -> Result<(TrainedModel, TrainReport), TrainError> {
+    let TrainProgress {
+        fit: progress,
+        detail: detail_progress,
+        select: select_progress,
+    } = progress;
     let mut base = train_base(input, options, progress)?;
     let t = Instant::now();
     let (regress, beta) = match &options.select {
         Some(grid) => {
-            let s = select::select(&base, input.frames, &options.regress, grid)?;
+            let s = select::select_with_progress(
+                &base,
+                input.frames,
+                &options.regress,
+                grid,
+                select_progress,
+            )?;
             let chosen = (s.apply(&options.regress), s.best.beta);
             base.report.selection = Some(s);
             chosen

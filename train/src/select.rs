@@ -36,6 +36,18 @@ pub fn select(
     options: &RegressOptions,
     grid: &SelectGrid,
 ) -> Result<Selection, TrainError> {
+    select_with_progress(base, frames, options, grid, &|_, _| {})
+}
+
+/// [`select`], calling `on_fold(done, folds)` as each leave-one-out fold finishes (from the
+/// worker threads, in completion order).
+pub fn select_with_progress(
+    base: &TrainedBase,
+    frames: &[&[Vec3]],
+    options: &RegressOptions,
+    grid: &SelectGrid,
+    on_fold: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Selection, TrainError> {
     let start = Instant::now();
     if grid.kernels.is_empty() || grid.kappas.is_empty() || grid.betas.is_empty() {
         return Err(TrainError::Select("the candidate grid is empty".into()));
@@ -52,6 +64,7 @@ pub fn select(
         options,
         &candidates,
         &grid.betas,
+        on_fold,
     )?;
     let mut table = Vec::with_capacity(errors.len());
     for (c, &(kernel, kappa)) in candidates.iter().enumerate() {
@@ -79,7 +92,7 @@ pub fn select(
 
 /// Mean leave-one-out mesh error over the non-rest examples, per `(kernel, kappa)` of
 /// `candidates` (major) and `beta` of `betas`, with the control points `controls` (the rig and
-/// its edge skin from `base`).
+/// its edge skin from `base`); `on_fold(done, folds)` after each fold.
 fn loo_errors(
     base: &TrainedBase,
     controls: &[u32],
@@ -87,6 +100,7 @@ fn loo_errors(
     options: &RegressOptions,
     candidates: &[(KernelChoice, f64)],
     betas: &[f32],
+    on_fold: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<f64>, TrainError> {
     let n = frames.len();
     if n < 3 {
@@ -122,6 +136,7 @@ fn loo_errors(
         .collect();
 
     // Per fold (held-out example i >= 1): per (kernel, kappa), per beta, the error.
+    let done = std::sync::atomic::AtomicUsize::new(0);
     let per_fold: Vec<Vec<f64>> = par::map_range(
         n - 1,
         || FoldScratch::new(rig.bone_count, rig.rest.vertex_count()),
@@ -151,6 +166,10 @@ fn loo_errors(
                     errors.push(s.mesh_error(solver, rig, ctl, target, scale));
                 }
             }
+            on_fold(
+                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
+                n - 1,
+            );
             errors
         },
     );
@@ -188,7 +207,7 @@ pub fn select_controls(
     }
     let candidate = [(options.kernel, options.kcca.kappa)];
     let score = |set: &[u32]| -> Result<f64, TrainError> {
-        Ok(loo_errors(base, set, frames, options, &candidate, &[beta])?[0])
+        Ok(loo_errors(base, set, frames, options, &candidate, &[beta], &|_, _| {})?[0])
     };
     let mut chosen = start.to_vec();
     let mut current = score(&chosen)?;

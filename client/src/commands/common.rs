@@ -81,10 +81,14 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let bar = ProgressBar::new(len);
             bar.set_style(
-                ProgressStyle::with_template("{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg}")
-                    .expect("static template")
-                    .progress_chars("=> "),
+                ProgressStyle::with_template(
+                    "{spinner} {prefix:>8} [{bar:30}] {pos}/{len} {msg} ({elapsed})",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
             );
+            // The spinner and the clock move during long steps that report nothing.
+            bar.enable_steady_tick(std::time::Duration::from_millis(200));
             bar
         });
         Self { bar }
@@ -118,6 +122,21 @@ impl Progress {
                 }
                 bar.set_message(msg.to_string());
                 bar.println(line);
+            }
+            None => eprintln!("{line}"),
+        }
+    }
+
+    /// Reports `done` of `total` steps of a counted phase (leave-one-out folds, selection
+    /// folds): on a terminal the bar takes that length and position, otherwise `line` is
+    /// printed.
+    pub fn count(&self, prefix: &str, done: u64, total: u64, line: &str) {
+        match &self.bar {
+            Some(bar) => {
+                bar.set_prefix(prefix.to_string());
+                bar.set_length(total);
+                bar.set_position(done);
+                bar.set_message(String::new());
             }
             None => eprintln!("{line}"),
         }

@@ -65,6 +65,12 @@ pub struct EvalArgs {
     /// Also write the table to this file (`.csv` or `.json`).
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Write an HTML report into this folder (`DIR/index.html`, pictures beside it): the
+    /// results tables, error heat maps of the 3 worst poses of the best method (front and
+    /// side), per-bone rotation errors, the selection grid with --select, the control points
+    /// and the stage timings. Its numbers are the --json output's.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
 }
 
 /// Runs `crease eval`.
@@ -107,6 +113,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         names: &names,
     };
     let progress = Progress::new(options.train.fit.max_iterations as u64);
+    let mut timings: Vec<(String, f64)> = Vec::new();
+    let source = match (&args.hands, &args.examples) {
+        (Some(protocol), _) => format!("generated hand, {protocol}, layout {}", args.hand_layout),
+        (_, Some(path)) => path.display().to_string(),
+        _ => String::new(),
+    };
 
     let mut results = serde_json::Map::new();
     let mut tables: Vec<(&str, EvalTable)> = Vec::new();
@@ -164,6 +176,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 tf.len()
             );
         }
+        let t = std::time::Instant::now();
         let table = eval::evaluate_test_layers(
             input,
             HeldOut {
@@ -175,6 +188,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             &mut |s| progress.step(s),
         )
         .context("test evaluation")?;
+        timings.push(("test evaluation".into(), t.elapsed().as_secs_f64()));
         tables.push(("test", table));
     }
     if args.loo {
@@ -190,15 +204,17 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 frames.len()
             );
         }
+        let t = std::time::Instant::now();
         let table = eval::evaluate_loo_layers(input, detail, &options, &mut |i, n| {
-            progress.line(
+            progress.count(
                 "loo",
-                None,
-                &format!("fold {i}/{n}"),
+                i as u64 - 1,
+                n as u64,
                 &format!("leave-one-out fold {i}/{n}"),
             )
         })
         .context("leave-one-out evaluation")?;
+        timings.push(("leave-one-out".into(), t.elapsed().as_secs_f64()));
         tables.push(("loo", table));
     }
     progress.finish();
@@ -243,6 +259,29 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         };
         std::fs::write(out, text).with_context(|| format!("writing {}", out.display()))?;
         eprintln!("wrote {}", out.display());
+    }
+    if let Some(dir) = &args.report {
+        let progress = Progress::new(0);
+        let test = test_set
+            .as_ref()
+            .map(|(_, t)| (t.base.frames(), t.base.names()));
+        let page = super::report::write_eval(
+            dir,
+            &super::report::EvalReport {
+                source,
+                train: input,
+                test: test
+                    .as_ref()
+                    .map(|(frames, names)| HeldOut { names, frames }),
+                options: &options,
+                tables: &tables,
+                json: &json,
+                timings: &timings,
+            },
+            &progress,
+        )?;
+        progress.finish();
+        eprintln!("wrote {}", page.display());
     }
     Ok(())
 }

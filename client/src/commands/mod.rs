@@ -11,6 +11,7 @@ pub mod handgen;
 pub mod layers;
 pub mod mesh_stream;
 pub mod remote_synth;
+pub mod report;
 pub mod retarget;
 pub mod room;
 pub mod stream;

@@ -38,6 +38,13 @@ pub struct TrainArgs {
     /// Print one JSON object with the training report on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Write an HTML report into this folder (`DIR/index.html`, pictures beside it): the
+    /// training report's numbers (those of --json), the model's error on its training poses
+    /// with heat maps of the 3 worst (front and side), per-bone rotation errors, the bone fit's
+    /// convergence, the selection grid with --select, the control points and the stage
+    /// timings.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
 }
 
 /// Runs `crease train`.
@@ -50,22 +57,33 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let names: Vec<String> = set.names();
     let progress = Progress::new(options.fit.max_iterations as u64);
     let detail_parts = layers.detail_frames();
-    let (model, report) = pipeline::train_layers(
-        TrainInput {
-            rest: &set.rest,
-            frames: &frames,
-            names: &names,
-        },
+    let input = TrainInput {
+        rest: &set.rest,
+        frames: &frames,
+        names: &names,
+    };
+    let (model, report) = pipeline::train_layers_with(
+        input,
         detail_parts.as_ref().map(layers::frames),
         &options,
-        &mut |s| progress.step(s),
-        &mut |done, total| {
-            progress.line(
-                "detail",
-                None,
-                &format!("resampled {done}/{total}"),
-                &format!("detail layer: resampled detailed example {done}/{total}"),
-            )
+        pipeline::TrainProgress {
+            fit: &mut |s| progress.step(s),
+            detail: &mut |done, total| {
+                progress.line(
+                    "detail",
+                    None,
+                    &format!("resampled {done}/{total}"),
+                    &format!("detail layer: resampled detailed example {done}/{total}"),
+                )
+            },
+            select: &|done, folds| {
+                progress.count(
+                    "select",
+                    done as u64,
+                    folds as u64,
+                    &format!("model selection: leave-one-out fold {done}/{folds} scored"),
+                )
+            },
         },
     )
     .context("training")?;
@@ -118,6 +136,23 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             d.extract_seconds,
             d.fit_seconds
         );
+    }
+    if let Some(dir) = &args.report {
+        let json = serde_json::to_value(&report)?;
+        let progress = Progress::new(0);
+        let page = super::report::write_train(
+            dir,
+            &super::report::TrainReportInput {
+                source: args.examples.display().to_string(),
+                train: input,
+                model: &model,
+                report: &report,
+                json: &json,
+            },
+            &progress,
+        )?;
+        progress.finish();
+        eprintln!("wrote {}", page.display());
     }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

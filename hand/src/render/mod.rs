@@ -6,8 +6,9 @@
 //! - `camera`: [`View`] and [`Camera`]: orthographic cameras, fitted to a bounding box.
 //! - `shade`: [`RenderSettings`], [`Light`]: colours, lights fixed relative to the camera,
 //!   supersampling; the Blinn-Phong shader and the sRGB transfer functions.
-//! - `raster`: [`Renderer`]: z-buffered rasterisation into reusable buffers; [`render`] for one
-//!   picture.
+//! - `raster`: [`Renderer`]: z-buffered rasterisation into reusable buffers, in the settings'
+//!   colour or with per-vertex colours ([`Renderer::render_colored_into`], e.g. error heat maps);
+//!   [`render`] for one picture.
 //! - `image`: [`Image`]: RGB8 pictures with [`Image::blit`], [`Image::fill_rect`] and PNG output
 //!   ([`Image::encode_png`], [`Image::write_png`]); [`image_stats`]: mean and variance of
 //!   luminance (a "not blank" check).

@@ -34,6 +34,10 @@ pub struct Renderer {
     depth: Vec<f32>,
     /// Per sample: interpolated (unnormalised) normal of the nearest surface.
     sample_normals: Vec<Vec3>,
+    /// Vertex colours in linear light ([`Renderer::render_colored_into`]).
+    linear_colors: Vec<Vec3>,
+    /// Per sample: interpolated linear albedo of the nearest surface (vertex colours only).
+    sample_albedo: Vec<Vec3>,
 }
 
 impl Renderer {
@@ -60,6 +64,49 @@ impl Renderer {
         settings: &RenderSettings,
         out: &mut Image,
     ) {
+        self.draw(positions, triangles, None, camera, settings, out);
+    }
+
+    /// [`Renderer::render_into`] with one sRGB colour per vertex instead of
+    /// [`RenderSettings::base_color`]: the albedo is interpolated across each triangle in linear
+    /// light and shaded as usual (e.g. an error heat map on the mesh).
+    ///
+    /// # Panics
+    /// If a triangle index is out of range, or `colors` does not have one entry per position.
+    pub fn render_colored_into(
+        &mut self,
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        colors: &[[u8; 3]],
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut Image,
+    ) {
+        assert_eq!(
+            colors.len(),
+            positions.len(),
+            "one vertex colour per position"
+        );
+        let mut linear = std::mem::take(&mut self.linear_colors);
+        linear.clear();
+        linear.extend(
+            colors
+                .iter()
+                .map(|c| Vec3::from_array(c.map(super::srgb8_to_linear))),
+        );
+        self.draw(positions, triangles, Some(&linear), camera, settings, out);
+        self.linear_colors = linear;
+    }
+
+    fn draw(
+        &mut self,
+        positions: &[Vec3],
+        triangles: &[[u32; 3]],
+        colors: Option<&[Vec3]>,
+        camera: &Camera,
+        settings: &RenderSettings,
+        out: &mut Image,
+    ) {
         let factor = settings.supersample.clamp(1, MAX_SUPERSAMPLE);
         let cam = camera.scaled(factor);
         let (width, height) = (cam.width as usize, cam.height as usize);
@@ -71,12 +118,16 @@ impl Renderer {
         self.depth.clear();
         self.depth.resize(width * height, f32::INFINITY);
         self.sample_normals.resize(width * height, Vec3::ZERO);
+        if colors.is_some() {
+            self.sample_albedo.resize(width * height, Vec3::ZERO);
+        }
 
         let mut target = Target {
             width,
             height,
             depth: &mut self.depth,
             normals: &mut self.sample_normals,
+            albedo: colors.map(|c| (c, &mut self.sample_albedo[..])),
         };
         for t in triangles {
             rasterize_triangle(*t, positions, &self.projected, &self.normals, &mut target);
@@ -94,7 +145,11 @@ impl Renderer {
                     let row = (oy * f + sy) * width + ox * f;
                     for i in row..row + f {
                         if self.depth[i].is_finite() {
-                            sum += shader.shade(self.sample_normals[i]);
+                            sum += match colors {
+                                Some(_) => shader
+                                    .shade_albedo(self.sample_normals[i], self.sample_albedo[i]),
+                                None => shader.shade(self.sample_normals[i]),
+                            };
                             covered += 1;
                         } else {
                             sum += shader.background;
@@ -135,6 +190,8 @@ struct Target<'a> {
     height: usize,
     depth: &'a mut [f32],
     normals: &'a mut [Vec3],
+    /// Vertex colours (linear) and the per-sample albedo they are interpolated into.
+    albedo: Option<(&'a [Vec3], &'a mut [Vec3])>,
 }
 
 /// One vertex of a triangle being drawn: fixed-point pixel position, depth, normal.
@@ -144,6 +201,8 @@ struct Corner {
     y: i64,
     z: f32,
     n: Vec3,
+    /// Linear vertex colour (zero without vertex colours).
+    c: Vec3,
 }
 
 /// An edge function `E(p) = (b - a) x (p - a)` in fixed point, evaluated incrementally.
@@ -205,15 +264,17 @@ fn rasterize_triangle(
             .normalize_or_zero();
         (n0, n1, n2) = (face, face, face);
     }
-    let corner = |p: Vec3, n: Vec3| Corner {
+    let color = |i: usize| target.albedo.as_ref().map_or(Vec3::ZERO, |(c, _)| c[i]);
+    let corner = |p: Vec3, n: Vec3, c: Vec3| Corner {
         x: to_fixed(p.x),
         y: to_fixed(p.y),
         z: p.z,
         n,
+        c,
     };
-    let a = corner(p0, n0);
-    let mut b = corner(p1, n1);
-    let mut c = corner(p2, n2);
+    let a = corner(p0, n0, color(i0));
+    let mut b = corner(p1, n1, color(i1));
+    let mut c = corner(p2, n2, color(i2));
     let mut area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
     if area == 0 {
         return;
@@ -259,6 +320,9 @@ fn rasterize_triangle(
                 if z < target.depth[i] {
                     target.depth[i] = z;
                     target.normals[i] = a.n * l0 + b.n * l1 + c.n * l2;
+                    if let Some((_, albedo)) = target.albedo.as_mut() {
+                        albedo[i] = a.c * l0 + b.c * l1 + c.c * l2;
+                    }
                 }
             }
             w0 += e0.step_x;
@@ -295,5 +359,37 @@ mod tests {
         let mut image = Image::default();
         Renderer::new().render_into(&positions, &triangles, &camera, &settings, &mut image);
         assert!(image.pixels().iter().all(|&p| p == settings.background));
+    }
+
+    #[test]
+    fn vertex_colours_are_interpolated_and_shaded() {
+        // A square facing the camera, left edge red and right edge blue: the left of the
+        // picture is red, the right blue, the middle a mix.
+        let positions = vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ];
+        let triangles = vec![[0, 1, 2], [0, 2, 3]];
+        let colors = [[255, 0, 0], [0, 0, 255], [0, 0, 255], [255, 0, 0]];
+        let camera = Camera::orthographic(View::Back, Vec3::ZERO, 20.0, 50, 50);
+        let settings = RenderSettings {
+            supersample: 1,
+            specular: 0.0,
+            ..RenderSettings::default()
+        };
+        let mut image = Image::default();
+        Renderer::new().render_colored_into(
+            &positions, &triangles, &colors, &camera, &settings, &mut image,
+        );
+        let (left, right, mid) = (image.pixel(6, 25), image.pixel(43, 25), image.pixel(25, 25));
+        assert!(left[0] > 150 && left[1] == 0 && left[2] < 80, "{left:?}");
+        assert!(
+            right[2] > 150 && right[1] == 0 && right[0] < 80,
+            "{right:?}"
+        );
+        assert!(mid[0] > 40 && mid[2] > 40, "{mid:?}");
+        assert_eq!(image.pixel(1, 1), settings.background);
     }
 }

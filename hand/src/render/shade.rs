@@ -137,6 +137,11 @@ impl Shader {
 
     /// Linear colour of a surface sample with (unnormalised) normal `n`, clamped to `[0, 1]`.
     pub(super) fn shade(&self, n: Vec3) -> Vec3 {
+        self.shade_albedo(n, self.albedo)
+    }
+
+    /// [`Shader::shade`] with a linear `albedo` instead of the settings' base colour.
+    pub(super) fn shade_albedo(&self, n: Vec3, albedo: Vec3) -> Vec3 {
         let mut n = n.normalize_or(self.to_viewer);
         if n.dot(self.to_viewer) < 0.0 {
             n = -n;
@@ -153,8 +158,7 @@ impl Shader {
                 }
             }
         }
-        (self.albedo * diffuse + Vec3::splat(self.specular * highlight))
-            .clamp(Vec3::ZERO, Vec3::ONE)
+        (albedo * diffuse + Vec3::splat(self.specular * highlight)).clamp(Vec3::ZERO, Vec3::ONE)
     }
 }
 
