@@ -125,7 +125,12 @@ fn assert_within(what: &str, got: &[Vec3], want: &[Vec3], bound: Vec3) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dqs_rooms_stream_skin_dqs_of_the_predicted_transforms() {
-    let model = model();
+    // The curled tube: its bones blend over the rings, where the bent tube's are rigid
+    // segments (on which LBS and DQS agree).
+    let model = model_of(curled);
+    let control_frame = |model: &TrainedModel, room: &str, seq: u64, angle: f32| {
+        control_frame_of(curled, model, room, seq, angle)
+    };
     let running = serve_both(&model).await;
     let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
         .await
@@ -238,8 +243,9 @@ async fn dqs_rooms_stream_skin_dqs_of_the_predicted_transforms() {
         .unwrap();
     drop(ws);
 
-    // Frames in the training span and beyond it (the training bends go to 1.25 rad), one at a
-    // time, each read back from every room's vertex stream.
+    // Frames across the training span (0 to 1.25 rad; beyond it the prediction leaves the
+    // stream's quantisation box, where frames clamp), one at a time, each read back from every
+    // room's vertex stream.
     let rooms = ["dqs", "lbs", "default", "model-dqs"];
     let mut subs = Vec::new();
     for room in rooms {
@@ -261,7 +267,7 @@ async fn dqs_rooms_stream_skin_dqs_of_the_predicted_transforms() {
         subs.push((sub, topology, decoder));
     }
     let mut lbs_vs_dqs: f32 = 0.0;
-    for (seq, angle) in [(1u64, 0.3f32), (2, 0.9), (3, 1.2), (4, 1.7)] {
+    for (seq, angle) in [(1u64, 0.3f32), (2, 0.8), (3, 1.1), (4, 1.25)] {
         let frame = |room: &str| control_frame(&model, room, seq, angle);
         let (want_dqs, want_lbs) = wanted(&model, &frame(""));
         for ((room, (sub, topology, decoder)), skinning) in rooms.iter().zip(&mut subs).zip([
@@ -296,7 +302,7 @@ async fn dqs_rooms_stream_skin_dqs_of_the_predicted_transforms() {
             // The other skinning is far outside the bound: the comparison can fail.
             let apart = max_distance(&got, other);
             assert!(
-                angle < 0.5 || apart > 5.0 * bound.max_element(),
+                angle < 0.5 || apart > 10.0 * bound.max_element(),
                 "{what}: {apart} from the other skinning (bound {bound})"
             );
             lbs_vs_dqs = lbs_vs_dqs.max(apart);
