@@ -182,6 +182,132 @@ fn handgen_and_pose_reject_bad_input() {
     assert!(err.contains("bad.json") && err.contains("elbow"), "{err}");
 }
 
+/// Vertices of `mesh` deeper than `tolerance` inside the ball (`centre`, `radius`), and the
+/// deepest one's depth.
+fn inside_ball(mesh: &Mesh, centre: Vec3, radius: f32, tolerance: f32) -> (usize, f32) {
+    let depths: Vec<f32> = mesh
+        .positions
+        .iter()
+        .map(|p| radius - p.distance(centre))
+        .filter(|&d| d > tolerance)
+        .collect();
+    (depths.len(), depths.iter().copied().fold(0.0, f32::max))
+}
+
+/// `--collide-sphere` (issue 22; LYK06 "Collision detection with other objects"): the grasp
+/// closes around a ball in the palm; without the flag the skin passes through it, with it no
+/// vertex is left inside (beyond 0.1 mm), in `crease pose` and in `crease handgen`'s meshes.
+#[test]
+fn a_collide_sphere_pushes_the_hand_out_of_it() {
+    const BALL: &str = "0,0.07,-0.045,0.03";
+    let (centre, radius, tolerance) = (Vec3::new(0.0, 0.07, -0.045), 0.03, 1e-4);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let pose = |name: &str, ball: Option<&str>| {
+        let path = dir.path().join(name);
+        let mut cmd = crease();
+        cmd.args(["pose", "--pose", "grasp", "--out"]).arg(&path);
+        if let Some(b) = ball {
+            cmd.args(["--collide-sphere", b]);
+        }
+        run_ok(&mut cmd);
+        Mesh::read(&path).expect("posed mesh")
+    };
+    let free = pose("free.ply", None);
+    let (inside, deepest) = inside_ball(&free, centre, radius, tolerance);
+    eprintln!("grasp without the ball: {inside} vertices inside, deepest {deepest} m");
+    assert!(
+        inside > 50 && deepest > 0.003,
+        "the test ball should cut the grasping hand: {inside} vertices, deepest {deepest} m"
+    );
+    let held = pose("held.ply", Some(BALL));
+    let (inside, deepest) = inside_ball(&held, centre, radius, tolerance);
+    assert_eq!(
+        inside, 0,
+        "{inside} vertices left inside the ball, deepest {deepest} m"
+    );
+    // The rest of the hand stays where it was: only skin near the ball moved.
+    let moved = free
+        .positions
+        .iter()
+        .zip(&held.positions)
+        .filter(|(a, b)| a.distance(**b) > 1e-6)
+        .count();
+    assert!(
+        moved > 0 && moved < free.positions.len() / 2,
+        "{moved} of {} vertices moved",
+        free.positions.len()
+    );
+
+    // handgen: every mesh pushed out, the ball in the summary and the manifests' header.
+    let out = dir.path().join("hands");
+    run_ok(
+        crease()
+            .args([
+                "handgen",
+                "--train",
+                "8",
+                "--test",
+                "2",
+                "--base-only",
+                "--collide-sphere",
+                BALL,
+                "--out",
+            ])
+            .arg(&out),
+    );
+    let set = ExampleSet::load(out.join("train-back.toml")).expect("manifest");
+    let test = ExampleSet::load(out.join("test.toml")).expect("test manifest");
+    assert_eq!(set.examples.len() + test.examples.len(), 10);
+    for e in set.examples.iter().chain(&test.examples) {
+        let (inside, deepest) = inside_ball(&e.mesh, centre, radius, tolerance);
+        assert_eq!(
+            inside, 0,
+            "{}: {inside} vertices inside, deepest {deepest} m",
+            e.name
+        );
+    }
+    // The grasp (a named training pose) equals `crease pose --collide-sphere`.
+    let grasp = set
+        .examples
+        .iter()
+        .find(|e| e.name.contains("grasp"))
+        .expect("the grasp is a training pose");
+    let worst = grasp
+        .mesh
+        .positions
+        .iter()
+        .zip(&held.positions)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 1e-6,
+        "handgen's grasp differs from pose's by {worst} m"
+    );
+    let manifest = std::fs::read_to_string(out.join("train-back.toml")).unwrap();
+    assert!(
+        manifest.contains("--collide-sphere 0,0.07,-0.045,0.03"),
+        "{manifest}"
+    );
+    let summary = std::fs::read_to_string(out.join("handgen.json")).unwrap();
+    assert!(summary.contains("\"ball\""), "{summary}");
+
+    // Bad balls are refused naming what is wrong.
+    for (bad, says) in [
+        ("0,0.07,-0.045", "expected X,Y,Z,R"),
+        ("0,0.07,-0.045,-0.01", "radius R must be > 0"),
+        ("0,nan,0,0.01", "finite"),
+    ] {
+        let out = crease()
+            .args(["pose", "--pose", "grasp", "--collide-sphere", bad, "--out"])
+            .arg(dir.path().join("bad.ply"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{bad}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{bad}: {err}");
+    }
+}
+
 /// `crease eval --hands extrapolation` (issue 20) generates in memory what `crease handgen
 /// --train 10` writes: the same named training poses, sampled test poses and control points,
 /// so its table equals the one of `crease eval` on the written manifests.

@@ -565,6 +565,26 @@ fn room_commands_open_inspect_and_close() {
         info.contains("beta 2") && info.contains("min cutoff 3 Hz, beta 0,"),
         "{info}"
     );
+    // The skinning (issue 22): the model's default (LBS), or --skinning dqs.
+    assert!(info.contains(", skinning lbs,"), "{info}");
+    let opened = room(&[
+        "open",
+        "--admin-token",
+        "adm",
+        "--room",
+        "d",
+        "--model",
+        "tube",
+        "--skinning",
+        "dqs",
+    ])
+    .output()
+    .unwrap();
+    assert!(opened.status.success(), "{opened:?}");
+    let said = String::from_utf8_lossy(&opened.stderr);
+    assert!(said.contains(", skinning dqs"), "{said}");
+    let info = run_ok(&mut room(&["info", "--room", "d"]));
+    assert!(info.contains(", skinning dqs,"), "{info}");
     let failed = |mut c: std::process::Command| {
         let out = c.output().unwrap();
         assert!(!out.status.success());

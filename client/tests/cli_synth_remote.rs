@@ -98,6 +98,54 @@ fn assert_close(what: &str, got: &Mesh, want: &Mesh, bound: Vec3) {
     }
 }
 
+/// The model at `path` with its skin replaced by a smooth blend of bones 0 and 1 along the
+/// tube (all of bone 0 below z = 2, all of bone 1 above z = 5): what LBS and DQS differ on.
+fn blended_weights(path: &Path) -> TrainedModel {
+    let mut model = TrainedModel::load(path).unwrap();
+    assert_eq!(model.rig.bone_count, 2);
+    // Which bone holds the tube's base (z = 0) in the fitted rig.
+    let (bones, weights) = model.rig.skin.vertex(0);
+    let base = bones[weights
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap()
+        .0];
+    let (mut indices, mut blend) = (Vec::new(), Vec::new());
+    for p in &model.rig.rest.positions {
+        let t = ((p.z - 2.0) / 3.0).clamp(0.0, 1.0);
+        indices.extend([base, 1 - base]);
+        blend.extend([1.0 - t, t]);
+    }
+    model.rig.skin = crease_core::runtime::skin::SkinWeights::new(2, indices, blend).unwrap();
+    model.validate().unwrap();
+    model
+}
+
+/// Half a grid step (plus [`EPSILON`]) of the batches of the server at `addr`, from the
+/// `Topology` it sends a plain gRPC client.
+async fn batch_bound(addr: std::net::SocketAddr) -> Vec3 {
+    let mut client = CreaseClient::connect(format!("http://{addr}"))
+        .await
+        .unwrap();
+    let mut stream = client
+        .synthesize(v1::SynthesizeRequest {
+            model: "tube".into(),
+            frames: Vec::new(),
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let Some(v1::mesh_frame::Body::Topology(t)) = stream.message().await.unwrap().unwrap().body
+    else {
+        panic!("the batch starts with its topology");
+    };
+    let q = t.quantization.unwrap();
+    let (lo, hi) = (Vec3::from(q.min.unwrap()), Vec3::from(q.max.unwrap()));
+    (hi - lo) / ((1u32 << t.bits) - 1) as f32 * 0.5 + Vec3::splat(EPSILON)
+}
+
 #[test]
 fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let tmp = tempfile::tempdir().unwrap();
@@ -249,6 +297,57 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
         };
         assert_close(&format!("glTF keyframe {i}"), &got, want, bound);
     }
+
+    // --skinning dqs (issue 22), locally and on the server. This tube's two bones are rigid
+    // segments, on which LBS and DQS agree; a copy whose weights blend the bones smoothly
+    // along the tube (z from 2 to 5) tells them apart: the same DQS meshes on both sides, and
+    // not the LBS ones (the option reached the predictor on both sides).
+    let blended = blended_weights(&model_path);
+    let blended_path = dir.join("blended.crease");
+    blended.save(&blended_path).unwrap();
+    let (blended_url, blended_bound) = runtime.block_on(async {
+        let addr = serve_tube(blended, None).await;
+        (format!("http://{addr}"), batch_bound(addr).await)
+    });
+    let blended_arg = blended_path.to_str().unwrap();
+    let run_into = |model: &str, server: Option<&str>, skinning: &str, out_dir: &Path| {
+        let out = synth(model, server)
+            .args(["--skinning", skinning, "--out"])
+            .arg(out_dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "synth --skinning {skinning}: {}",
+            stderr(&out)
+        );
+    };
+    let (local_lbs, local_dqs, remote_dqs) = (
+        dir.join("blended-lbs"),
+        dir.join("blended-dqs"),
+        dir.join("blended-remote-dqs"),
+    );
+    run_into(blended_arg, None, "lbs", &local_lbs);
+    run_into(blended_arg, None, "dqs", &local_dqs);
+    run_into("tube", Some(&blended_url), "dqs", &remote_dqs);
+    let mut apart: f32 = 0.0;
+    for i in 0..ANGLES.len() {
+        let name = format!("frame_{i:05}.obj");
+        let want = Mesh::read(local_dqs.join(&name)).unwrap();
+        let got = Mesh::read(remote_dqs.join(&name)).unwrap();
+        assert_close(&format!("DQS frame {i}"), &got, &want, blended_bound);
+        let lbs = Mesh::read(local_lbs.join(&name)).unwrap();
+        apart = lbs
+            .positions
+            .iter()
+            .zip(&want.positions)
+            .map(|(a, b)| a.distance(*b))
+            .fold(apart, f32::max);
+    }
+    assert!(
+        apart > 10.0 * blended_bound.max_element(),
+        "DQS frames {apart} from the LBS ones (bound {blended_bound})"
+    );
 
     // An unknown model: the server's NotFound, naming it.
     let out = synth("no-such-model", Some(&url))

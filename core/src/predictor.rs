@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! controls (+ validity) -> hold last valid -> rotations (predict) -> translations (eq. 11)
-//!                       -> bone palette -> LBS into the context's vertex buffer
+//!                       -> bone palette -> LBS or DQS into the context's vertex buffer
 //! [on request, for models with a detail layer]
 //!   -> h = D xi(c) + b (displacement) -> S · base, normals, + h n (detail) into the context
 //! ```
@@ -30,7 +30,9 @@ use crate::runtime::detail::{DetailError, DetailSynth};
 use crate::runtime::displacement::{DetailInput, DetailRegressor, rotations_input};
 use crate::runtime::predict::RotationScratch;
 use crate::runtime::refine::{BoneRefiner, RefineScratch};
-use crate::runtime::skin::{BonePalette, PackedSkin, RigidTransform, SkinError, skin_lbs_packed};
+use crate::runtime::skin::{
+    BonePalette, PackedSkin, RigidTransform, SkinError, Skinning, skin_dqs, skin_lbs_packed,
+};
 use crate::runtime::translations::{TranslationError, TranslationScratch, TranslationSolver};
 
 /// What a frame got wrong.
@@ -86,6 +88,9 @@ pub struct Predictor {
     model: Arc<TrainedModel>,
     /// The rig's skin weights packed once for the per-frame LBS ([`skin_lbs_packed`]).
     skin: PackedSkin,
+    /// How [`Predictor::skin`] blends the bones (the model's default until
+    /// [`Predictor::set_skinning`]).
+    skinning: Skinning,
     solver: TranslationSolver,
     beta: f32,
     /// `S` and its topology for the detail layer, built by the first call that needs it (a
@@ -227,6 +232,7 @@ impl Predictor {
         let skin = PackedSkin::new(&model.rig.skin)?;
         let confidence = Confidence::new(&model.rotations);
         Ok(Self {
+            skinning: model.skinning,
             model,
             skin,
             solver,
@@ -241,6 +247,17 @@ impl Predictor {
     /// (a pass over the mesh's edges: setup, not a per-frame operation).
     pub fn set_refinement(&mut self, refinement: Option<Refinement>) {
         self.refine = refinement.map(|r| (self.build_refiner(), r));
+    }
+
+    /// Chooses how [`Predictor::skin`] blends the bones (issue 22; a model's default is
+    /// [`TrainedModel::skinning`]). Free: nothing is rebuilt.
+    pub fn set_skinning(&mut self, skinning: Skinning) {
+        self.skinning = skinning;
+    }
+
+    /// How [`Predictor::skin`] blends the bones.
+    pub fn skinning(&self) -> Skinning {
+        self.skinning
     }
 
     /// The refinement's settings, when on.
@@ -556,21 +573,37 @@ impl Predictor {
         }
     }
 
-    /// Skins the rest mesh with the context's current transforms into `ctx.positions()`.
+    /// Skins the rest mesh with the context's current transforms into `ctx.positions()`, as
+    /// [`Predictor::skinning`] says.
     pub fn skin(&self, ctx: &mut FrameContext) -> Result<(), PredictError> {
+        self.skin_with(ctx, self.skinning)
+    }
+
+    /// [`Predictor::skin`] with the given skinning, whatever the predictor's (the evaluation's
+    /// `+dqs` rows): LBS (FKY08 §5's `v^s = sum_b w_b (R_b v^0 + t_b)`) on the packed skin, or
+    /// DQS on the rig's weights (Kavan et al. 2007's dual quaternion linear blending, DLB: the
+    /// weights' blend of the bones' unit dual quaternions, normalised; FKY08 §6 skins so on the
+    /// GPU). Neither allocates. The translations come from eq. 11 either way, which FKY08 §5
+    /// solves with LBS in place of DQS (to stay linear), so a DQS frame is that approximation.
+    pub fn skin_with(
+        &self,
+        ctx: &mut FrameContext,
+        skinning: Skinning,
+    ) -> Result<(), PredictError> {
         ctx.palette.update(&ctx.transforms);
-        skin_lbs_packed(
-            &self.model.rig.rest.positions,
-            &self.skin,
-            &ctx.palette,
-            &mut ctx.positions,
-        )?;
+        let rest = &self.model.rig.rest.positions;
+        match skinning {
+            Skinning::Lbs => skin_lbs_packed(rest, &self.skin, &ctx.palette, &mut ctx.positions)?,
+            Skinning::Dqs => {
+                skin_dqs(rest, &self.model.rig.skin, &ctx.palette, &mut ctx.positions)?
+            }
+        }
         Ok(())
     }
 
-    /// Rest vertex `v` skinned with the context's current transforms (LBS, FKY08 eq. 1): the
-    /// few vertices a caller needs without skinning the whole mesh (a palette stream's control
-    /// residual).
+    /// Rest vertex `v` skinned with the context's current transforms (LBS, FKY08 eq. 1,
+    /// whatever [`Predictor::skinning`] says): the few vertices a caller needs without skinning
+    /// the whole mesh (a palette stream's control residual; palette streams are LBS only).
     ///
     /// # Panics
     /// If `v` is not a rest vertex.

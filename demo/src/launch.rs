@@ -295,6 +295,9 @@ async fn hands_room(
         beta: Some(DEMO_BETA),
         filter: None,
         refine: Some(DEMO_HANDS_REFINE),
+        // The model's default (the demo hand is trained with LBS): the viewer may subscribe
+        // with palette frames, which it skins with LBS, and a DQS room refuses those.
+        skinning: None,
     };
     let room = Room::open(
         DEMO_HANDS_ROOM,

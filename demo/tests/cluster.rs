@@ -920,7 +920,8 @@ async fn a_partitioned_owner_serves_its_own_clients_then_yields_to_the_adopter()
 /// A retargeting room (issue 19) in a cluster: opened on A with a marker map, published to
 /// through B (forwarded to A, which retargets the raw markers), then adopted by B after kill -9
 /// of A: B rebuilt the room's map from the registry, so the same marker frames go on being
-/// acknowledged with a capture-units residual.
+/// acknowledged with a capture-units residual. The room refines and skins with DQS: B's relay
+/// and then B as the adopter report both from the registry's entry.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
     let Some(nats_bin) = nats_binary() else {
@@ -965,6 +966,9 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         }),
         // Refining, as the demo's hands room: the adopter must refine as the owner did.
         refine: Some(refine),
+        // Skinning with dual quaternions, which the model's default (LBS) is not: the
+        // adopter must skin as the owner did (issue 22).
+        skinning: v1::Skinning::Dqs as i32,
         ..Default::default()
     };
     let token = a
@@ -1033,6 +1037,11 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         Some(refine),
         "B's relay reads the registry's refine"
     );
+    assert_eq!(
+        relayed.skinning,
+        v1::Skinning::Dqs as i32,
+        "B's relay reads the registry's skinning"
+    );
     a.kill9();
     until(Duration::from_secs(10), "B adopts the room", || async {
         b.owner_of("mocap").await.as_deref() == Some("B")
@@ -1060,4 +1069,21 @@ async fn a_retargeting_room_is_forwarded_and_survives_its_owner() {
         Some(refine),
         "the adopter refines as the owner did"
     );
+    assert_eq!(
+        info.skinning,
+        v1::Skinning::Dqs as i32,
+        "the adopter skins as the owner did"
+    );
+    // And so refuses palette streams, as the owner did.
+    let err = b
+        .client()
+        .await
+        .subscribe(v1::SubscribeRequest {
+            room: "mocap".into(),
+            encoding: v1::Encoding::Palette as i32,
+            ..Default::default()
+        })
+        .await
+        .unwrap_err();
+    assert_eq!(err.code(), tonic::Code::FailedPrecondition, "{err:?}");
 }

@@ -380,6 +380,10 @@ pub struct DatasetSummary {
     pub resolutions: BTreeMap<String, [usize; 2]>,
     /// Landmarks per layout and resolution.
     pub layouts: BTreeMap<String, BTreeMap<String, Vec<Landmark>>>,
+    /// The external ball every pose was pushed out of (`crease handgen --collide-sphere`):
+    /// centre x, y, z and radius, metres, in the hand frame; absent without one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ball: Option<[f32; 4]>,
 }
 
 /// Progress of [`write_dataset`].
@@ -429,6 +433,30 @@ pub fn write_dataset(
     test: usize,
     seed: u64,
     resolutions: &[Resolution],
+    progress: impl FnMut(DatasetProgress<'_>),
+) -> Result<DatasetSummary, DatasetError> {
+    write_dataset_with(
+        dir,
+        train,
+        test,
+        seed,
+        resolutions,
+        Layers::default(),
+        progress,
+    )
+}
+
+/// [`write_dataset`] with the rig's `layers` (e.g. an external ball in
+/// [`CollideOptions::object`](crate::collide::CollideOptions::object): every pose is pushed out
+/// of it, LYK06 "Collision detection with other objects"). [`write_dataset`] is this with
+/// [`Layers::default`].
+pub fn write_dataset_with(
+    dir: &Path,
+    train: usize,
+    test: usize,
+    seed: u64,
+    resolutions: &[Resolution],
+    layers: Layers,
     mut progress: impl FnMut(DatasetProgress<'_>),
 ) -> Result<DatasetSummary, DatasetError> {
     if train == 0 {
@@ -441,6 +469,10 @@ pub fn write_dataset(
         test: test_poses.iter().map(|p| p.name.clone()).collect(),
         resolutions: BTreeMap::new(),
         layouts: BTreeMap::new(),
+        ball: layers
+            .collide
+            .and_then(|c| c.object)
+            .map(|b| [b.center.x, b.center.y, b.center.z, b.radius]),
     };
     for (set, poses) in [("train", &train_poses), ("test", &test_poses)] {
         let folder = dir.join("poses").join(set);
@@ -485,12 +517,7 @@ pub fn write_dataset(
             let folder = dir.join(res).join(set);
             std::fs::create_dir_all(&folder).map_err(io_err(&folder))?;
             for p in poses.iter() {
-                rig.deform(
-                    &p.pose,
-                    Layers::default(),
-                    &mut scratch,
-                    &mut mesh.positions,
-                );
+                rig.deform(&p.pose, layers, &mut scratch, &mut mesh.positions);
                 write_ply(
                     folder.join(format!("{}.ply", p.name)),
                     &mesh,
@@ -522,8 +549,11 @@ pub fn write_dataset(
         // Manifests.
         let rest = format!("train/{}.ply", train_poses[0].name);
         let test_rest = test_poses.first().map(|p| format!("test/{}.ply", p.name));
+        let ball = summary.ball.map_or(String::new(), |[x, y, z, r]| {
+            format!(" --collide-sphere {x},{y},{z},{r}")
+        });
         let header = format!(
-            "# crease handgen --train {train} --test {test} --seed {seed}: {res} resolution.\n"
+            "# crease handgen --train {train} --test {test} --seed {seed}{ball}: {res} resolution.\n"
         );
         if resolution == Resolution::Base {
             for layout in Layout::ALL {

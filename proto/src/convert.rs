@@ -1,11 +1,12 @@
 //! The small conversions between wire messages and core types: points, boxes, a room's One
-//! Euro filter and refinement, levels, and model descriptions. Control frames are in [`crate::control`], the
+//! Euro filter, refinement and skinning, levels, and model descriptions. Control frames are in [`crate::control`], the
 //! mesh stream in [`crate::mesh`].
 
 use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_core::predictor::Refinement;
 use crease_core::runtime::filter::OneEuroParams;
+use crease_core::runtime::skin::Skinning;
 
 use crate::errors::WireError;
 use crate::v1;
@@ -72,6 +73,37 @@ impl From<v1::Refine> for Refinement {
     }
 }
 
+/// The wire form of a skinning (never `SKINNING_UNSPECIFIED`).
+impl From<Skinning> for v1::Skinning {
+    fn from(s: Skinning) -> Self {
+        match s {
+            Skinning::Lbs => v1::Skinning::Lbs,
+            Skinning::Dqs => v1::Skinning::Dqs,
+        }
+    }
+}
+
+/// A request's `skinning` field in `message_type`: `None` for `SKINNING_UNSPECIFIED` (the
+/// model's default).
+///
+/// # Errors
+/// [`WireError`] naming `{message_type}.skinning` for a value that is not a `Skinning`.
+pub fn skinning_from_wire(
+    message_type: &'static str,
+    skinning: i32,
+) -> Result<Option<Skinning>, WireError> {
+    match v1::Skinning::try_from(skinning) {
+        Ok(v1::Skinning::Unspecified) => Ok(None),
+        Ok(v1::Skinning::Lbs) => Ok(Some(Skinning::Lbs)),
+        Ok(v1::Skinning::Dqs) => Ok(Some(Skinning::Dqs)),
+        Err(_) => Err(WireError::new(
+            message_type,
+            "skinning",
+            format!("{skinning} is not a Skinning (0 unspecified, 1 lbs, 2 dqs)"),
+        )),
+    }
+}
+
 /// A box from its corners.
 pub fn box3(min: Vec3, max: Vec3) -> v1::Box3 {
     v1::Box3 {
@@ -112,6 +144,7 @@ pub fn model_info(name: &str, model: &TrainedModel) -> v1::ModelInfo {
         method: model.method.clone(),
         default_beta: model.beta,
         bones: model.rig.bone_count as u32,
+        skinning: v1::Skinning::from(model.skinning) as i32,
     }
 }
 
@@ -272,6 +305,25 @@ mod tests {
         let e = Encoding::from_query(Some("Palette")).unwrap_err();
         assert_eq!(e.field, "encoding");
         assert!(e.message.contains("expected vertices or palette"), "{e}");
+    }
+
+    #[test]
+    fn skinnings_convert_both_ways_and_bad_ones_name_the_field() {
+        for s in Skinning::ALL {
+            assert_eq!(
+                skinning_from_wire("OpenRoomRequest", v1::Skinning::from(s) as i32),
+                Ok(Some(s))
+            );
+        }
+        assert_eq!(skinning_from_wire("OpenRoomRequest", 0), Ok(None));
+        // The wire integers are the proto's: 1 lbs, 2 dqs.
+        assert_eq!(v1::Skinning::from(Skinning::Lbs) as i32, 1);
+        assert_eq!(v1::Skinning::from(Skinning::Dqs) as i32, 2);
+        let e = skinning_from_wire("SynthesizeRequest", 5).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "SynthesizeRequest.skinning: 5 is not a Skinning (0 unspecified, 1 lbs, 2 dqs)"
+        );
     }
 
     #[test]

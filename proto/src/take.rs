@@ -16,7 +16,7 @@ use std::io::{self, Read, Write};
 use crease_core::glam::{Quat, Vec3};
 use crease_core::model::{ModelError, TrainedModel, gltf_export};
 use crease_core::predictor::Predictor;
-use crease_core::runtime::skin::RigidTransform;
+use crease_core::runtime::skin::{RigidTransform, Skinning};
 use prost::Message as _;
 
 use crate::v1;
@@ -352,6 +352,15 @@ pub fn check_model(take: &Take, model: &TrainedModel, sha256: &str) -> Result<()
     Ok(())
 }
 
+/// The skinning the take's room used: its own choice, else the model's default.
+pub fn take_skinning(take: &Take, model: &TrainedModel) -> Skinning {
+    let wire = take.header().room.as_ref().map_or(0, |r| r.skinning);
+    crate::convert::skinning_from_wire("TakeHeader.room", wire)
+        .ok()
+        .flatten()
+        .unwrap_or(model.skinning)
+}
+
 /// The take as a skinned glTF animation (`core::model::gltf_export`): the model's rest mesh
 /// and skin, one joint per bone, one keyframe per frame at [`keyframe_times`] holding the
 /// recorded bone transforms, so a glTF viewer's skinning reproduces the room's base meshes.
@@ -361,6 +370,14 @@ pub fn check_model(take: &Take, model: &TrainedModel, sha256: &str) -> Result<()
 pub fn skinned_glb(take: &Take, model: &TrainedModel) -> Result<Vec<u8>, TakeError> {
     if take.frames.is_empty() {
         return Err(TakeError::Export("the take has no frames".into()));
+    }
+    if take_skinning(take, model) == Skinning::Dqs {
+        return Err(TakeError::Export(
+            "the room skinned with dual quaternions and glTF skins linearly: the skinned \
+             export would not be the room's meshes (export --level detail, or record an LBS \
+             room)"
+                .into(),
+        ));
     }
     let mut all = Vec::with_capacity(take.frames.len() * model.rig.bone_count);
     let mut one = Vec::new();
@@ -388,8 +405,10 @@ pub fn detail_glb(
     every: usize,
 ) -> Result<Vec<u8>, TakeError> {
     let every = every.max(1);
-    let predictor =
+    let skinning = take_skinning(take, &model);
+    let mut predictor =
         Predictor::new(model, None).map_err(|e| TakeError::Export(format!("predictor: {e}")))?;
+    predictor.set_skinning(skinning);
     let triangles = predictor
         .detail_triangles()
         .ok_or_else(|| TakeError::Export("the model has no detail layer".into()))?

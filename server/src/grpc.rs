@@ -216,6 +216,7 @@ impl Crease for CreaseService {
             replica,
             retarget: room.pipeline().capture().map(|c| c.wire().clone()),
             refine: room.refinement().map(v1::Refine::from),
+            skinning: v1::Skinning::from(room.skinning()) as i32,
         }))
     }
 
@@ -282,6 +283,7 @@ impl Crease for CreaseService {
         let room = self.room(&r.room).await?;
         check_level(&room, level)?;
         let channel = Channel::new(level, encoding);
+        room.check_channel(channel)?;
         let subscription = room
             .subscribe(channel, self.state.config.limits.subscribers_per_room)
             .map_err(|e| Status::resource_exhausted(format!("room {:?}: {e}", room.id)))?;
@@ -305,6 +307,7 @@ impl Crease for CreaseService {
             beta: (r.beta != 0.0).then_some(r.beta),
             filter: None,
             refine: refinement(r.refine)?,
+            skinning: crease_proto::convert::skinning_from_wire("SynthesizeRequest", r.skinning)?,
         };
         let room = Room::open("batch", model, options, StreamSettings::full())
             .await
@@ -408,6 +411,7 @@ pub(crate) async fn room_options(
         beta,
         filter,
         refine: refinement(r.refine)?,
+        skinning: crease_proto::convert::skinning_from_wire("OpenRoomRequest", r.skinning)?,
     };
     let capture = match r.retarget.clone() {
         None => None,

@@ -39,6 +39,7 @@ use crease_core::glam::Vec3;
 use crease_core::model::{ControlPoint, TrainedModel};
 use crease_core::predictor::{FrameContext, PredictError, Predictor, Refinement};
 use crease_core::runtime::filter::{OneEuro, OneEuroParams};
+use crease_core::runtime::skin::Skinning;
 use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
 
@@ -182,8 +183,8 @@ struct State {
     take: Option<Recorder>,
 }
 
-/// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter and
-/// refine; the streaming side is the server's [`StreamSettings`]).
+/// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter,
+/// refine and skinning; the streaming side is the server's [`StreamSettings`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RoomOptions {
     /// Translation-solve beta; the model's default when `None`.
@@ -195,6 +196,9 @@ pub struct RoomOptions {
     /// (the default: it pays where the control points are dense, the hands, and costs ~40 µs
     /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
     pub refine: Option<Refinement>,
+    /// How the room skins (issue 22); the model's default ([`TrainedModel::skinning`]) when
+    /// `None`. A DQS room streams vertices only ([`Pipeline::check_encoding`]).
+    pub skinning: Option<Skinning>,
 }
 
 /// A room's filter, predictor and encoders (module docs).
@@ -309,6 +313,7 @@ impl Pipeline {
             beta,
             filter,
             refine,
+            skinning,
         } = options;
         assert!(
             filter.is_none_or(|p| p.is_valid()),
@@ -320,6 +325,9 @@ impl Pipeline {
         );
         let mut predictor = Predictor::new(Arc::clone(&model.model), beta)?;
         predictor.set_refinement(refine);
+        if let Some(skinning) = skinning {
+            predictor.set_skinning(skinning);
+        }
         let ctx = predictor.new_context();
         let n = model.model.controls.len();
         let (lo, hi) = model.pose_bounds;
@@ -415,6 +423,27 @@ impl Pipeline {
     /// The bone-level refinement, when on.
     pub fn refinement(&self) -> Option<Refinement> {
         self.predictor.refinement()
+    }
+
+    /// How the room skins (the option, else the model's default).
+    pub fn skinning(&self) -> Skinning {
+        self.predictor.skinning()
+    }
+
+    /// Whether the room can stream `encoding`: a palette stream ships the bone transforms and
+    /// its client skins them with LBS (the browser viewer on its GPU, `crease watch`), so a DQS
+    /// room refuses it rather than stream meshes other than its own.
+    ///
+    /// # Errors
+    /// What is wrong, naming the encoding and the room's skinning.
+    pub fn check_encoding(&self, encoding: Encoding) -> Result<(), String> {
+        match (encoding, self.skinning()) {
+            (Encoding::Palette, Skinning::Dqs) => Err(format!(
+                "encoding: palette streams are skinned by the client with LBS, and this room skins with {}: subscribe with encoding vertices, or open the room with skinning lbs",
+                Skinning::Dqs
+            )),
+            _ => Ok(()),
+        }
     }
 
     /// The quantisation box of `level`'s frames.

@@ -84,7 +84,7 @@ pub struct Subscription {
 }
 
 impl Room {
-    /// Opens a room on `model` with `options` (beta, filter, refinement) and a fresh random
+    /// Opens a room on `model` with `options` (beta, filter, refinement, skinning) and a fresh random
     /// publish token, streaming as `settings` says. The predictor's factorisation runs on
     /// the blocking pool, not on the caller's async thread.
     ///
@@ -143,7 +143,7 @@ impl Room {
     }
 
     /// The room's settings as the request that would open it again: id, model, beta,
-    /// filter, retargeting, refinement (no token). What a take's header keeps.
+    /// filter, retargeting, refinement, skinning (no token). What a take's header keeps.
     pub fn settings(&self) -> v1::OpenRoomRequest {
         v1::OpenRoomRequest {
             room: self.id.clone(),
@@ -152,6 +152,7 @@ impl Room {
             filter: self.filter().map(v1::MarkerFilter::from),
             retarget: self.pipeline.capture().map(|c| c.wire().clone()),
             refine: self.refinement().map(v1::Refine::from),
+            skinning: v1::Skinning::from(self.skinning()) as i32,
         }
     }
 
@@ -219,6 +220,22 @@ impl Room {
     /// The room's bone-level refinement, when on (issue 20).
     pub fn refinement(&self) -> Option<crease_core::predictor::Refinement> {
         self.pipeline.refinement()
+    }
+
+    /// How the room skins (issue 22).
+    pub fn skinning(&self) -> crease_core::runtime::skin::Skinning {
+        self.pipeline.skinning()
+    }
+
+    /// A subscription on `channel` the room cannot serve (a palette stream of a DQS room,
+    /// [`Pipeline::check_encoding`]), as FAILED_PRECONDITION naming the room and its skinning.
+    ///
+    /// # Errors
+    /// That status.
+    pub fn check_channel(&self, channel: Channel) -> Result<(), tonic::Status> {
+        self.pipeline
+            .check_encoding(channel.encoding)
+            .map_err(|e| tonic::Status::failed_precondition(format!("room {:?}: {e}", self.id)))
     }
 
     /// Whether the model has a detail layer.

@@ -157,6 +157,11 @@ pub async fn room_socket(
     let subscription = if params.subscribe == Some(false) {
         None
     } else {
+        // A palette stream of a DQS room: gRPC's FAILED_PRECONDITION, here as 409 Conflict
+        // (the request is well formed; the room's state refuses it), with the same message.
+        if let Err(status) = room.check_channel(channel) {
+            return (StatusCode::CONFLICT, format!("{}\n", status.message())).into_response();
+        }
         match room.subscribe(channel, state.config.limits.subscribers_per_room) {
             Ok(s) => Some(s),
             Err(e) => {

@@ -193,6 +193,7 @@ async fn publish_subscribe_batch_and_errors_over_a_socket() {
             beta: 0.0,
             frames: batch.clone(),
             refine: None,
+            skinning: 0,
         })
         .await
         .unwrap()

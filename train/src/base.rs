@@ -199,6 +199,7 @@ impl TrainedBase {
             edge_skin: self.edge_skin.clone(),
             beta,
             detail: None,
+            skinning: Default::default(),
         }
     }
 }

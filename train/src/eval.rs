@@ -11,6 +11,13 @@
 //! - `rbf`, `global`, `local-geometry`, `local-pose`, `local`: the predictors
 //!   ([`crate::regress::Method`]).
 //!
+//! Every row with a run-time path (`oracle-rotations`, each method, each `METHOD+refine`) also
+//! gets a `ROW+dqs` row beside it (issue 22): the same bone transforms skinned with dual
+//! quaternions (Kavan et al. 2007; FKY08 §6 skins so on the GPU) instead of LBS. The bones are
+//! fitted for LBS (SSDR minimises the examples' LBS error) and eq. 11 solves the translations
+//! for LBS (FKY08 §5 replaces DQS by LBS there to keep the solve linear), so the DQS rows show
+//! what that approximation costs on each set.
+//!
 //! Two protocols: a held-out test set (trained once on the training set), and leave-one-out
 //! over the training set, where the held-out pose is removed from everything, the bone fit
 //! included.
@@ -41,8 +48,8 @@ use std::time::Instant;
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
-use crease_core::predictor::{Predictor, Refinement};
-use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};
+use crease_core::predictor::{FrameContext, Predictor, Refinement};
+use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, Skinning, skin_lbs};
 
 use crease_core::model::{DetailLayer, TrainedModel};
 use crease_core::runtime::detail::DetailSynth;
@@ -99,16 +106,16 @@ pub struct MethodStats {
 /// One table: method name -> statistics.
 pub type EvalTable = BTreeMap<String, MethodStats>;
 
-/// The rows of `table` in the order of [`ROWS`], each method's `+refine` row after it, then
-/// any other rows (the refinement's baselines) in name order.
+/// The rows of `table` in the order of [`ROWS`], each row's `+dqs` row after it, then its
+/// `+refine` and `+refine+dqs` rows, then any other rows (the refinement's baselines) in name
+/// order.
 pub fn rows(table: &EvalTable) -> Vec<&str> {
     let mut out: Vec<&str> = Vec::new();
     for row in ROWS {
-        if let Some((k, _)) = table.get_key_value(row) {
-            out.push(k);
-        }
-        if let Some((k, _)) = table.get_key_value(&format!("{row}+refine")) {
-            out.push(k);
+        for suffix in ["", DQS_SUFFIX, "+refine", "+refine+dqs"] {
+            if let Some((k, _)) = table.get_key_value(&format!("{row}{suffix}")) {
+                out.push(k);
+            }
         }
     }
     for k in table.keys() {
@@ -134,6 +141,9 @@ pub const ROWS: [&str; 12] = [
     "true-base",
     "true-base-static",
 ];
+
+/// The suffix of a row's dual-quaternion twin (module docs).
+pub const DQS_SUFFIX: &str = "+dqs";
 
 /// Fraction of detailed vertices that make the crease regions (module docs).
 pub const CREASE_FRACTION: f64 = 0.05;
@@ -441,15 +451,9 @@ fn evaluate_frames(
         let t = Instant::now();
         predictor
             .solve_with_rotations(&mut ctx, &rotations, &controls_of(f))
-            .and_then(|()| predictor.skin(&mut ctx))
             .map_err(|e| TrainError::Controls(e.to_string()))?;
         let us = t.elapsed().as_secs_f64() * 1e6;
-        push(
-            table,
-            "oracle-rotations",
-            rms_normalized(ctx.positions(), f, scale),
-            us,
-        );
+        push_both_skinnings(table, "oracle-rotations", &predictor, &mut ctx, f, us)?;
     }
 
     // the detail layer on the true base
@@ -515,13 +519,19 @@ fn evaluate_frames(
                     .map_err(|e| TrainError::Controls(e.to_string()))?;
                 predictor.set_refinement(Some(refine));
                 let mut ctx = predictor.new_context();
+                let dqs = !refine.from_rest;
                 for f in frames {
                     let t = Instant::now();
-                    let got = predictor
-                        .predict(&mut ctx, &controls_of(f), None)
+                    predictor
+                        .predict_transforms(&mut ctx, &controls_of(f), None)
                         .map_err(|e| TrainError::Controls(e.to_string()))?;
                     let us = t.elapsed().as_secs_f64() * 1e6;
-                    push(table, &row, rms_normalized(got, f, scale), us);
+                    if dqs {
+                        push_both_skinnings(table, &row, &predictor, &mut ctx, f, us)?;
+                    } else {
+                        let us = us + skin_timed(&predictor, &mut ctx, Skinning::Lbs)?;
+                        push(table, &row, rms_normalized(ctx.positions(), f, scale), us);
+                    }
                 }
             }
             if Some(method) == options.methods.first().copied() {
@@ -534,12 +544,12 @@ fn evaluate_frames(
         for (k, f) in frames.iter().enumerate() {
             let controls = controls_of(f);
             let t = Instant::now();
-            let got = predictor
-                .predict(&mut ctx, &controls, None)
+            predictor
+                .predict_transforms(&mut ctx, &controls, None)
                 .map_err(|e| TrainError::Controls(e.to_string()))?;
             let us = t.elapsed().as_secs_f64() * 1e6;
-            let e = rms_normalized(got, f, scale);
-            push(table, method.name(), e, us);
+            // LBS last: the detail rows below build on the LBS base in the context.
+            let e = push_both_skinnings(table, method.name(), &predictor, &mut ctx, f, us)?;
             let Some(d) = &detail else { continue };
             let mut rows = vec![(method.name(), &d.pose)];
             if Some(method) == baseline {
@@ -559,6 +569,40 @@ fn evaluate_frames(
         }
     }
     Ok(())
+}
+
+/// Skins the context's transforms (found in `transforms_us`) with DQS, then with LBS, and adds
+/// the frame to `row+dqs` and `row`; returns the LBS error. The context is left with the LBS
+/// mesh.
+fn push_both_skinnings(
+    table: &mut EvalTable,
+    row: &str,
+    predictor: &Predictor,
+    ctx: &mut FrameContext,
+    truth: &[Vec3],
+    transforms_us: f64,
+) -> Result<f64, TrainError> {
+    let scale = predictor.model().rig.rest.bbox_diagonal_scale();
+    let us = transforms_us + skin_timed(predictor, ctx, Skinning::Dqs)?;
+    let e = rms_normalized(ctx.positions(), truth, scale);
+    push(table, &format!("{row}{DQS_SUFFIX}"), e, us);
+    let us = transforms_us + skin_timed(predictor, ctx, Skinning::Lbs)?;
+    let e = rms_normalized(ctx.positions(), truth, scale);
+    push(table, row, e, us);
+    Ok(e)
+}
+
+/// Skins the context's transforms with `skinning`; the microseconds it took.
+fn skin_timed(
+    predictor: &Predictor,
+    ctx: &mut FrameContext,
+    skinning: Skinning,
+) -> Result<f64, TrainError> {
+    let t = Instant::now();
+    predictor
+        .skin_with(ctx, skinning)
+        .map_err(|e| TrainError::Controls(e.to_string()))?;
+    Ok(t.elapsed().as_secs_f64() * 1e6)
 }
 
 /// The `nearest` and `nearest+refine` rows (issue 20's extrapolating baselines): every frame

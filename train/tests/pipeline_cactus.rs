@@ -264,6 +264,7 @@ fn selection_scores_equal_an_independent_leave_one_out() {
                 edge_skin: base.edge_skin.clone(),
                 beta: cand.beta,
                 detail: None,
+                skinning: Default::default(),
             };
             let predictor = Predictor::new(Arc::new(model), None).unwrap();
             let mut ctx = predictor.new_context();

@@ -142,6 +142,16 @@ impl Progress {
         }
     }
 
+    /// Moves the bar (prefix, position, short message) without printing a line; nothing
+    /// without a terminal.
+    pub fn set(&self, prefix: &str, pos: u64, msg: &str) {
+        if let Some(bar) = &self.bar {
+            bar.set_prefix(prefix.to_string());
+            bar.set_position(pos);
+            bar.set_message(msg.to_string());
+        }
+    }
+
     /// Removes the bar.
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {
@@ -298,6 +308,22 @@ pub fn print_refinement(refine: Option<&crease_proto::v1::Refine>) -> String {
         || "off".to_owned(),
         |r| format!("{} iterations at strength {}", r.iterations, r.strength),
     )
+}
+
+/// A `--skinning` option on the wire: `SKINNING_UNSPECIFIED` (the model's default) when absent.
+pub fn skinning_wire(skinning: Option<crease_core::runtime::skin::Skinning>) -> i32 {
+    skinning.map_or(0, |s| crease_proto::v1::Skinning::from(s) as i32)
+}
+
+/// How `crease room open|info` and `crease models` print a wire skinning: `lbs`, `dqs`.
+pub fn print_skinning(skinning: i32) -> String {
+    use crease_proto::v1::Skinning;
+    match Skinning::try_from(skinning) {
+        Ok(Skinning::Lbs) => "lbs".to_owned(),
+        Ok(Skinning::Dqs) => "dqs".to_owned(),
+        Ok(Skinning::Unspecified) => "the model's default".to_owned(),
+        Err(_) => format!("unknown ({skinning})"),
+    }
 }
 
 #[cfg(test)]

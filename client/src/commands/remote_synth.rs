@@ -95,6 +95,7 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
         level: level as i32,
         beta: args.beta.unwrap_or(0.0),
         refine: args.refine.map(v1::Refine::from),
+        skinning: super::common::skinning_wire(args.skinning),
         frames,
     };
     // The glTF's rest mesh: the server's prediction at the rest controls (a request of its own,

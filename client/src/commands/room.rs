@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1;
 
-use super::common::{ServerArgs, authorized, get_room, print_refinement};
+use super::common::{ServerArgs, authorized, get_room, print_refinement, print_skinning};
 
 /// Options of `crease room`.
 #[derive(Clone, Debug, clap::Args)]
@@ -94,6 +94,12 @@ pub struct OpenArgs {
     /// performer leaves the training poses; each iteration costs about one translation solve.
     #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
     pub refine: Option<crease_core::predictor::Refinement>,
+    /// How the room skins: `lbs` or `dqs` (issue 22; dual quaternions, Kavan et al. 2007:
+    /// no volume loss at twisting joints). Default: the model's (`crease train --skinning`).
+    /// A DQS room streams vertices only: it refuses palette subscriptions, which the client
+    /// skins with LBS.
+    #[arg(long, value_name = "lbs|dqs")]
+    pub skinning: Option<crease_core::runtime::skin::Skinning>,
     /// The capture's length unit (with --markers; default "mm").
     #[arg(long, default_value = "mm")]
     pub units: String,
@@ -204,6 +210,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         filter: filter.map(v1::MarkerFilter::from),
         retarget,
         refine: args.refine.map(v1::Refine::from),
+        skinning: super::common::skinning_wire(args.skinning),
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
@@ -213,12 +220,13 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         .into_inner();
     let room = get_room(&mut client, &opened.room).await?;
     eprintln!(
-        "opened room {:?} on model {:?}: beta {}, filter {}, refinement {}{}",
+        "opened room {:?} on model {:?}: beta {}, filter {}, refinement {}, skinning {}{}",
         room.room,
         args.model,
         room.beta,
         print_filter(room.filter.as_ref()),
         print_refinement(room.refine.as_ref()),
+        print_skinning(room.skinning),
         room.retarget.as_ref().map_or(String::new(), |r| format!(
             ", retargets {} markers ({})",
             r.markers.len(),
@@ -271,7 +279,7 @@ async fn info(args: &InfoArgs) -> anyhow::Result<()> {
     let room = get_room(&mut client, &args.room).await?;
     let model = room.model.unwrap_or_default();
     println!(
-        "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, refinement {}, {} subscribers, {} frames published",
+        "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, refinement {}, skinning {}, {} subscribers, {} frames published",
         room.room,
         model.name,
         model.base_vertices,
@@ -285,6 +293,7 @@ async fn info(args: &InfoArgs) -> anyhow::Result<()> {
         room.beta,
         print_filter(room.filter.as_ref()),
         print_refinement(room.refine.as_ref()),
+        print_skinning(room.skinning),
         room.subscribers,
         room.published
     );

@@ -72,6 +72,10 @@ pub struct SynthArgs {
     /// (issue 20; e.g. `4,0.01`), locally or on the server.
     #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
     pub refine: Option<Refinement>,
+    /// How to skin: `lbs` or `dqs` (issue 22; default: the model's, `crease train
+    /// --skinning`), locally or on the server.
+    #[arg(long, value_name = "lbs|dqs")]
+    pub skinning: Option<crease_core::runtime::skin::Skinning>,
 }
 
 impl SynthArgs {
@@ -108,6 +112,9 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     let mut predictor =
         Predictor::new(Arc::new(model), args.beta).context("preparing the predictor")?;
     predictor.set_refinement(args.refine);
+    if let Some(skinning) = args.skinning {
+        predictor.set_skinning(skinning);
+    }
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     }

@@ -35,6 +35,12 @@ pub struct TrainArgs {
     /// the same rig the model predicts with, not a new fit.
     #[arg(long, value_name = "FILE.glb")]
     pub export_gltf: Option<PathBuf>,
+    /// The model's default skinning, `lbs` or `dqs` (issue 22; stored in the model file):
+    /// what rooms on it and `crease synth` use unless they choose. The bones are fitted for
+    /// LBS either way; DQS (Kavan et al. 2007) keeps the volume at twisting joints. A DQS room
+    /// refuses palette subscriptions (their clients skin with LBS).
+    #[arg(long, value_name = "lbs|dqs", default_value_t)]
+    pub skinning: crease_core::runtime::skin::Skinning,
     /// Print one JSON object with the training report on stdout.
     #[arg(long)]
     pub json: bool,
@@ -62,7 +68,7 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         frames: &frames,
         names: &names,
     };
-    let (model, report) = pipeline::train_layers_with(
+    let (mut model, report) = pipeline::train_layers_with(
         input,
         detail_parts.as_ref().map(layers::frames),
         &options,
@@ -91,14 +97,16 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     for w in &report.fit.warnings {
         eprintln!("warning: {w}");
     }
+    model.skinning = args.skinning;
     model.save(&args.out).context("writing the model")?;
     eprintln!(
-        "wrote {}: {} bones, {} control points (vertices {:?}), method {}",
+        "wrote {}: {} bones, {} control points (vertices {:?}), method {}, skinning {}",
         args.out.display(),
         model.rig.bone_count,
         model.controls.len(),
         model.controls.iter().map(|c| c.vertex).collect::<Vec<_>>(),
-        model.method
+        model.method,
+        model.skinning
     );
     if let Some(glb) = &args.export_gltf {
         crease_core::model::export_rig_glb(&model.rig, glb)

@@ -7,7 +7,7 @@
 //!
 //! | tag | content |
 //! |---|---|
-//! | `CTRL` | JSON: control points (vertex, name), method name, default beta |
+//! | `CTRL` | JSON: control points (vertex, name), method name, default beta, default skinning |
 //! | `RREG` | JSON: the [`RotationModel`] (group structure and matrices) |
 //! | `EDGE` | edges, u32 x 2 per edge |
 //! | `EDBI` / `EDVC` | edge skin: bone indices (u32) and rest-frame vectors (f32 x 3), stride from `CTRL` |
@@ -21,6 +21,11 @@
 //!
 //! Files written before the vector edge skin carry `EDBW` (scalar FKY08 eq. 10 weights, f32)
 //! instead of `EDVC`; they still load, as [`EdgeSkin::from_weights`].
+//!
+//! The default skinning (`skinning` in `CTRL`, issue 22) is written only when it is not LBS:
+//! an LBS model's file is byte for byte what it was before the choice existed, and files
+//! without the key (every earlier file) load as LBS. A reader older than the key ignores it
+//! (serde's default for unknown fields) and skins with LBS.
 //!
 //! `RREG` is JSON for now: the regressors are a few hundred thousand numbers at most for the
 //! models we train (serde_json writes shortest round-trip floats, so it is exact), and the
@@ -40,7 +45,7 @@ use crate::runtime::displacement::{DetailInput, DetailRegressor};
 use crate::runtime::edge_skin::EdgeSkin;
 use crate::runtime::kernel::Kernel;
 use crate::runtime::predict::{LinearOperator, RotationModel};
-use crate::runtime::skin::SkinWeights;
+use crate::runtime::skin::{SkinWeights, Skinning};
 
 const CTRL: Tag = Tag(*b"CTRL");
 const RREG: Tag = Tag(*b"RREG");
@@ -102,6 +107,8 @@ pub struct TrainedModel {
     pub beta: f32,
     /// The detail layer, when the model was trained on detailed examples.
     pub detail: Option<DetailLayer>,
+    /// The skinning rooms on this model use unless they choose (`crease train --skinning`).
+    pub skinning: Skinning,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -111,6 +118,9 @@ struct CtrlMeta {
     beta: f32,
     edge_count: u64,
     edge_influences: u64,
+    /// Absent in LBS models and in every file written before issue 22 (module docs).
+    #[serde(default, skip_serializing_if = "Skinning::is_lbs")]
+    skinning: Skinning,
 }
 
 impl TrainedModel {
@@ -209,6 +219,7 @@ impl TrainedModel {
                 beta: self.beta,
                 edge_count: self.edges.len() as u64,
                 edge_influences: self.edge_skin.k() as u64,
+                skinning: self.skinning,
             },
         )?;
         w.add_json(RREG, &self.rotations)?;
@@ -281,6 +292,7 @@ impl TrainedModel {
             edge_skin,
             beta: meta.beta,
             detail,
+            skinning: meta.skinning,
         };
         model.validate()?;
         Ok(model)

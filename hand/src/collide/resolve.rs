@@ -155,8 +155,8 @@ fn relevant(b: &Bucket, o: &Obstacle, options: &CollideOptions, palm_active: [bo
     }
 }
 
-/// Pushes `v` out of the deepest of `obstacles`, again and again up to [`MAX_PUSHES`] times;
-/// whether it moved.
+/// Pushes `v` out of the deepest of `obstacles`, again and again up to [`MAX_PUSHES`] times,
+/// then out of the ball if it is still inside; whether it moved.
 fn push_vertex(v: &mut Vec3, obstacles: impl Iterator<Item = Obstacle> + Clone) -> bool {
     let mut moved = false;
     for _ in 0..MAX_PUSHES {
@@ -172,6 +172,18 @@ fn push_vertex(v: &mut Vec3, obstacles: impl Iterator<Item = Obstacle> + Clone) 
         }
         *v += (deepest.0 + PUSH_SLACK) * deepest.1;
         moved = true;
+    }
+    // The ball is rigid (module docs): where the hand's own primitives push a vertex back into
+    // it (a fist closing on a ball in the palm: the skin between a finger's spheres and the
+    // ball bounces for all MAX_PUSHES), the last push is out of the ball. The hand primitive
+    // then keeps the overlap, as a finger pressing on a held ball does.
+    for o in obstacles.filter(|o| o.owner == Owner::Object) {
+        if let Some((pen, dir)) = penetration(o.shape, *v)
+            && pen > 0.0
+        {
+            *v += (pen + PUSH_SLACK) * dir;
+            moved = true;
+        }
     }
     moved
 }

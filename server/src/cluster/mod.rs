@@ -471,6 +471,8 @@ impl Cluster {
             adoptions: 0,
             retarget: capture.as_ref().map(|c| c.resolved().clone()),
             refine: options.refine.map(v1::Refine::from),
+            // The value in use, set once the room is built (as beta).
+            skinning: 0,
         };
         let (room, link, rx) = self
             .open_linked(id, model, options, settings, &entry, true, 0)
@@ -481,6 +483,7 @@ impl Cluster {
             None => room,
         };
         entry.beta = room.beta();
+        entry.skinning = v1::Skinning::from(room.skinning()) as i32;
         entry.token_sha256 = room.session().token_sha256().to_vec();
         let revision = self
             .rooms_kv
@@ -617,6 +620,10 @@ impl Cluster {
                 "room {id:?}: the registry's refine is invalid: {e}"
             )));
         }
+        // Unspecified (an entry of a replica older than issue 22): the model's default, which
+        // is what that owner skinned with.
+        let skinning = crease_proto::convert::skinning_from_wire("RoomEntry", entry.skinning)
+            .map_err(|e| LookupError::Internal(format!("room {id:?}: the registry's {e}")))?;
         let digest = <[u8; 32]>::try_from(entry.token_sha256.as_slice()).map_err(|_| {
             LookupError::Internal(format!(
                 "room {id:?}: the registry's token digest has {} bytes, a SHA-256 has 32",
@@ -644,6 +651,7 @@ impl Cluster {
                     beta: Some(entry.beta),
                     filter,
                     refine,
+                    skinning,
                 },
                 settings_of(entry),
                 entry,

@@ -60,9 +60,24 @@ pub(crate) fn bent(rest: &Mesh, angle: f32) -> Vec<Vec3> {
         .collect()
 }
 
+/// The tube curled: the ring at height `z` turned about the x axis through the origin by
+/// `angle * z / (RINGS - 1)`, a bend whose rotation grows along the tube. Its fitted bones
+/// blend over the rings (where [`bent`]'s are rigid segments), so LBS and DQS differ on it.
+pub(crate) fn curled(rest: &Mesh, angle: f32) -> Vec<Vec3> {
+    rest.positions
+        .iter()
+        .map(|&p| Quat::from_rotation_x(angle * p.z / (RINGS - 1) as f32) * p)
+        .collect()
+}
+
 pub(crate) fn model() -> TrainedModel {
+    model_of(bent)
+}
+
+/// The tube model trained on `deform` at 0 to 1.25 rad.
+pub(crate) fn model_of(deform: fn(&Mesh, f32) -> Vec<Vec3>) -> TrainedModel {
     let rest = tube();
-    let frames: Vec<Vec<Vec3>> = (0..6).map(|k| bent(&rest, 0.25 * k as f32)).collect();
+    let frames: Vec<Vec<Vec3>> = (0..6).map(|k| deform(&rest, 0.25 * k as f32)).collect();
     let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
     let names: Vec<String> = (0..frames.len()).map(|k| format!("f{k}")).collect();
     let options = TrainOptions {
@@ -201,7 +216,18 @@ pub(crate) fn control_frame(
     seq: u64,
     angle: f32,
 ) -> v1::ControlFrame {
-    let p = bent(&model.rig.rest, angle);
+    control_frame_of(bent, model, room, seq, angle)
+}
+
+/// [`control_frame`] of the tube deformed by `deform`.
+pub(crate) fn control_frame_of(
+    deform: fn(&Mesh, f32) -> Vec<Vec3>,
+    model: &TrainedModel,
+    room: &str,
+    seq: u64,
+    angle: f32,
+) -> v1::ControlFrame {
+    let p = deform(&model.rig.rest, angle);
     v1::ControlFrame {
         room: room.into(),
         seq,

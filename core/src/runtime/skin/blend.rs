@@ -139,6 +139,11 @@ fn dqs_kernel<const K: usize>(
         let qp = dqs[ii[0] as usize][0];
         let (mut br, mut bd) = (Vec4::ZERO, Vec4::ZERO);
         for j in 0..K {
+            // As in the LBS kernel: slots are sorted heaviest first, so the first zero ends
+            // the vertex's influences (a zero slot adds nothing to the blend).
+            if ww[j] == 0.0 {
+                break;
+            }
             let [r, d] = dqs[ii[j] as usize];
             // q and -q are one rotation: take the sign that agrees with the pivot.
             let s = ww[j].copysign(r.dot(qp));

@@ -28,6 +28,8 @@
 //! - `palette`: [`BonePalette`], the per-frame bone data in the forms the loops read.
 //! - `blend`: [`skin_lbs`] and [`skin_dqs`] over [`SkinWeights`], and the chunking they share.
 //! - `packed`: [`PackedSkin`] and [`skin_lbs_packed`], the per-frame LBS path.
+//!
+//! [`Skinning`] names the choice between the two (a model's default, a room's override).
 
 mod blend;
 mod packed;
@@ -40,6 +42,61 @@ pub use packed::{PACKED_MAX_BONES, PackedSkin, skin_lbs_packed};
 pub use palette::BonePalette;
 pub use transform::{DualQuat, RigidTransform};
 pub use weights::SkinWeights;
+
+/// Which skinning turns the bone transforms into vertices: a model's default (stored in its
+/// file) and a room's choice (issue 22).
+///
+/// LBS is what the bones were fitted for (SSDR minimises the LBS error of the examples) and
+/// what a palette stream's client runs on its GPU; DQS (Kavan et al. 2007, FKY08 §6.3) keeps
+/// the volume at twisting joints that LBS collapses ("candy wrapper").
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Skinning {
+    /// Linear blend skinning ([`skin_lbs`], [`skin_lbs_packed`]): the default.
+    #[default]
+    Lbs,
+    /// Dual-quaternion skinning ([`skin_dqs`]).
+    Dqs,
+}
+
+impl Skinning {
+    /// Both, LBS first.
+    pub const ALL: [Skinning; 2] = [Skinning::Lbs, Skinning::Dqs];
+
+    /// The name a command line and a model file spell: `lbs` or `dqs`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Skinning::Lbs => "lbs",
+            Skinning::Dqs => "dqs",
+        }
+    }
+
+    /// Whether this is LBS (a model file leaves the default out, so LBS models keep the bytes
+    /// of files written before the choice existed).
+    pub fn is_lbs(&self) -> bool {
+        *self == Skinning::Lbs
+    }
+}
+
+impl std::fmt::Display for Skinning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Skinning {
+    type Err = String;
+
+    /// `lbs` or `dqs` (ASCII case ignored).
+    fn from_str(s: &str) -> Result<Self, String> {
+        Skinning::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("skinning {s:?}: expected lbs or dqs"))
+    }
+}
 
 /// Most bone influences per vertex a [`SkinWeights`] may hold (two glTF `JOINTS_n` sets).
 pub const MAX_INFLUENCES: usize = 8;
