@@ -19,6 +19,7 @@ import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { decodeFrame, decodeIndices, ready } from "./codec.js";
 import { PaletteSynth, floatTargetsSupported } from "./palette.js";
 import { readMeshFrame, socketProtocols } from "./wire.js";
+import { listTakes, startPlayer } from "./takes.js";
 import { HandTracker, markerMessage, markerPlan } from "./xr.js";
 
 const params = new URLSearchParams(location.search);
@@ -54,6 +55,9 @@ const state = {
   // the hand, frames published and dropped (socket backed up), the last one's seq, and the capture-to-mesh latency
   // (ms, mean over the last half second: an XR frame's time to its mesh frame's arrival).
   xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, published: 0, dropped: 0, seq: null, latencyMs: null },
+  // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
+  // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
+  take: { list: [], id: params.get("take"), loaded: false },
 };
 window.crease = state;
 // Not enumerable, so JSON.stringify(window.crease) stays small: `palette` (in palette mode
@@ -540,6 +544,14 @@ hidden("publish", (flat) => {
   publish(points);
 });
 
+/** Sends one JSON control frame as it is (a take's, takes.js); false when it cannot. */
+function sendFrame(frame) {
+  if (!ws || ws.readyState !== WebSocket.OPEN || !tokenInput.value) return false;
+  ws.send(JSON.stringify(frame));
+  state.published += 1;
+  return true;
+}
+
 // ---- WebXR hands (xr.js) ----------------------------------------------------------------------
 let tracker = null; // HandTracker while a session runs
 let placed = false;
@@ -749,4 +761,15 @@ try {
 }
 connect();
 updateXrControl();
+const takeError = (msg) => {
+  state.error = msg;
+  showBanner("error", msg);
+};
+if (state.take.id) {
+  startPlayer({ takeId: state.take.id, root: document.getElementById("player"), state, send: sendFrame, onError: takeError });
+} else {
+  listTakes({ roomId, list: document.getElementById("take-list"), state, onError: takeError }).catch((err) =>
+    takeError(`takes: ${err.message || err}`),
+  );
+}
 renderer.setAnimationLoop(render); // the window's frames, or the XR session's while one runs

@@ -510,6 +510,8 @@ pub struct TakeFrames {
     pub room: String,
     /// The model.
     pub model: String,
+    /// The model's bones (a skinned export has one joint each).
+    pub bones: u32,
     /// Seconds after the first frame, one per frame, strictly increasing.
     pub times: Vec<f64>,
     /// The frames, as recorded.
@@ -530,6 +532,7 @@ impl TakeFrames {
             take: header.take.clone(),
             room: room.room.clone(),
             model: room.model.clone(),
+            bones: header.bones,
             times: crate::take::keyframe_times(take),
             frames: take
                 .frames

@@ -4,8 +4,9 @@
 # demo), then runs tests/browser/viewer.test.mjs and tests/browser/palette.test.mjs (palette
 # streams on the GPU against `crease decode-stream`; playwright-core driving Debian's
 # /usr/bin/chromium) and tests/browser/webxr.test.mjs (WebXR hands in room `hands`, through
-# Meta's WebXR emulator iwer) against it, and tests/browser/report.test.mjs (the --report pages of
-# crease eval and crease train, written here).
+# Meta's WebXR emulator iwer) against it, tests/browser/report.test.mjs (the --report pages of
+# crease eval and crease train, written here), and tests/browser/takes.test.mjs (a take of room
+# demo: the viewer's takes list and player, GLTFLoader on its skinned glTF export).
 # Called by .ci/run; runs alone from anywhere:
 #   bash tests/browser/run.sh
 # Uses ${CARGO_TARGET_DIR:-target} for the build, the demo cache (demo-cache/, trained once,
@@ -51,7 +52,8 @@ echo "== build (crease-server, crease)"
 cargo build --release --locked -p crease-demo -p crease-cli
 
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
-start_demo_server --demo-token "$token"
+admin="admin-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
+start_demo_server --demo-token "$token" --admin-token "$admin" --takes "$work/takes"
 
 # Every test runs even when an earlier one fails; the script fails if any did.
 failed=0
@@ -91,6 +93,30 @@ fi
     --json --report "$work/report-hand" >"$work/report-hand/stdout.json" || failed=1
 CREASE_REPORTS="$reports" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
     node tests/browser/report.test.mjs || failed=1
+
+# Issue 22: a take of room demo (the server animates it), exported by `crease take export` and
+# by the server (byte-identical), then takes.test.mjs: the viewer's takes list, its player in a
+# private replay room, and three.js's GLTFLoader on the export.
+echo "== takes in headless chromium"
+rm -rf "$work/takes"
+if take="$("$bin/crease" take start --room demo --name browser --server "http://$grpc_addr" --admin-token "$admin")"; then
+    sleep 8
+    "$bin/crease" take stop --room demo --server "http://$grpc_addr" --admin-token "$admin" >/dev/null || failed=1
+    "$bin/crease" take export "$take" --server "http://$grpc_addr" --model "$target/demo-cache/demo-hand-v1.crease" \
+        --out "$work/take.glb" || failed=1
+    node -e 'fetch(process.argv[1]).then(async (r) => { if (!r.ok) throw new Error(`${r.status} ${await r.text()}`); require("fs").writeFileSync(process.argv[2], Buffer.from(await r.arrayBuffer())); }).catch((e) => { console.error(`GET ${process.argv[1]}: ${e.message}`); process.exit(1); })' \
+        "http://$http_addr/api/takes/$take/glb" "$work/take-server.glb" || failed=1
+    if cmp -s "$work/take.glb" "$work/take-server.glb"; then
+        echo "ok   crease take export and GET /api/takes/$take/glb write the same bytes"
+    else
+        echo "FAIL crease take export and GET /api/takes/$take/glb differ"
+        failed=1
+    fi
+    CREASE_HTTP="$http_addr" CREASE_TAKE="$take" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+        node tests/browser/takes.test.mjs || failed=1
+else
+    failed=1
+fi
 
 echo "== stop crease-server"
 stop_server
