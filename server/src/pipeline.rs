@@ -386,10 +386,10 @@ impl Pipeline {
     }
 
     /// Starts recording into `recorder` (`crate::takes`); gives it back when a take runs.
-    pub(crate) fn start_take(&self, recorder: Recorder) -> Result<(), Recorder> {
+    pub(crate) fn start_take(&self, recorder: Recorder) -> Result<(), Box<Recorder>> {
         let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
         if state.take.is_some() {
-            return Err(recorder);
+            return Err(Box::new(recorder));
         }
         state.take = Some(recorder);
         Ok(())

@@ -131,7 +131,7 @@ pub async fn start(
             }
             // Another StartTake won the race: this one's file goes.
             Err(recorder) => {
-                recorder.discard();
+                (*recorder).discard();
                 Err(TakeError::Recording {
                     room: room.id.clone(),
                     take: room
