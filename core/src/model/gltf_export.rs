@@ -1,6 +1,8 @@
 //! Animated glTF 2.0 binaries (`.glb`) any viewer (three.js, Blender) can play: a [`Rig`] as a
-//! skinned mesh ([`export_rig_glb`]), and a sequence of synthesized meshes baked into morph
-//! targets ([`export_animation_glb`], what `crease synth --gltf` writes).
+//! skinned mesh ([`export_rig_glb`]; with any sequence of bone transforms as its keyframes,
+//! [`skinned_animation_to_glb`], what `crease take export` writes), and a sequence of
+//! synthesized meshes baked into morph targets ([`export_animation_glb`], what
+//! `crease synth --gltf` writes).
 //!
 //! # Skinned rig
 //!
