@@ -195,6 +195,11 @@ async function loadRoomInfo() {
   const r = await fetch(`/api/rooms/${encodeURIComponent(roomId)}`);
   if (!r.ok) throw new Error(`room ${roomId}: ${(await r.text()).trim()}`);
   roomInfo = await r.json();
+  // A room that skins with dual quaternions refuses palette streams (palette.js skins linearly).
+  if (roomInfo.skinning === "dqs" && state.encoding === "palette") {
+    state.encoding = "vertices";
+    state.paletteReason = "the room skins with dual quaternions";
+  }
 }
 
 // ---- Stream ------------------------------------------------------------------------------

@@ -229,6 +229,10 @@ pub struct RoomDocument {
     pub model: String,
     /// The room id.
     pub room: String,
+    /// `"dqs"` in a room that skins with dual quaternions (its palette streams are refused:
+    /// the viewer asks for vertex frames); absent in LBS rooms.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skinning: Option<String>,
 }
 
 /// A retargeting room's capture in a [`RoomDocument`] (`v1::Retarget`'s markers and units).
@@ -255,6 +259,13 @@ pub struct RoomControlPoint {
 }
 
 impl RoomDocument {
+    /// The document of a room that skins with `skinning` (only DQS is named).
+    pub fn with_skinning(mut self, skinning: crease_core::runtime::skin::Skinning) -> RoomDocument {
+        self.skinning =
+            (skinning == crease_core::runtime::skin::Skinning::Dqs).then(|| "dqs".to_owned());
+        self
+    }
+
     /// The document of room `room` on the model `info`, with the room's `beta` and, for a
     /// retargeting room, its `retarget`.
     pub fn new(
@@ -290,6 +301,7 @@ impl RoomDocument {
             has_detail,
             model: info.name.clone(),
             room: room.to_owned(),
+            skinning: None,
         }
     }
 }

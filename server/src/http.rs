@@ -98,13 +98,16 @@ async fn room_info(
         Ok(room) => room,
         Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
     };
-    axum::Json(RoomDocument::new(
-        &room.id,
-        &room.model.info,
-        room.beta(),
-        room.has_detail(),
-        room.pipeline().capture().map(|c| c.wire()),
-    ))
+    axum::Json(
+        RoomDocument::new(
+            &room.id,
+            &room.model.info,
+            room.beta(),
+            room.has_detail(),
+            room.pipeline().capture().map(|c| c.wire()),
+        )
+        .with_skinning(room.skinning()),
+    )
     .into_response()
 }
 
