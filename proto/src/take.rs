@@ -537,6 +537,38 @@ mod tests {
     }
 
     #[test]
+    fn damaged_files_never_panic_and_keep_a_prefix_of_whole_frames() {
+        // A deterministic xorshift: flipped bytes, zeroed runs, huge lengths, cuts.
+        let (bytes, _) = file(6);
+        let whole = read_take(bytes.as_slice()).unwrap().frames;
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..2000 {
+            let mut damaged = bytes.clone();
+            for _ in 0..1 + next() % 4 {
+                let len = damaged.len();
+                let at = (next() as usize) % len;
+                match next() % 3 {
+                    0 => damaged[at] ^= 1 << (next() % 8),
+                    1 => damaged[at..(at + 4).min(len)].fill(0xff),
+                    _ => damaged.truncate(at.max(1)),
+                }
+            }
+            if let Ok(take) = read_take(damaged.as_slice()) {
+                // Whatever survives is a prefix of the frames written (a CRC-32 collision on a
+                // 2000-case run is not expected).
+                assert!(take.frames.len() <= whole.len());
+                assert_eq!(take.frames[..], whole[..take.frames.len()]);
+            }
+        }
+    }
+
+    #[test]
     fn not_a_take_and_a_missing_header_are_errors() {
         let err = read_take(&b"PK\x03\x04 zip"[..]).unwrap_err();
         assert!(matches!(err, TakeError::Magic { .. }), "{err}");
