@@ -540,6 +540,90 @@ fn dockerfile_builds_every_member_on_a_matching_toolchain() {
     );
 }
 
+/// Copies `from` (a file or a folder, recursively) to `to`.
+fn copy_path(from: &Path, to: &Path) {
+    if from.is_dir() {
+        std::fs::create_dir_all(to).unwrap();
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            copy_path(&e.path(), &to.join(e.file_name()));
+        }
+    } else {
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(from, to).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+    }
+}
+
+/// The builder stage's dependency layer, outside Docker: its COPY lines (the manifests, the
+/// lockfile, proto's build script and protos) into a folder standing for WORKDIR, then its
+/// stand-in RUN there with the dependency build swapped for `cargo fetch --locked`
+/// for this host, which loads every manifest and its targets as the build would (`cargo
+/// metadata` does not look for target files): a `[[bench]]`, `[[test]]` or `[[example]]` the
+/// stand-ins miss, a member the RUN forgets, a lockfile out of date, all fail here as they would
+/// in `docker build`. (The real-source half of the stage is the workspace build every test run
+/// does.)
+#[test]
+fn the_builder_stages_stand_ins_are_manifests_cargo_accepts() {
+    let docker = Dockerfile::read();
+    let builder = docker.stages.first().expect("a builder stage");
+    let dir = tempfile::tempdir().unwrap();
+    let build = "cargo build --release --locked -p crease-demo -p crease-cli";
+    let mut ran = false;
+    for i in builder {
+        match i.keyword.as_str() {
+            "COPY" if !ran => {
+                let words: Vec<&str> = i.args.split_whitespace().collect();
+                let (dest, sources) = words.split_last().expect("COPY src... dest");
+                for src in sources {
+                    let from = repo().join(src);
+                    let to = if dest.ends_with('/') {
+                        dir.path()
+                            .join(dest)
+                            .join(from.file_name().expect("a named source"))
+                    } else {
+                        dir.path().join(dest)
+                    };
+                    copy_path(&from, &to);
+                }
+            }
+            "RUN" if !ran && i.args.contains("members=") => {
+                assert!(
+                    i.args.contains(build),
+                    "Dockerfile: the stand-in RUN should `{build}`"
+                );
+                let script = i.args.replace(
+                    build,
+                    "cargo fetch --locked --target \"$(rustc -vV | sed -n 's/^host: //p')\"",
+                );
+                let out = std::process::Command::new("bash")
+                    .args(["-o", "pipefail", "-c", &script])
+                    .current_dir(dir.path())
+                    .output()
+                    .unwrap();
+                assert!(
+                    out.status.success(),
+                    "the stand-in RUN outside Docker: {}\n{}",
+                    out.status,
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                ran = true;
+            }
+            _ => {}
+        }
+    }
+    assert!(
+        ran,
+        "Dockerfile: no stand-in RUN (members=...) in the builder stage"
+    );
+    // The RUN removed its stand-ins again: the real sources come next.
+    for m in ["core", "proto", "demo", "client"] {
+        assert!(
+            !dir.path().join(m).join("src").exists(),
+            "{m}/src left behind"
+        );
+    }
+}
+
 /// The paths under `/node_modules/` that web/index.html's import map names.
 fn import_map_modules() -> Vec<String> {
     let html = read("web/index.html");
