@@ -536,3 +536,136 @@ fn takes_record_survive_a_kill_replay_and_export() {
         "{err}"
     );
 }
+
+/// `crease take export --level detail` on a detailed model (the real cactus, split by
+/// `--base-vertices`): a take written here from predicted frames, exported as morph targets;
+/// every exported frame (the base shape plus its target) equals the detail layer predicted
+/// straight from that frame's control points (`Predictor::predict` + `predict_detail`), not
+/// from the recorded transforms the export loads.
+#[test]
+fn a_detail_export_holds_each_frames_detail_mesh() {
+    use crease_core::model::TrainedModel;
+    use crease_core::predictor::Predictor;
+    use sha2::Digest as _;
+    let Some(dir) = common::shared_data("cactus") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = tmp.path().join("cactus.crease");
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(&dir)
+            .args([
+                "--base-vertices",
+                "1200",
+                "--bones",
+                "12",
+                "--max-influences",
+                "4",
+            ])
+            .args([
+                "--detail-ray",
+                "0.05",
+                "--control-points",
+                "auto:6",
+                "--method",
+                "local",
+                "--out",
+            ])
+            .arg(&model_path),
+    );
+    let bytes = std::fs::read(&model_path).unwrap();
+    let sha: String = sha2::Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    let model = std::sync::Arc::new(TrainedModel::from_bytes(&bytes).unwrap());
+    let predictor = Predictor::new(std::sync::Arc::clone(&model), None).unwrap();
+    let mut ctx = predictor.new_context();
+    let (lo, hi) = model.rig.rest.bounding_box();
+    let size = (hi - lo).length();
+    // Five frames: the rest control points swaying sideways.
+    let frames: Vec<Vec<Vec3>> = (0..5)
+        .map(|f| {
+            model
+                .controls
+                .iter()
+                .map(|c| {
+                    let p = model.rig.rest.positions[c.vertex as usize];
+                    p + Vec3::X * (0.02 * size * f as f32 * (p.y - lo.y) / (hi.y - lo.y))
+                })
+                .collect()
+        })
+        .collect();
+    let mut file = Vec::new();
+    crease_proto::take::write_header(
+        &mut file,
+        &v1::TakeHeader {
+            take: "cactus-take".into(),
+            room: Some(v1::OpenRoomRequest {
+                room: "r".into(),
+                model: "cactus".into(),
+                ..Default::default()
+            }),
+            model_sha256: sha,
+            bones: model.rig.bone_count as u32,
+            controls: model.controls.len() as u32,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut want = Vec::new();
+    let (mut record, mut buf) = (v1::TakeFrame::default(), Vec::new());
+    for (f, controls) in frames.iter().enumerate() {
+        predictor.predict(&mut ctx, controls, None).unwrap();
+        let control = v1::ControlFrame {
+            seq: f as u64,
+            capture_time_us: 40_000 * f as i64,
+            positions: controls.iter().flat_map(|p| p.to_array()).collect(),
+            ..Default::default()
+        };
+        crease_proto::take::fill_frame(&mut record, &control, 0, ctx.controls(), ctx.transforms());
+        crease_proto::take::encode_record(&record, &mut buf);
+        file.extend_from_slice(&buf);
+        want.push(predictor.predict_detail(&mut ctx).unwrap().to_vec());
+    }
+    let take_path = tmp.path().join("cactus.take");
+    std::fs::write(&take_path, &file).unwrap();
+    let glb = tmp.path().join("detail.glb");
+    run_ok(
+        crease()
+            .args(["take", "export"])
+            .arg(&take_path)
+            .arg("--model")
+            .arg(&model_path)
+            .args(["--level", "detail", "--out"])
+            .arg(&glb),
+    );
+    let doc = gltf::Gltf::from_slice(&std::fs::read(&glb).unwrap()).unwrap();
+    let blob = doc.blob.clone().unwrap();
+    let get = |_: gltf::Buffer<'_>| Some(&blob[..]);
+    let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+    let reader = prim.reader(get);
+    let base: Vec<Vec3> = reader.read_positions().unwrap().map(Vec3::from).collect();
+    let targets: Vec<Vec<Vec3>> = reader
+        .read_morph_targets()
+        .map(|(p, _, _)| p.unwrap().map(Vec3::from).collect())
+        .collect();
+    assert_eq!(targets.len(), frames.len(), "a morph target per frame");
+    assert_eq!(base.len(), want[0].len(), "the detail mesh's vertices");
+    let mut spread = 0.0f32;
+    for (f, (target, want)) in targets.iter().zip(&want).enumerate() {
+        let got: Vec<Vec3> = base.iter().zip(target).map(|(b, d)| *b + *d).collect();
+        let d = max_distance(&got, want);
+        assert!(d < 1e-5 * size, "frame {f}: the export differs by {d}");
+        spread = spread.max(max_distance(want, &frames_detail_first(&targets, &base)));
+    }
+    // The frames differ from each other by far more than the tolerance.
+    assert!(spread > 1e-3 * size, "the frames move {spread}");
+}
+
+/// The first exported frame's detail mesh.
+fn frames_detail_first(targets: &[Vec<Vec3>], base: &[Vec3]) -> Vec<Vec3> {
+    base.iter().zip(&targets[0]).map(|(b, d)| *b + *d).collect()
+}
