@@ -108,7 +108,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     }
     std::fs::write(&csv, text).unwrap();
     let out = on_server("stream", "r1")
-        .args(["--token", &publish_token, "--rate", "100", "--frames"])
+        .args(["--token", &publish_token, "--rate", "50", "--frames"])
         .arg(&csv)
         .output()
         .unwrap();
@@ -118,12 +118,23 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
         "stream failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // Latest wins on the way in (server::mailbox): on a busy machine a frame that waited while
+    // a stalled one ran can be superseded by the next (counted apart, never refused).
+    let superseded: usize = stdout
+        .split(" superseded")
+        .next()
+        .and_then(|s| s.rsplit(", ").next())
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or(0);
     assert!(
         stdout.starts_with("10 frames in ")
-            && stdout.contains("10 acknowledged, 0 refused")
-            && stdout.contains("invalid control points: 1 in 1 frames (server held 1)"),
+            && stdout.contains(&format!("{} acknowledged, 0 refused", 10 - superseded))
+            && stdout.contains("invalid control points: 1 in 1 frames"),
         "{stdout}"
     );
+    if superseded == 0 {
+        assert!(stdout.contains("(server held 1)"), "{stdout}");
+    }
     // A wrong token: every frame refused, and the command says so.
     let out = on_server("stream", "r1")
         .args(["--token", "wrong", "--frames"])
