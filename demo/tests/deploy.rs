@@ -542,15 +542,19 @@ fn dockerfile_builds_every_member_on_a_matching_toolchain() {
 
 /// Copies `from` (a file or a folder, recursively) to `to`.
 fn copy_path(from: &Path, to: &Path) {
+    fn must<T>(r: std::io::Result<T>, path: &Path) -> T {
+        r.unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    }
     if from.is_dir() {
-        std::fs::create_dir_all(to).unwrap();
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
+        must(std::fs::create_dir_all(to), to);
+        for e in must(std::fs::read_dir(from), from) {
+            let e = must(e, from);
             copy_path(&e.path(), &to.join(e.file_name()));
         }
     } else {
-        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(from, to).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+        let parent = to.parent().expect("a file has a parent");
+        must(std::fs::create_dir_all(parent), parent);
+        must(std::fs::copy(from, to), from);
     }
 }
 
