@@ -5,8 +5,6 @@ use std::net::IpAddr;
 use std::pin::Pin;
 use std::sync::Arc;
 
-use crease_core::predictor::Refinement;
-use crease_core::runtime::filter::OneEuroParams;
 use crease_proto::v1::crease_server::{Crease, CreaseServer};
 use crease_proto::{Encoding, Level, v1};
 use tokio::sync::mpsc;
@@ -19,7 +17,7 @@ use crate::fanout::Channel;
 use crate::ingest;
 use crate::registry::LoadedModel;
 use crate::room::{Room, RoomOptions, StreamSettings};
-use crate::takes::service as takes;
+use crate::take_service as takes;
 use crate::{AddRoomError, AppState};
 
 /// The largest message the server sends: what it sends is its own (a limit on requests,
@@ -164,7 +162,8 @@ impl Crease for CreaseService {
         self.require_admin(&req)?;
         let r = req.into_inner();
         let model = self.model(&r.model)?;
-        let (options, capture) = room_options(&self.state, &r, &model).await?;
+        let (options, capture) =
+            crate::room::options_from_request(&r, &model, self.state.config.maps.clone()).await?;
         let room = match self.state.cluster() {
             Some(cluster) => {
                 Arc::clone(cluster)
@@ -306,7 +305,7 @@ impl Crease for CreaseService {
         let options = RoomOptions {
             beta: (r.beta != 0.0).then_some(r.beta),
             filter: None,
-            refine: refinement(r.refine)?,
+            refine: crate::room::refinement(r.refine)?,
             skinning: crease_proto::convert::skinning_from_wire("SynthesizeRequest", r.skinning)?,
         };
         let room = Room::open("batch", model, options, StreamSettings::full())
@@ -385,54 +384,6 @@ fn holding<T: Send + 'static>(
         let _held = &permit;
         item
     }))
-}
-
-/// What an `OpenRoomRequest` asks of the room, checked: its [`RoomOptions`] (beta, filter,
-/// refinement) and, for a retargeting room, its capture (the marker map resolved).
-///
-/// # Errors
-/// INVALID_ARGUMENT naming the field.
-pub(crate) async fn room_options(
-    state: &AppState,
-    r: &v1::OpenRoomRequest,
-    model: &Arc<LoadedModel>,
-) -> Result<(RoomOptions, Option<Arc<crate::capture::CaptureSpec>>), Status> {
-    let beta = (r.beta != 0.0).then_some(r.beta);
-    let filter = r.filter.map(OneEuroParams::from);
-    if let Some(f) = filter
-        && !f.is_valid()
-    {
-        return Err(Status::invalid_argument(format!(
-            "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
-            f.min_cutoff_hz, f.beta, f.d_cutoff_hz
-        )));
-    }
-    let options = RoomOptions {
-        beta,
-        filter,
-        refine: refinement(r.refine)?,
-        skinning: crease_proto::convert::skinning_from_wire("OpenRoomRequest", r.skinning)?,
-    };
-    let capture = match r.retarget.clone() {
-        None => None,
-        Some(spec) => {
-            let maps = state.config.maps.clone();
-            let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(model))
-                .await
-                .map_err(|e| Status::invalid_argument(e.to_string()))?;
-            Some(Arc::new(spec))
-        }
-    };
-    Ok((options, capture))
-}
-
-/// A request's refinement, checked (`refine: ...` names the field in the error).
-fn refinement(wire: Option<v1::Refine>) -> Result<Option<Refinement>, Status> {
-    let refine = wire.map(Refinement::from);
-    match refine.map(|r| r.validate()) {
-        Some(Err(e)) => Err(Status::invalid_argument(format!("refine: {e}"))),
-        _ => Ok(refine),
-    }
 }
 
 /// Detail streams need a model with a detail layer.

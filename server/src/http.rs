@@ -3,7 +3,7 @@
 //! [`crate::ws`]), the rooms (`/api/rooms`, `/api/rooms/{id}`), the takes (issue 22:
 //! `GET /api/takes[?room=ID]`, `GET /api/takes/{id}` the file, `.../frames` as JSON for the
 //! viewer's player, `.../glb` as a skinned glTF animation, `POST .../replay` opens a private
-//! room to play it back in; [`crate::takes::service`]), and the static files of the browser
+//! room to play it back in; [`crate::take_service`]), and the static files of the browser
 //! viewer (`Config::web`) at `/`.
 
 use std::sync::Arc;
@@ -129,7 +129,7 @@ struct TakesQuery {
 }
 
 /// A take operation's error as a plain-text response.
-fn take_error(e: &crate::takes::service::TakeOpError) -> axum::response::Response {
+fn take_error(e: &crate::take_service::TakeOpError) -> axum::response::Response {
     (e.http_status(), format!("{e}\n")).into_response()
 }
 
@@ -138,7 +138,7 @@ async fn takes_list(
     State(state): State<Arc<AppState>>,
     axum::extract::Query(q): axum::extract::Query<TakesQuery>,
 ) -> axum::response::Response {
-    match crate::takes::service::list(&state, q.room).await {
+    match crate::take_service::list(&state, q.room).await {
         Ok(takes) => axum::Json(TakeList {
             takes: takes.iter().map(TakeSummary::from).collect(),
         })
@@ -152,7 +152,7 @@ async fn take_file(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    match crate::takes::service::bytes(&state, id.clone()).await {
+    match crate::take_service::bytes(&state, id.clone()).await {
         Ok(bytes) => attachment("application/octet-stream", &format!("{id}.take"), bytes),
         Err(e) => take_error(&e),
     }
@@ -163,7 +163,7 @@ async fn take_frames(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    match crate::takes::service::frames(&state, id).await {
+    match crate::take_service::frames(&state, id).await {
         Ok(frames) => axum::Json(frames).into_response(),
         Err(e) => take_error(&e),
     }
@@ -174,7 +174,7 @@ async fn take_glb(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    match crate::takes::service::glb(&state, id.clone()).await {
+    match crate::take_service::glb(&state, id.clone()).await {
         Ok(bytes) => attachment("model/gltf-binary", &format!("{id}.glb"), bytes),
         Err(e) => take_error(&e),
     }
@@ -186,7 +186,7 @@ async fn take_replay(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    match crate::takes::service::open_replay(&state, id).await {
+    match crate::take_service::open_replay(&state, id).await {
         Ok(room) => axum::Json(room).into_response(),
         Err(e) => take_error(&e),
     }

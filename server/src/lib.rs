@@ -20,7 +20,8 @@
 //! - [`cluster`]: rooms across replicas over NATS (`--nats`): the room registry, relayed
 //!   frames, forwarded controls, leases and failover, models in the cluster's store.
 //! - [`takes`]: a room's recordings (issue 22) in the takes folder: the recorder in the
-//!   pipeline, its writer thread, listing and reading takes.
+//!   pipeline, its writer thread, listing and reading takes; [`take_service`]: the take
+//!   operations both transports call (start, stop, list, export, replay rooms).
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
 //!   Prometheus metrics.
 //! - [`serve`]: binds the listeners and runs until shut down.
@@ -44,6 +45,7 @@ pub mod registry;
 pub mod room;
 pub mod session;
 pub mod stream;
+pub mod take_service;
 pub mod takes;
 pub mod ws;
 

@@ -306,3 +306,55 @@ impl Room {
         })
     }
 }
+
+/// What an `OpenRoomRequest` asks of the room, checked: its [`RoomOptions`] (beta, filter,
+/// refinement) and, for a retargeting room, its capture (the marker map resolved).
+///
+/// # Errors
+/// INVALID_ARGUMENT naming the field.
+pub(crate) async fn options_from_request(
+    r: &v1::OpenRoomRequest,
+    model: &Arc<LoadedModel>,
+    maps: Option<std::path::PathBuf>,
+) -> Result<(RoomOptions, Option<Arc<crate::capture::CaptureSpec>>), tonic::Status> {
+    use tonic::Status;
+    let beta = (r.beta != 0.0).then_some(r.beta);
+    let filter = r.filter.map(OneEuroParams::from);
+    if let Some(f) = filter
+        && !f.is_valid()
+    {
+        return Err(Status::invalid_argument(format!(
+            "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
+            f.min_cutoff_hz, f.beta, f.d_cutoff_hz
+        )));
+    }
+    let options = RoomOptions {
+        beta,
+        filter,
+        refine: refinement(r.refine)?,
+        skinning: crease_proto::convert::skinning_from_wire("OpenRoomRequest", r.skinning)?,
+    };
+    let capture = match r.retarget.clone() {
+        None => None,
+        Some(spec) => {
+            let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(model))
+                .await
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            Some(Arc::new(spec))
+        }
+    };
+    Ok((options, capture))
+}
+
+/// A request's refinement, checked (`refine: ...` names the field in the error).
+pub(crate) fn refinement(
+    wire: Option<v1::Refine>,
+) -> Result<Option<crease_core::predictor::Refinement>, tonic::Status> {
+    use crease_core::predictor::Refinement;
+    use tonic::Status;
+    let refine = wire.map(Refinement::from);
+    match refine.map(|r| r.validate()) {
+        Some(Err(e)) => Err(Status::invalid_argument(format!("refine: {e}"))),
+        _ => Ok(refine),
+    }
+}

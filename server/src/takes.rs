@@ -21,8 +21,6 @@ use crease_core::runtime::skin::RigidTransform;
 use crease_proto::take::{self, Scan};
 use crease_proto::v1;
 
-pub mod service;
-
 /// Frames a take's writer may be behind before the room drops the next one.
 pub const QUEUE: usize = 256;
 

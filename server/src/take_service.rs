@@ -8,9 +8,9 @@ use std::time::Duration;
 use crease_proto::json::{ReplayRoom, TakeFrames};
 use crease_proto::{take, v1};
 
-use super::TakeError;
 use crate::ingest::PublishError;
 use crate::room::Room;
+use crate::takes::TakeError;
 use crate::{AddRoomError, AppState};
 
 /// Most private replay rooms open at once (each also counts against `Limits::rooms`).
@@ -253,9 +253,10 @@ pub async fn open_replay(state: &Arc<AppState>, id: String) -> Result<ReplayRoom
         blocking(move || take_and_model(&state, &id)).await?
     };
     let settings = take.header().room.clone().unwrap_or_default();
-    let (options, capture) = crate::grpc::room_options(state, &settings, &model)
-        .await
-        .map_err(|s| TakeOpError::Open(s.message().to_owned()))?;
+    let (options, capture) =
+        crate::room::options_from_request(&settings, &model, state.config.maps.clone())
+            .await
+            .map_err(|s| TakeOpError::Open(s.message().to_owned()))?;
     let room_id = format!("replay-{}", &crate::session::new_token()[..12]);
     let room = Room::open(&room_id, model, options, state.config.stream)
         .await
