@@ -256,7 +256,7 @@ impl AppState {
             .read()
             .unwrap_or_else(|e| e.into_inner())
             .values()
-            .filter_map(|r| r.pipeline().take_info().map(|t| t.take))
+            .filter_map(|r| r.pipeline().take_id())
             .collect()
     }
 

@@ -404,10 +404,10 @@ impl Pipeline {
             .take()
     }
 
-    /// The running take's summary, if one runs.
-    pub fn take_info(&self) -> Option<crease_proto::v1::TakeInfo> {
+    /// The running take's id, if one runs (no summary built).
+    pub fn take_id(&self) -> Option<String> {
         let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        state.take.as_ref().map(Recorder::info)
+        state.take.as_ref().map(|t| t.id().to_owned())
     }
 
     /// The control-point filter.

@@ -105,10 +105,10 @@ pub async fn start(
     name: String,
 ) -> Result<v1::TakeInfo, TakeOpError> {
     let room = local_room(state, id).await?;
-    if let Some(t) = room.pipeline().take_info() {
+    if let Some(take) = room.pipeline().take_id() {
         return Err(TakeError::Recording {
             room: room.id.clone(),
-            take: t.take,
+            take,
         }
         .into());
     }
@@ -134,11 +134,7 @@ pub async fn start(
                 (*recorder).discard();
                 Err(TakeError::Recording {
                     room: room.id.clone(),
-                    take: room
-                        .pipeline()
-                        .take_info()
-                        .map(|t| t.take)
-                        .unwrap_or_default(),
+                    take: room.pipeline().take_id().unwrap_or_default(),
                 }
                 .into())
             }
