@@ -8,8 +8,9 @@
 //! to a trained `.crease` model to add a case with its rig (rest mesh, weights, and the first
 //! example's bone transforms).
 //!
-//! Functions per case: `lbs` ([`skin_lbs`]), `lbs_packed` ([`skin_lbs_packed`] on a
-//! [`PackedSkin`] built once), `dqs`, and `memcpy` / `memcpy_packed`: a copy of as many bytes as
+//! Functions per case: `lbs` ([`skin_lbs`]), `lbs_packed` ([`skin_lbs_packed_with`] on a
+//! [`PackedSkin`] built once, portable kernel), `lbs_packed_fma` (the AVX2 + FMA kernel, where
+//! the CPU has it: what `skin_lbs_packed` picks), `dqs`, and `memcpy` / `memcpy_packed`: a copy of as many bytes as
 //! the reference / packed layout reads and writes per frame.
 //!
 //! Bytes per frame (what `Throughput::Bytes` and the copies use): rest positions read (12 B per
@@ -31,7 +32,8 @@ use std::time::Duration;
 use crease_core::glam::{Quat, Vec3};
 use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{
-    BonePalette, PackedSkin, RigidTransform, SkinWeights, skin_dqs, skin_lbs, skin_lbs_packed,
+    BonePalette, PackedKernel, PackedSkin, RigidTransform, SkinWeights, skin_dqs, skin_lbs,
+    skin_lbs_packed_with,
 };
 use criterion::{Criterion, Throughput};
 use rand::rngs::StdRng;
@@ -120,7 +122,7 @@ fn packed_bytes_per_frame(n: usize, packed: &PackedSkin) -> usize {
 #[derive(Clone, Copy)]
 enum Method {
     Lbs,
-    LbsPacked,
+    LbsPacked(PackedKernel),
     Dqs,
 }
 
@@ -137,7 +139,9 @@ fn frame(
     palette.update(black_box(bones));
     let r = match method {
         Method::Lbs => skin_lbs(black_box(rest), skin, palette, out),
-        Method::LbsPacked => skin_lbs_packed(black_box(rest), packed, palette, out),
+        Method::LbsPacked(kernel) => {
+            skin_lbs_packed_with(kernel, black_box(rest), packed, palette, out)
+        }
         Method::Dqs => skin_dqs(black_box(rest), skin, palette, out),
     };
     r.expect("sizes checked at setup");
@@ -206,14 +210,27 @@ fn main() {
         let packed_bytes = packed_bytes_per_frame(n, &packed);
         let src = vec![1u8; bytes];
         let mut dst = vec![0u8; bytes];
-        let methods = [
+        let mut methods = vec![
             ("lbs", Method::Lbs, bytes),
-            ("lbs_packed", Method::LbsPacked, packed_bytes),
-            ("dqs", Method::Dqs, bytes),
+            (
+                "lbs_packed",
+                Method::LbsPacked(PackedKernel::Portable),
+                packed_bytes,
+            ),
         ];
+        if PackedKernel::Fma.available() {
+            methods.push((
+                "lbs_packed_fma",
+                Method::LbsPacked(PackedKernel::Fma),
+                packed_bytes,
+            ));
+        } else {
+            println!("lbs_packed_fma: not run, this CPU lacks AVX2 + FMA");
+        }
+        methods.push(("dqs", Method::Dqs, bytes));
 
         let mut g = c.benchmark_group(format!("skin_{name}"));
-        for (label, method, b) in methods {
+        for &(label, method, b) in &methods {
             g.throughput(Throughput::Bytes(b as u64));
             g.bench_function(label, |bch| {
                 bch.iter(|| frame(method, rest, skin, &packed, bones, &mut palette, &mut out))

@@ -196,6 +196,12 @@ impl Takes {
         if name.len() > 200 {
             return Err(TakeError::Name(name.len()));
         }
+        // The folder again: someone may have removed it while the server ran (an operator
+        // clearing old takes); a take must not fail for that.
+        std::fs::create_dir_all(&self.dir).map_err(|error| TakeError::Io {
+            path: self.dir.clone(),
+            error,
+        })?;
         let started_unix_us = unix_us();
         let (path, file, id) = loop {
             let n = self.counter.fetch_add(1, Ordering::Relaxed);
@@ -564,5 +570,22 @@ mod tests {
         assert_eq!(take.frames[7].controls, vec![7.0, 0.0, 0.0]);
         assert!(matches!(takes.read("nope"), Err(TakeError::NoTake(_))));
         assert!(matches!(takes.path("../etc"), Err(TakeError::NoTake(_))));
+    }
+
+    /// The browser test once removed the takes folder after the server had created it, and
+    /// every take start then failed with "No such file or directory".
+    #[test]
+    fn a_take_starts_after_its_folder_was_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("takes");
+        let takes = Takes::new(&folder).unwrap();
+        std::fs::remove_dir_all(&folder).unwrap();
+        let room = v1::OpenRoomRequest {
+            room: "r1".into(),
+            ..Default::default()
+        };
+        let rec = takes.start(room, "again", "ab12", 1, 1).unwrap();
+        assert!(folder.join(format!("{}.take", rec.id())).is_file());
+        assert_eq!(rec.finish().unwrap().frames, 0);
     }
 }

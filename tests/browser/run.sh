@@ -53,6 +53,8 @@ cargo build --release --locked -p crease-demo -p crease-cli
 
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 admin="admin-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
+# A fresh takes folder for this run's take (before the server starts: it is the server's folder).
+rm -rf "$work/takes"
 start_demo_server --demo-token "$token" --admin-token "$admin" --takes "$work/takes"
 
 # Every test runs even when an earlier one fails; the script fails if any did.
@@ -98,7 +100,6 @@ CREASE_REPORTS="$reports" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
 # by the server (byte-identical), then takes.test.mjs: the viewer's takes list, its player in a
 # private replay room, and three.js's GLTFLoader on the export.
 echo "== takes in headless chromium"
-rm -rf "$work/takes"
 if take="$("$bin/crease" take start --room demo --name browser --server "http://$grpc_addr" --admin-token "$admin")"; then
     sleep 8
     "$bin/crease" take stop --room demo --server "http://$grpc_addr" --admin-token "$admin" >/dev/null || failed=1

@@ -251,6 +251,61 @@ pub fn skin_lbs_packed(
     palette: &BonePalette,
     out: &mut [Vec3],
 ) -> Result<(), SkinError> {
+    skin_lbs_packed_with(PackedKernel::best(), rest, skin, palette, out)
+}
+
+/// The instructions [`skin_lbs_packed_with`] blends with.
+///
+/// [`PackedKernel::Portable`] is bit for bit [`skin_lbs`]. [`PackedKernel::Fma`] blends each
+/// influence with fused multiply-adds, 8 floats at a time (two bone rows per instruction), and
+/// rounds once per multiply-add instead of twice, so its result differs from [`skin_lbs`] in the
+/// last bits (a few ulps of the coordinates; `packed_fma_lbs_*` tests bound it), and is the same
+/// on every CPU that has the instructions: it is bit for bit [`lbs_fma_reference`], a scalar
+/// `f32::mul_add` loop in the same order.
+///
+/// [`skin_lbs`]: super::skin_lbs
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PackedKernel {
+    /// 128-bit SIMD through glam (SSE2 on x86-64, NEON on AArch64): every CPU.
+    Portable,
+    /// AVX2 and FMA (x86-64-v3: Intel since 2013, AMD since 2015), detected at run time through
+    /// `pulp` (the workspace forbids `unsafe`; pulp's CPU-feature tokens make the intrinsics
+    /// safe to call).
+    Fma,
+}
+
+impl PackedKernel {
+    /// [`PackedKernel::Fma`] where this CPU has it, else [`PackedKernel::Portable`].
+    pub fn best() -> Self {
+        if Self::Fma.available() {
+            Self::Fma
+        } else {
+            Self::Portable
+        }
+    }
+
+    /// Whether this CPU runs the kernel.
+    pub fn available(self) -> bool {
+        match self {
+            Self::Portable => true,
+            Self::Fma => fma::token().is_some(),
+        }
+    }
+}
+
+/// [`skin_lbs_packed`] with the kernel chosen by the caller (benchmarks and tests compare
+/// them); a kernel this CPU lacks ([`PackedKernel::available`]) falls back to
+/// [`PackedKernel::Portable`].
+///
+/// # Errors
+/// As [`skin_lbs_packed`].
+pub fn skin_lbs_packed_with(
+    kernel: PackedKernel,
+    rest: &[Vec3],
+    skin: &PackedSkin,
+    palette: &BonePalette,
+    out: &mut [Vec3],
+) -> Result<(), SkinError> {
     let expected = skin.vertex_count;
     for (what, got) in [("rest positions", rest.len()), ("output", out.len())] {
         if got != expected {
@@ -278,10 +333,17 @@ pub fn skin_lbs_packed(
             let table: &[BoneRows; U8_TABLE_LEN] = palette.rows[..U8_TABLE_LEN]
                 .try_into()
                 .expect("BonePalette keeps at least U8_TABLE_LEN rows");
-            packed_chunks(table, &skin.offsets, slots, rest, out);
+            packed_chunks(kernel, table, &skin.offsets, slots, rest, out);
         }
         PackedSlots::U16(slots) => {
-            packed_chunks(palette.rows.as_slice(), &skin.offsets, slots, rest, out);
+            packed_chunks(
+                kernel,
+                palette.rows.as_slice(),
+                &skin.offsets,
+                slots,
+                rest,
+                out,
+            );
         }
     }
     Ok(())
@@ -290,6 +352,7 @@ pub fn skin_lbs_packed(
 /// Runs [`packed_kernel`] over all vertices: with the `parallel` feature and more than
 /// [`PARALLEL_CHUNK`] vertices, in chunks of that size on the rayon pool; else on this thread.
 fn packed_chunks<I, T>(
+    kernel: PackedKernel,
     table: &T,
     offsets: &[u32],
     slots: &[Slot<I>],
@@ -299,6 +362,18 @@ fn packed_chunks<I, T>(
     I: Copy + Sync,
     T: RowTable<I> + Sync + ?Sized,
 {
+    let fma = match kernel {
+        PackedKernel::Fma => fma::token(),
+        PackedKernel::Portable => None,
+    };
+    // One run of whole blocks with the chosen kernel (inside `vectorize` the FMA one is compiled
+    // for AVX2 + FMA).
+    let run = |offsets: &[u32], rest: &[Vec3], out: &mut [Vec3]| match fma {
+        Some(simd) => fma::vectorize(simd, || {
+            packed_kernel(table, offsets, slots, rest, out, fma::Blend(simd));
+        }),
+        None => packed_kernel(table, offsets, slots, rest, out, Portable),
+    };
     #[cfg(feature = "parallel")]
     if crate::runtime::use_pool(out.len(), PARALLEL_CHUNK) {
         use rayon::prelude::*;
@@ -309,22 +384,51 @@ fn packed_chunks<I, T>(
             .for_each(|(c, (o, r))| {
                 let first = c * BLOCKS;
                 let blocks = &offsets[first..=first + o.len().div_ceil(LANES)];
-                packed_kernel(table, blocks, slots, r, o)
+                run(blocks, r, o);
             });
         return;
     }
-    packed_kernel(table, offsets, slots, rest, out);
+    run(offsets, rest, out);
+}
+
+/// How one block of [`LANES`] vertices is blended: [`Portable`] or [`fma::Blend`].
+trait BlockBlend: Copy {
+    fn blend<I: Copy, T: RowTable<I> + ?Sized>(
+        self,
+        table: &T,
+        block: &[Slot<I>],
+        rest: &[Vec3; LANES],
+        out: &mut [Vec3; LANES],
+    );
+}
+
+/// [`PackedKernel::Portable`]'s block: [`blend_block`].
+#[derive(Clone, Copy)]
+struct Portable;
+
+impl BlockBlend for Portable {
+    #[inline(always)]
+    fn blend<I: Copy, T: RowTable<I> + ?Sized>(
+        self,
+        table: &T,
+        block: &[Slot<I>],
+        rest: &[Vec3; LANES],
+        out: &mut [Vec3; LANES],
+    ) {
+        blend_block(table, block, rest, out);
+    }
 }
 
 /// Packed LBS over a run of whole blocks (the last may be partial): `offsets` has one entry per
 /// block plus one, indexing into the whole `slots`.
 #[inline(always)]
-fn packed_kernel<I: Copy, T: RowTable<I> + ?Sized>(
+fn packed_kernel<I: Copy, T: RowTable<I> + ?Sized, B: BlockBlend>(
     table: &T,
     offsets: &[u32],
     slots: &[Slot<I>],
     rest: &[Vec3],
     out: &mut [Vec3],
+    blend: B,
 ) {
     let mut outs = out.chunks_exact_mut(LANES);
     let mut rests = rest.chunks_exact(LANES);
@@ -332,7 +436,7 @@ fn packed_kernel<I: Copy, T: RowTable<I> + ?Sized>(
         let block = &slots[off[0] as usize..off[1] as usize];
         let o: &mut [Vec3; LANES] = o.try_into().expect("chunks_exact_mut yields LANES");
         let r: &[Vec3; LANES] = r.try_into().expect("chunks_exact yields LANES");
-        blend_block(table, block, r, o);
+        blend.blend(table, block, r, o);
     }
     let (o, r) = (outs.into_remainder(), rests.remainder());
     if !o.is_empty() {
@@ -343,7 +447,7 @@ fn packed_kernel<I: Copy, T: RowTable<I> + ?Sized>(
         let mut rr = [Vec3::ZERO; LANES];
         rr[..r.len()].copy_from_slice(r);
         let mut oo = [Vec3::ZERO; LANES];
-        blend_block(table, block, &rr, &mut oo);
+        blend.blend(table, block, &rr, &mut oo);
         o.copy_from_slice(&oo[..o.len()]);
     }
 }
@@ -377,6 +481,147 @@ fn blend_block<I: Copy, T: RowTable<I> + ?Sized>(
         let t = Mat4::from_cols(t[0], t[1], t[2], t[3]).transpose();
         (t.x_axis + t.y_axis + t.z_axis + t.w_axis).write_to_slice(dst);
     }
+}
+
+/// [`PackedKernel::Fma`]: AVX2 + FMA through pulp's safe intrinsics, x86-64 only.
+#[cfg(target_arch = "x86_64")]
+mod fma {
+    use glam::Vec3;
+    use pulp::x86::V3;
+    use std::arch::x86_64::__m256;
+
+    use super::{BlockBlend, LANES, RowTable, Slot};
+
+    /// The CPU's AVX2 + FMA token, if it has them (detected once, then cached by pulp).
+    pub(super) fn token() -> Option<V3> {
+        V3::try_new()
+    }
+
+    /// Runs `f` compiled for AVX2 + FMA (everything it inlines; the kernel is `inline(always)`).
+    #[inline(always)]
+    pub(super) fn vectorize(simd: V3, f: impl FnOnce()) {
+        simd.vectorize(f);
+    }
+
+    /// [`PackedKernel::Fma`](super::PackedKernel::Fma)'s block.
+    #[derive(Clone, Copy)]
+    pub(super) struct Blend(pub(super) V3);
+
+    impl BlockBlend for Blend {
+        /// Per vertex, two 8-wide accumulators: rows 0 and 1 of the blended matrix, and row 2
+        /// with the palette's zero pad row. Per influence: a broadcast of the weight and two
+        /// fused multiply-adds of the bone's 64-byte entry (`acc = w * rows + acc`, slot
+        /// order). Then each row times `(x, y, z, 1)` and three rounds of horizontal adds: the
+        /// coordinate `r . p` as `(r0 x + r1 y) + (r2 z + r3)`.
+        #[inline(always)]
+        fn blend<I: Copy, T: RowTable<I> + ?Sized>(
+            self,
+            table: &T,
+            block: &[Slot<I>],
+            rest: &[Vec3; LANES],
+            out: &mut [Vec3; LANES],
+        ) {
+            let simd = self.0;
+            let zero = simd.avx._mm256_setzero_ps();
+            let mut rows01 = [zero; LANES];
+            let mut rows2 = [zero; LANES];
+            for s in block {
+                for l in 0..LANES {
+                    let m: &[[f32; 8]; 2] = bytemuck::cast_ref(table.row(s.rows[l]));
+                    let w = simd.avx._mm256_set1_ps(s.weights[l]);
+                    let r01: __m256 = bytemuck::cast(m[0]);
+                    let r2: __m256 = bytemuck::cast(m[1]);
+                    rows01[l] = simd.fma._mm256_fmadd_ps(w, r01, rows01[l]);
+                    rows2[l] = simd.fma._mm256_fmadd_ps(w, r2, rows2[l]);
+                }
+            }
+            for l in 0..LANES {
+                let p = rest[l];
+                let pp = simd
+                    .avx
+                    ._mm256_setr_ps(p.x, p.y, p.z, 1.0, p.x, p.y, p.z, 1.0);
+                rows01[l] = simd.avx._mm256_mul_ps(rows01[l], pp);
+                rows2[l] = simd.avx._mm256_mul_ps(rows2[l], pp);
+            }
+            // hadd(a, b) = [a0+a1, a2+a3, b0+b1, b2+b3 | a4+a5, a6+a7, b4+b5, b6+b7]: after
+            // three rounds, [x0 x1 x2 x3 | y0 y1 y2 y3] and [z0 z1 z2 z3 | 0 0 0 0].
+            let hadd = |a, b| simd.avx._mm256_hadd_ps(a, b);
+            let xy = hadd(hadd(rows01[0], rows01[1]), hadd(rows01[2], rows01[3]));
+            let z = hadd(hadd(rows2[0], rows2[1]), hadd(rows2[2], rows2[3]));
+            let xy: [f32; 8] = bytemuck::cast(xy);
+            let z: [f32; 8] = bytemuck::cast(z);
+            for (l, o) in out.iter_mut().enumerate() {
+                *o = Vec3::new(xy[l], xy[LANES + l], z[l]);
+            }
+        }
+    }
+}
+
+/// Elsewhere than x86-64: no FMA kernel ([`PackedKernel::Fma`] is never available).
+#[cfg(not(target_arch = "x86_64"))]
+mod fma {
+    /// No token type off x86-64.
+    #[derive(Clone, Copy)]
+    pub(super) enum Never {}
+
+    pub(super) fn token() -> Option<Never> {
+        None
+    }
+
+    pub(super) fn vectorize(simd: Never, _f: impl FnOnce()) {
+        match simd {}
+    }
+
+    #[derive(Clone, Copy)]
+    pub(super) struct Blend(pub(super) Never);
+
+    impl super::BlockBlend for Blend {
+        fn blend<I: Copy, T: super::RowTable<I> + ?Sized>(
+            self,
+            _table: &T,
+            _block: &[super::Slot<I>],
+            _rest: &[glam::Vec3; super::LANES],
+            _out: &mut [glam::Vec3; super::LANES],
+        ) {
+            match self.0 {}
+        }
+    }
+}
+
+/// What [`PackedKernel::Fma`] computes, one vertex at a time with scalar `f32::mul_add`: per
+/// vertex the blended rows `a_r = sum_j w_j M_j[r]` (row `r` of bone `j`'s 3x4 matrix, a fused
+/// multiply-add per entry in slot order, from +0), then each coordinate as
+/// `(a_r0 x + a_r1 y) + (a_r2 z + a_r3)`. Slow; the reference the kernel is tested against, bit
+/// for bit.
+///
+/// # Errors
+/// As [`skin_lbs`](super::skin_lbs).
+pub fn lbs_fma_reference(
+    rest: &[Vec3],
+    skin: &SkinWeights,
+    palette: &BonePalette,
+    out: &mut [Vec3],
+) -> Result<(), SkinError> {
+    // The sizes and bone indices are those skin_lbs checks: let it check them.
+    super::skin_lbs(rest, skin, palette, out)?;
+    for (v, (p, o)) in rest.iter().zip(out.iter_mut()).enumerate() {
+        let (ii, ww) = skin.vertex(v);
+        let mut a = [[0.0f32; 4]; 3];
+        for (&bone, &w) in ii.iter().zip(ww) {
+            if w == 0.0 {
+                break;
+            }
+            let rows = &palette.rows[bone as usize + 1];
+            for (ar, mr) in a.iter_mut().zip(rows) {
+                for (x, &m) in ar.iter_mut().zip(mr.as_ref()) {
+                    *x = w.mul_add(m, *x);
+                }
+            }
+        }
+        let c = |r: [f32; 4]| (r[0] * p.x + r[1] * p.y) + (r[2] * p.z + r[3]);
+        *o = Vec3::new(c(a[0]), c(a[1]), c(a[2]));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -449,20 +694,53 @@ mod tests {
         v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
     }
 
-    /// Packed and reference LBS on the same inputs; asserts bit-identical output.
+    /// Bits, with every NaN as one (the kernels need not agree on NaN payloads).
+    fn bits_nan_as_one(v: &[Vec3]) -> Vec<[u32; 3]> {
+        v.iter()
+            .map(|p| {
+                p.to_array()
+                    .map(|x| if x.is_nan() { u32::MAX } else { x.to_bits() })
+            })
+            .collect()
+    }
+
+    /// Packed and reference LBS on the same inputs: the portable kernel bit for bit
+    /// `skin_lbs`; the FMA kernel (where the CPU has it) bit for bit its scalar reference
+    /// `lbs_fma_reference`, and within rounding of `skin_lbs`.
     fn assert_packed_matches(rest: &[Vec3], skin: &SkinWeights, palette: &BonePalette) {
         let packed = PackedSkin::new(skin).unwrap();
         let mut expected = vec![Vec3::NAN; rest.len()];
         skin_lbs(rest, skin, palette, &mut expected).unwrap();
         let mut got = vec![Vec3::NAN; rest.len()];
-        skin_lbs_packed(rest, &packed, palette, &mut got).unwrap();
+        skin_lbs_packed_with(PackedKernel::Portable, rest, &packed, palette, &mut got).unwrap();
+        let what = format!("k = {}, n = {}", skin.k(), rest.len());
+        assert_eq!(bits(&got), bits(&expected), "portable, {what}");
+        if !PackedKernel::Fma.available() {
+            eprintln!("the FMA kernel is not checked: this CPU lacks AVX2 + FMA");
+            return;
+        }
+        let mut fused = vec![Vec3::NAN; rest.len()];
+        lbs_fma_reference(rest, skin, palette, &mut fused).unwrap();
+        got.fill(Vec3::NAN);
+        skin_lbs_packed_with(PackedKernel::Fma, rest, &packed, palette, &mut got).unwrap();
         assert_eq!(
-            bits(&got),
-            bits(&expected),
-            "k = {}, n = {}",
-            skin.k(),
-            rest.len()
+            bits_nan_as_one(&got),
+            bits_nan_as_one(&fused),
+            "fma, {what}"
         );
+        for (v, (a, b)) in got.iter().zip(&expected).enumerate() {
+            if b.is_finite() {
+                // Rounding of |coordinates| <= ~10 (rest points within 3 of the origin,
+                // translations within 2): a few ulps of 10 in f32.
+                let scale = 1.0 + rest[v].abs().max_element() * 3.0;
+                assert!(
+                    (*a - *b).abs().max_element() <= 8.0 * f32::EPSILON * scale * 3.0,
+                    "fma vs skin_lbs, {what}, vertex {v}: {a} vs {b}"
+                );
+            } else {
+                assert!(a.is_nan(), "{what}, vertex {v}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]
