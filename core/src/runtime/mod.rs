@@ -15,6 +15,8 @@
 //!   as constraints, the regression as a prior (issue 20).
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 //! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
+//! - `simd`: the hand-written AVX2 + FMA kernels (regression operators, the translation
+//!   solve's right-hand side), chosen at run time, each beside a portable loop.
 //! - [`filter`]: the One Euro filter (Casiez et al. 2012), the input smoothing of a room's
 //!   control points.
 
@@ -26,6 +28,7 @@ pub mod filter;
 pub mod kernel;
 pub mod predict;
 pub mod refine;
+mod simd;
 pub mod skin;
 pub mod translations;
 

@@ -53,10 +53,16 @@ pub struct LinearOperator {
 }
 
 impl LinearOperator {
-    /// `out = m * xi + b`.
+    /// `out = m * xi + b`: with AVX2 + FMA where the CPU has them and a row has at least 8
+    /// columns (`runtime::simd`), else a row at a time.
     #[inline]
     pub fn apply(&self, xi: &[f32], out: &mut [f32]) {
         debug_assert_eq!(xi.len(), self.cols);
+        if let Some(simd) = super::simd::fma()
+            && super::simd::dot_rows(simd, &self.m, xi, &self.b, out)
+        {
+            return;
+        }
         for ((row, o), b) in self
             .m
             .chunks_exact(self.cols)

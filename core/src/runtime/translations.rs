@@ -65,6 +65,7 @@ use faer::{Conj, MatMut, Par, Side};
 use glam::{DMat3, DVec3, Quat, Vec3};
 
 use super::edge_skin::{EdgeSkin, EdgeSkinError};
+use super::simd;
 use super::skin::{RigidTransform, SkinError, SkinWeights};
 
 /// Ridge added to the diagonal of the normal matrix, relative to its largest diagonal entry.
@@ -313,6 +314,8 @@ pub struct TranslationSolver {
 /// allocation). Cloning gives a fresh buffer of the same size.
 pub struct TranslationScratch {
     rot: Vec<DMat3>,
+    /// `rot`'s columns padded to four lanes, for the FMA kernel (`simd::rotate_sum`).
+    rot4: Vec<[f64; 12]>,
     acc: Vec<DVec3>,
     /// Right-hand side and solution, column-major `bones x 3`.
     rhs: Vec<f64>,
@@ -325,6 +328,7 @@ impl Default for TranslationScratch {
     fn default() -> Self {
         Self {
             rot: Vec::new(),
+            rot4: Vec::new(),
             acc: Vec::new(),
             rhs: Vec::new(),
             mem: MemBuffer::new(StackReq::empty()),
@@ -356,6 +360,7 @@ impl TranslationScratch {
     fn prepare(&mut self, bones: usize, req: StackReq) {
         if self.rot.len() != bones {
             self.rot.resize(bones, DMat3::IDENTITY);
+            self.rot4.resize(bones, [0.0; 12]);
             self.acc.resize(bones, DVec3::ZERO);
             self.rhs.resize(3 * bones, 0.0);
         }
@@ -764,12 +769,26 @@ impl TranslationSolver {
         }
         let n = self.bones;
         // A^T T = sum_b R_b K_ab + beta sum_l w_la c_l (FKY08 eq. 11, right-hand side).
-        for a in 0..n {
-            let mut s = DVec3::ZERO;
-            for p in self.k_ptr[a]..self.k_ptr[a + 1] {
-                s += scratch.rot[self.k_idx[p] as usize] * self.k_val[p];
+        if let Some(simd) = simd::fma() {
+            for (r4, r) in scratch.rot4.iter_mut().zip(&scratch.rot) {
+                *r4 = simd::pad_columns(r);
             }
-            scratch.acc[a] = s;
+            simd::rotate_sum(
+                simd,
+                &self.k_ptr,
+                &self.k_idx,
+                &self.k_val,
+                &scratch.rot4,
+                &mut scratch.acc,
+            );
+        } else {
+            for a in 0..n {
+                let mut s = DVec3::ZERO;
+                for p in self.k_ptr[a]..self.k_ptr[a + 1] {
+                    s += scratch.rot[self.k_idx[p] as usize] * self.k_val[p];
+                }
+                scratch.acc[a] = s;
+            }
         }
         for (l, c) in controls.iter().enumerate() {
             let c = self.beta * c.as_dvec3();

@@ -487,15 +487,12 @@ fn blend_block<I: Copy, T: RowTable<I> + ?Sized>(
 #[cfg(target_arch = "x86_64")]
 mod fma {
     use glam::Vec3;
-    use pulp::x86::V3;
     use std::arch::x86_64::__m256;
 
-    use super::{BlockBlend, LANES, RowTable, Slot};
+    use crate::runtime::simd::Fma as V3;
+    pub(super) use crate::runtime::simd::fma as token;
 
-    /// The CPU's AVX2 + FMA token, if it has them (detected once, then cached by pulp).
-    pub(super) fn token() -> Option<V3> {
-        V3::try_new()
-    }
+    use super::{BlockBlend, LANES, RowTable, Slot};
 
     /// Runs `f` compiled for AVX2 + FMA (everything it inlines; the kernel is `inline(always)`).
     #[inline(always)]
@@ -560,20 +557,15 @@ mod fma {
 /// Elsewhere than x86-64: no FMA kernel ([`PackedKernel::Fma`] is never available).
 #[cfg(not(target_arch = "x86_64"))]
 mod fma {
-    /// No token type off x86-64.
-    #[derive(Clone, Copy)]
-    pub(super) enum Never {}
+    use crate::runtime::simd::Fma;
+    pub(super) use crate::runtime::simd::fma as token;
 
-    pub(super) fn token() -> Option<Never> {
-        None
-    }
-
-    pub(super) fn vectorize(simd: Never, _f: impl FnOnce()) {
+    pub(super) fn vectorize(simd: Fma, _f: impl FnOnce()) {
         match simd {}
     }
 
     #[derive(Clone, Copy)]
-    pub(super) struct Blend(pub(super) Never);
+    pub(super) struct Blend(pub(super) Fma);
 
     impl super::BlockBlend for Blend {
         fn blend<I: Copy, T: super::RowTable<I> + ?Sized>(

@@ -1,0 +1,286 @@
+//! Hand-written SIMD kernels of the per-frame path, chosen at run time (issue 23): AVX2 with
+//! fused multiply-adds (x86-64-v3) where the CPU has it, the portable loop of the caller
+//! elsewhere. The workspace forbids `unsafe`: `pulp`'s CPU-feature token ([`Fma`]) makes the
+//! intrinsics safe to call, and [`Fma::vectorize`] compiles what it runs for those features.
+//!
+//! Each kernel here has a portable twin in its caller and a test against an independent
+//! computation (f64 dense sums); the FMA kernels round differently from the portable loops (one
+//! rounding per multiply-add, another summation order), within a few ulps.
+//!
+//! - [`dot_rows`]: `out = m xi + b`, `m` row-major, for [`super::predict::LinearOperator`]
+//!   (the rotation regressors, FKY08 eq. 8, and the detail regressor, HZY11 §5.2);
+//! - [`rotate_sum`]: `acc_a = sum_p R_{idx_p} k_p` over a sparse row structure, the
+//!   right-hand side of the translation solve (FKY08 eq. 11);
+//!
+//! The packed LBS kernel lives beside its private layout in `skin::packed`.
+
+/// The CPU-feature token of the FMA kernels: AVX2 + FMA.
+#[cfg(target_arch = "x86_64")]
+pub(crate) type Fma = pulp::x86::V3;
+
+/// [`Fma`] if this CPU has AVX2 and FMA (detected once, then cached by pulp) and the
+/// environment does not say `CREASE_SIMD=portable` (read once: A/B runs of one binary, and a
+/// way out should a kernel misbehave on some CPU).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+pub(crate) fn fma() -> Option<Fma> {
+    static PORTABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if *PORTABLE.get_or_init(|| std::env::var("CREASE_SIMD").is_ok_and(|v| v == "portable")) {
+        return None;
+    }
+    Fma::try_new()
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Fma {}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline]
+pub(crate) fn fma() -> Option<Fma> {
+    None
+}
+
+/// `out[r] = m[r] . xi + b[r]` for the rows of the row-major `m` (`out.len()` rows of
+/// `xi.len()` columns), with FMA: per row, 8 columns at a time in one accumulator, the last 8
+/// columns of the row loaded whole and multiplied by `xi` with its already-counted columns
+/// zeroed (so no row reads past its end), then the 8 lanes summed. Rows shorter than 8 columns
+/// return `false` (the caller's portable loop runs them).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn dot_rows(simd: Fma, m: &[f32], xi: &[f32], b: &[f32], out: &mut [f32]) -> bool {
+    use std::arch::x86_64::__m256;
+    let cols = xi.len();
+    if cols < 8 || m.len() != out.len() * cols || b.len() != out.len() {
+        return false;
+    }
+    let full = cols / 8;
+    // The tail chunk covers columns cols-8..cols; of those, the first 8-(cols-8*full) were
+    // counted by the last full chunk (none when cols is a multiple of 8: the tail is then the
+    // last full chunk, and full drops by one).
+    let (full, counted) = if cols.is_multiple_of(8) {
+        (full - 1, 0)
+    } else {
+        (full, 8 - cols % 8)
+    };
+    let mut tail_x = [0.0f32; 8];
+    tail_x[counted..].copy_from_slice(&xi[cols - 8 + counted..]);
+    simd.vectorize(|| {
+        let avx = simd.avx;
+        let tail_x: __m256 = bytemuck::cast(tail_x);
+        for ((row, o), &bias) in m.chunks_exact(cols).zip(out.iter_mut()).zip(b) {
+            let mut acc = avx._mm256_setzero_ps();
+            for c in 0..full {
+                let a: [f32; 8] = row[8 * c..8 * c + 8].try_into().expect("8 columns");
+                let x: [f32; 8] = xi[8 * c..8 * c + 8].try_into().expect("8 columns");
+                acc = simd
+                    .fma
+                    ._mm256_fmadd_ps(bytemuck::cast(a), bytemuck::cast(x), acc);
+            }
+            let a: [f32; 8] = row[cols - 8..].try_into().expect("8 columns");
+            acc = simd.fma._mm256_fmadd_ps(bytemuck::cast(a), tail_x, acc);
+            *o = sum8(simd, acc) + bias;
+        }
+    });
+    true
+}
+
+/// The 8 lanes of `v` summed: `(v0+v4) + (v1+v5)` and `(v2+v6) + (v3+v7)`, then those two.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sum8(simd: Fma, v: std::arch::x86_64::__m256) -> f32 {
+    let lo = simd.avx._mm256_castps256_ps128(v);
+    let hi = simd.avx._mm256_extractf128_ps::<1>(v);
+    let s = simd.sse._mm_add_ps(lo, hi);
+    let s = simd.sse3._mm_hadd_ps(s, s);
+    let s = simd.sse3._mm_hadd_ps(s, s);
+    simd.sse._mm_cvtss_f32(s)
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) fn dot_rows(simd: Fma, _m: &[f32], _xi: &[f32], _b: &[f32], _out: &mut [f32]) -> bool {
+    match simd {}
+}
+
+/// `acc[a] = sum over p in ptr[a]..ptr[a+1] of R_{idx[p]} val[p]` with FMA, where `rot` holds
+/// each rotation's three columns padded to four lanes (`[c0x c0y c0z 0 c1x .. c2z 0]`): per
+/// entry three broadcasts and three 4-wide fused multiply-adds. The sizes are the caller's
+/// (every `idx` below `rot.len()`, `ptr` one longer than `acc`).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn rotate_sum(
+    simd: Fma,
+    ptr: &[usize],
+    idx: &[u32],
+    val: &[glam::DVec3],
+    rot: &[[f64; 12]],
+    acc: &mut [glam::DVec3],
+) {
+    use std::arch::x86_64::__m256d;
+    simd.vectorize(|| {
+        let avx = simd.avx;
+        // One accumulator per column and per entry parity: six independent chains of fused
+        // multiply-adds (one chain would wait out the FMA's latency three times per entry).
+        let entry = |p: usize, sum: &mut [__m256d; 3]| {
+            let cols: &[[f64; 4]; 3] = bytemuck::cast_ref(&rot[idx[p] as usize]);
+            let v = val[p];
+            for (s, (c, x)) in sum.iter_mut().zip(cols.iter().zip([v.x, v.y, v.z])) {
+                *s = simd
+                    .fma
+                    ._mm256_fmadd_pd(bytemuck::cast(*c), avx._mm256_set1_pd(x), *s);
+            }
+        };
+        for (a, s) in acc.iter_mut().enumerate() {
+            let zero = avx._mm256_setzero_pd();
+            let mut even = [zero; 3];
+            let mut odd = [zero; 3];
+            let (start, end) = (ptr[a], ptr[a + 1]);
+            let mut p = start;
+            while p + 1 < end {
+                entry(p, &mut even);
+                entry(p + 1, &mut odd);
+                p += 2;
+            }
+            if p < end {
+                entry(p, &mut even);
+            }
+            let add = |a, b| avx._mm256_add_pd(a, b);
+            let sum = add(
+                add(add(even[0], odd[0]), add(even[1], odd[1])),
+                add(even[2], odd[2]),
+            );
+            let s4: [f64; 4] = bytemuck::cast(sum);
+            *s = glam::DVec3::new(s4[0], s4[1], s4[2]);
+        }
+    });
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) fn rotate_sum(
+    simd: Fma,
+    _ptr: &[usize],
+    _idx: &[u32],
+    _val: &[glam::DVec3],
+    _rot: &[[f64; 12]],
+    _acc: &mut [glam::DVec3],
+) {
+    match simd {}
+}
+
+/// `m`'s columns padded to four lanes, as [`rotate_sum`] reads them.
+#[inline]
+pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
+    let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
+    [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use glam::{DMat3, DQuat, DVec3};
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn dot_rows_equal_f64_sums_for_every_column_count() {
+        let Some(simd) = fma() else {
+            eprintln!("dot_rows not checked: this CPU lacks AVX2 + FMA");
+            return;
+        };
+        let mut rng = StdRng::seed_from_u64(3);
+        for cols in 1..=41 {
+            let rows = 37;
+            let m: Vec<f32> = (0..rows * cols)
+                .map(|_| rng.random_range(-2.0..2.0))
+                .collect();
+            let xi: Vec<f32> = (0..cols).map(|_| rng.random_range(0.0..1.0)).collect();
+            let b: Vec<f32> = (0..rows).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut out = vec![f32::NAN; rows];
+            let ran = dot_rows(simd, &m, &xi, &b, &mut out);
+            assert_eq!(ran, cols >= 8, "{cols} columns");
+            if !ran {
+                continue;
+            }
+            for (r, &got) in out.iter().enumerate() {
+                let row = &m[r * cols..(r + 1) * cols];
+                let want: f64 = row
+                    .iter()
+                    .zip(&xi)
+                    .map(|(&a, &x)| f64::from(a) * f64::from(x))
+                    .sum::<f64>()
+                    + f64::from(b[r]);
+                let scale: f64 = row
+                    .iter()
+                    .zip(&xi)
+                    .map(|(&a, &x)| f64::from((a * x).abs()))
+                    .sum::<f64>()
+                    + f64::from(b[r].abs());
+                let err = (f64::from(got) - want).abs();
+                assert!(
+                    err <= 4.0 * f64::from(f32::EPSILON) * scale,
+                    "{cols} columns, row {r}: {got} vs {want} (error {err:e}, scale {scale})"
+                );
+            }
+        }
+        // Wrong sizes are refused, not read out of bounds.
+        assert!(!dot_rows(
+            simd,
+            &[0.0; 15],
+            &[0.0; 8],
+            &[0.0; 2],
+            &mut [0.0; 2]
+        ));
+    }
+
+    #[test]
+    fn rotate_sum_equals_the_matrix_products() {
+        let Some(simd) = fma() else {
+            eprintln!("rotate_sum not checked: this CPU lacks AVX2 + FMA");
+            return;
+        };
+        let mut rng = StdRng::seed_from_u64(4);
+        let bones = 23;
+        let mats: Vec<DMat3> = (0..bones)
+            .map(|_| {
+                let q = DQuat::from_xyzw(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                )
+                .normalize();
+                DMat3::from_quat(q)
+            })
+            .collect();
+        let rot: Vec<[f64; 12]> = mats.iter().map(pad_columns).collect();
+        let (mut ptr, mut idx, mut val) = (vec![0], Vec::new(), Vec::new());
+        for a in 0..bones {
+            // Row a: 0 to 9 entries, repeats allowed.
+            for _ in 0..(a * 7) % 10 {
+                idx.push(rng.random_range(0..bones as u32));
+                val.push(DVec3::new(
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                ));
+            }
+            ptr.push(idx.len());
+        }
+        let mut acc = vec![DVec3::NAN; bones];
+        rotate_sum(simd, &ptr, &idx, &val, &rot, &mut acc);
+        for a in 0..bones {
+            let want: DVec3 = (ptr[a]..ptr[a + 1])
+                .map(|p| mats[idx[p] as usize] * val[p])
+                .sum();
+            assert!(
+                (acc[a] - want).abs().max_element() <= 1e-13,
+                "row {a}: {} vs {want}",
+                acc[a]
+            );
+        }
+        assert_eq!(acc[0], DVec3::ZERO, "an empty row sums to zero");
+    }
+}
