@@ -1,6 +1,7 @@
 //! [`PackedSkin`] and [`skin_lbs_packed`]: [`SkinWeights`] rearranged once (non-zero
 //! influences only, narrow row indices, four vertices blended side by side) for the per-frame
-//! LBS, bit for bit that of [`super::skin_lbs`] in a fraction of the time.
+//! LBS, in a fraction of the time of [`super::skin_lbs`]: bit for bit with the portable kernel,
+//! within a few ulps with the AVX2 + FMA one ([`PackedKernel`]).
 
 use glam::{Mat4, Vec3, Vec4};
 
@@ -239,7 +240,9 @@ impl RowTable<u16> for [BoneRows] {
 }
 
 /// Linear blend skinning with a [`PackedSkin`]: the same `out[v] = (sum_j w_vj M_{b_vj})
-/// rest[v]` as [`skin_lbs`], bit for bit, in a fraction of the time (see [`PackedSkin`]).
+/// rest[v]` as [`skin_lbs`] in a fraction of the time (see [`PackedSkin`]), with the fastest
+/// kernel this CPU runs ([`PackedKernel::best`]): bit for bit [`skin_lbs`] with the portable
+/// one, within a few ulps with the FMA one.
 ///
 /// Errors (checked once, before any vertex is written) when `rest` or `out` do not have
 /// `skin.vertex_count()` entries or a bone with non-zero weight is not below `palette.len()`.
@@ -259,7 +262,7 @@ pub fn skin_lbs_packed(
 /// [`PackedKernel::Portable`] is bit for bit [`skin_lbs`]. [`PackedKernel::Fma`] blends each
 /// influence with fused multiply-adds, 8 floats at a time (two bone rows per instruction), and
 /// rounds once per multiply-add instead of twice, so its result differs from [`skin_lbs`] in the
-/// last bits (a few ulps of the coordinates; `packed_fma_lbs_*` tests bound it), and is the same
+/// last bits (a few ulps of the coordinates; the `packed_lbs_*` tests bound it), and is the same
 /// on every CPU that has the instructions: it is bit for bit [`lbs_fma_reference`], a scalar
 /// `f32::mul_add` loop in the same order.
 ///
