@@ -176,6 +176,12 @@ pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
     [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
 }
 
+/// The matrix [`pad_columns`] padded (exactly).
+#[inline]
+pub(crate) fn unpad_columns(c: &[f64; 12]) -> glam::DMat3 {
+    glam::DMat3::from_cols_array(&[c[0], c[1], c[2], c[4], c[5], c[6], c[8], c[9], c[10]])
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -256,6 +262,9 @@ mod tests {
             })
             .collect();
         let rot: Vec<[f64; 12]> = mats.iter().map(pad_columns).collect();
+        for (r, m) in rot.iter().zip(&mats) {
+            assert_eq!(unpad_columns(r), *m, "padding round trip");
+        }
         let (mut ptr, mut idx, mut val) = (vec![0], Vec::new(), Vec::new());
         for a in 0..bones {
             // Row a: 0 to 9 entries, repeats allowed.

@@ -313,9 +313,10 @@ pub struct TranslationSolver {
 /// from [`TranslationSolver::scratch`]; a `Default` one is sized by its first solve (the only
 /// allocation). Cloning gives a fresh buffer of the same size.
 pub struct TranslationScratch {
-    rot: Vec<DMat3>,
-    /// `rot`'s columns padded to four lanes, for the FMA kernel (`simd::rotate_sum`).
-    rot4: Vec<[f64; 12]>,
+    /// Each bone's rotation matrix as its three columns padded to four lanes
+    /// ([`simd::pad_columns`]), the form the FMA kernel reads; the portable loop rebuilds the
+    /// matrix from it (exactly).
+    rot: Vec<[f64; 12]>,
     acc: Vec<DVec3>,
     /// Right-hand side and solution, column-major `bones x 3`.
     rhs: Vec<f64>,
@@ -328,7 +329,6 @@ impl Default for TranslationScratch {
     fn default() -> Self {
         Self {
             rot: Vec::new(),
-            rot4: Vec::new(),
             acc: Vec::new(),
             rhs: Vec::new(),
             mem: MemBuffer::new(StackReq::empty()),
@@ -359,8 +359,7 @@ impl TranslationScratch {
     /// Sizes the buffers for `bones` bones and a solve needing `req` of faer workspace.
     fn prepare(&mut self, bones: usize, req: StackReq) {
         if self.rot.len() != bones {
-            self.rot.resize(bones, DMat3::IDENTITY);
-            self.rot4.resize(bones, [0.0; 12]);
+            self.rot.resize(bones, simd::pad_columns(&DMat3::IDENTITY));
             self.acc.resize(bones, DVec3::ZERO);
             self.rhs.resize(3 * bones, 0.0);
         }
@@ -679,7 +678,7 @@ impl TranslationSolver {
     ) -> Result<(), TranslationError> {
         scratch.prepare(self.bones, self.solve_req);
         for (m, r) in scratch.rot.iter_mut().zip(rotations) {
-            *m = r;
+            *m = simd::pad_columns(&r);
         }
         self.solve_prepared(scratch, controls)
     }
@@ -755,7 +754,11 @@ impl TranslationSolver {
         scratch: &mut TranslationScratch,
         controls: &[Vec3],
     ) -> Result<(), TranslationError> {
-        if let Some(index) = scratch.rot.iter().position(|m| !m.is_finite()) {
+        if let Some(index) = scratch
+            .rot
+            .iter()
+            .position(|m| !m.iter().all(|x| x.is_finite()))
+        {
             return Err(TranslationError::NonFinite {
                 what: "rotation",
                 index,
@@ -770,22 +773,19 @@ impl TranslationSolver {
         let n = self.bones;
         // A^T T = sum_b R_b K_ab + beta sum_l w_la c_l (FKY08 eq. 11, right-hand side).
         if let Some(simd) = simd::fma() {
-            for (r4, r) in scratch.rot4.iter_mut().zip(&scratch.rot) {
-                *r4 = simd::pad_columns(r);
-            }
             simd::rotate_sum(
                 simd,
                 &self.k_ptr,
                 &self.k_idx,
                 &self.k_val,
-                &scratch.rot4,
+                &scratch.rot,
                 &mut scratch.acc,
             );
         } else {
             for a in 0..n {
                 let mut s = DVec3::ZERO;
                 for p in self.k_ptr[a]..self.k_ptr[a + 1] {
-                    s += scratch.rot[self.k_idx[p] as usize] * self.k_val[p];
+                    s += simd::unpad_columns(&scratch.rot[self.k_idx[p] as usize]) * self.k_val[p];
                 }
                 scratch.acc[a] = s;
             }

@@ -40,8 +40,7 @@ mod weights;
 
 pub use blend::{skin_dqs, skin_lbs};
 pub use packed::{
-    PACKED_MAX_BONES, PackedKernel, PackedSkin, lbs_fma_reference, skin_lbs_packed,
-    skin_lbs_packed_with,
+    PACKED_MAX_BONES, PackedKernel, PackedSkin, skin_lbs_packed, skin_lbs_packed_with,
 };
 pub use palette::BonePalette;
 pub use transform::{DualQuat, RigidTransform};

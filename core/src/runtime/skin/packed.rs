@@ -241,8 +241,8 @@ impl RowTable<u16> for [BoneRows] {
 
 /// Linear blend skinning with a [`PackedSkin`]: the same `out[v] = (sum_j w_vj M_{b_vj})
 /// rest[v]` as [`skin_lbs`] in a fraction of the time (see [`PackedSkin`]), with the fastest
-/// kernel this CPU runs ([`PackedKernel::best`]): bit for bit [`skin_lbs`] with the portable
-/// one, within a few ulps with the FMA one.
+/// kernel this CPU runs (FMA where present, see [`skin_lbs_packed_with`]): bit for bit
+/// [`skin_lbs`] with the portable one, within a few ulps with the FMA one.
 ///
 /// Errors (checked once, before any vertex is written) when `rest` or `out` do not have
 /// `skin.vertex_count()` entries or a bone with non-zero weight is not below `palette.len()`.
@@ -254,7 +254,8 @@ pub fn skin_lbs_packed(
     palette: &BonePalette,
     out: &mut [Vec3],
 ) -> Result<(), SkinError> {
-    skin_lbs_packed_with(PackedKernel::best(), rest, skin, palette, out)
+    // The FMA kernel falls back to the portable one where the CPU lacks it.
+    skin_lbs_packed_with(PackedKernel::Fma, rest, skin, palette, out)
 }
 
 /// The instructions [`skin_lbs_packed_with`] blends with.
@@ -263,8 +264,8 @@ pub fn skin_lbs_packed(
 /// influence with fused multiply-adds, 8 floats at a time (two bone rows per instruction), and
 /// rounds once per multiply-add instead of twice, so its result differs from [`skin_lbs`] in the
 /// last bits (a few ulps of the coordinates; the `packed_lbs_*` tests bound it), and is the same
-/// on every CPU that has the instructions: it is bit for bit [`lbs_fma_reference`], a scalar
-/// `f32::mul_add` loop in the same order.
+/// on every CPU that has the instructions: the tests hold it bit for bit to a scalar
+/// `f32::mul_add` loop in the same order (`lbs_fma_reference`).
 ///
 /// [`skin_lbs`]: super::skin_lbs
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -278,15 +279,6 @@ pub enum PackedKernel {
 }
 
 impl PackedKernel {
-    /// [`PackedKernel::Fma`] where this CPU has it, else [`PackedKernel::Portable`].
-    pub fn best() -> Self {
-        if Self::Fma.available() {
-            Self::Fma
-        } else {
-            Self::Portable
-        }
-    }
-
     /// Whether this CPU runs the kernel.
     pub fn available(self) -> bool {
         match self {
@@ -583,42 +575,6 @@ mod fma {
     }
 }
 
-/// What [`PackedKernel::Fma`] computes, one vertex at a time with scalar `f32::mul_add`: per
-/// vertex the blended rows `a_r = sum_j w_j M_j[r]` (row `r` of bone `j`'s 3x4 matrix, a fused
-/// multiply-add per entry in slot order, from +0), then each coordinate as
-/// `(a_r0 x + a_r1 y) + (a_r2 z + a_r3)`. Slow; the reference the kernel is tested against, bit
-/// for bit.
-///
-/// # Errors
-/// As [`skin_lbs`](super::skin_lbs).
-pub fn lbs_fma_reference(
-    rest: &[Vec3],
-    skin: &SkinWeights,
-    palette: &BonePalette,
-    out: &mut [Vec3],
-) -> Result<(), SkinError> {
-    // The sizes and bone indices are those skin_lbs checks: let it check them.
-    super::skin_lbs(rest, skin, palette, out)?;
-    for (v, (p, o)) in rest.iter().zip(out.iter_mut()).enumerate() {
-        let (ii, ww) = skin.vertex(v);
-        let mut a = [[0.0f32; 4]; 3];
-        for (&bone, &w) in ii.iter().zip(ww) {
-            if w == 0.0 {
-                break;
-            }
-            let rows = &palette.rows[bone as usize + 1];
-            for (ar, mr) in a.iter_mut().zip(rows) {
-                for (x, &m) in ar.iter_mut().zip(mr.as_ref()) {
-                    *x = w.mul_add(m, *x);
-                }
-            }
-        }
-        let c = |r: [f32; 4]| (r[0] * p.x + r[1] * p.y) + (r[2] * p.z + r[3]);
-        *o = Vec3::new(c(a[0]), c(a[1]), c(a[2]));
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -687,6 +643,41 @@ mod tests {
 
     fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
         v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
+    }
+
+    /// What [`PackedKernel::Fma`] computes, one vertex at a time with scalar `f32::mul_add`: per
+    /// vertex the blended rows `a_r = sum_j w_j M_j[r]` (row `r` of bone `j`'s 3x4 matrix, a fused
+    /// multiply-add per entry in slot order, from +0), then each coordinate as
+    /// `(a_r0 x + a_r1 y) + (a_r2 z + a_r3)`. Slow; the reference the kernel is tested against, bit
+    /// for bit.
+    ///
+    /// Errors as `skin_lbs`.
+    fn lbs_fma_reference(
+        rest: &[Vec3],
+        skin: &SkinWeights,
+        palette: &BonePalette,
+        out: &mut [Vec3],
+    ) -> Result<(), SkinError> {
+        // The sizes and bone indices are those skin_lbs checks: let it check them.
+        skin_lbs(rest, skin, palette, out)?;
+        for (v, (p, o)) in rest.iter().zip(out.iter_mut()).enumerate() {
+            let (ii, ww) = skin.vertex(v);
+            let mut a = [[0.0f32; 4]; 3];
+            for (&bone, &w) in ii.iter().zip(ww) {
+                if w == 0.0 {
+                    break;
+                }
+                let rows = &palette.rows[bone as usize + 1];
+                for (ar, mr) in a.iter_mut().zip(rows) {
+                    for (x, &m) in ar.iter_mut().zip(mr.as_ref()) {
+                        *x = w.mul_add(m, *x);
+                    }
+                }
+            }
+            let c = |r: [f32; 4]| (r[0] * p.x + r[1] * p.y) + (r[2] * p.z + r[3]);
+            *o = Vec3::new(c(a[0]), c(a[1]), c(a[2]));
+        }
+        Ok(())
     }
 
     /// Bits, with every NaN as one (the kernels need not agree on NaN payloads).
