@@ -9,6 +9,8 @@
 //!   kernel vector `xi(c)` (FKY08 §4.2).
 //! - [`predict`]: bone rotations from control points (global and pose-local models).
 //! - [`translations`]: the Poisson translation solver (FKY08 §5, eq. 11), factored once.
+//! - `lower_factor`: the translation solve's Cholesky factor as its per-frame substitutions
+//!   read it (three coordinates at once, 4-lane rows).
 //! - [`confidence`]: how far a frame's control vector lies from the training examples, in the
 //!   kernel's metric (issue 20).
 //! - [`refine`]: bone-level local-global refinement after the regression: the control points
@@ -26,6 +28,7 @@ pub mod displacement;
 pub mod edge_skin;
 pub mod filter;
 pub mod kernel;
+mod lower_factor;
 pub mod predict;
 pub mod refine;
 mod simd;

@@ -11,6 +11,8 @@
 //!   (the rotation regressors, FKY08 eq. 8, and the detail regressor, HZY11 §5.2);
 //! - [`rotate_sum`]: `acc_a = sum_p R_{idx_p} k_p` over a sparse row structure, the
 //!   right-hand side of the translation solve (FKY08 eq. 11);
+//! - [`lower_solve4`]: that solve's forward and backward substitutions, the three coordinates
+//!   at once ([`super::lower_factor`]);
 //!
 //! The packed LBS kernel lives beside its private layout in `skin::packed`.
 
@@ -169,11 +171,105 @@ pub(crate) fn rotate_sum(
     match simd {}
 }
 
-/// `m`'s columns padded to four lanes, as [`rotate_sum`] reads them.
-#[inline]
+/// `L y' = y` then `L^T x = y'` in place on 4-lane rows, `L` in compressed columns with the
+/// diagonal first in each column and its reciprocals in `inv_diag`
+/// ([`super::lower_factor`]): per stored entry one broadcast and
+/// one 4-wide fused multiply-add. The forward pass scatters column `j` into the rows below it;
+/// the backward pass gathers them into row `j` in two accumulators (independent chains).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn lower_solve4(
+    simd: Fma,
+    col_ptr: &[u32],
+    row_idx: &[u32],
+    val: &[f64],
+    inv_diag: &[f64],
+    y: &mut [[f64; 4]],
+) {
+    use std::arch::x86_64::__m256d;
+    let n = y.len();
+    simd.vectorize(|| {
+        let avx = simd.avx;
+        let fma = simd.fma;
+        for j in 0..n {
+            let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
+            let yj = avx._mm256_mul_pd(bytemuck::cast(y[j]), avx._mm256_set1_pd(inv_diag[j]));
+            y[j] = bytemuck::cast(yj);
+            let neg = avx._mm256_sub_pd(avx._mm256_setzero_pd(), yj);
+            for p in start + 1..end {
+                let yi = &mut y[row_idx[p] as usize];
+                let v: __m256d =
+                    fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), neg, bytemuck::cast(*yi));
+                *yi = bytemuck::cast(v);
+            }
+        }
+        for j in (0..n).rev() {
+            let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
+            let zero = avx._mm256_setzero_pd();
+            let (mut even, mut odd) = (zero, zero);
+            let mut p = start + 1;
+            while p + 1 < end {
+                let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
+                let b: __m256d = bytemuck::cast(y[row_idx[p + 1] as usize]);
+                even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
+                odd = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p + 1]), b, odd);
+                p += 2;
+            }
+            if p < end {
+                let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
+                even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
+            }
+            let s = avx._mm256_sub_pd(bytemuck::cast(y[j]), avx._mm256_add_pd(even, odd));
+            y[j] = bytemuck::cast(avx._mm256_mul_pd(s, avx._mm256_set1_pd(inv_diag[j])));
+        }
+    });
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) fn lower_solve4(
+    simd: Fma,
+    _col_ptr: &[u32],
+    _row_idx: &[u32],
+    _val: &[f64],
+    _inv_diag: &[f64],
+    _y: &mut [[f64; 4]],
+) {
+    match simd {}
+}
+
+/// `m`'s columns padded to four lanes, as [`rotate_sum`] reads them (the tests' layout
+/// reference; frames build theirs with [`padded_rotation`]).
+#[cfg(test)]
 pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
     let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
     [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
+}
+
+/// The rotation of `q` (any non-zero length: divided out, in f64) as [`pad_columns`] lays it
+/// out: the unit quaternion's matrix without its square root (`s = 2 / |q|^2` where the unit
+/// form has 2). A zero or non-finite `q` gives non-finite entries.
+#[inline]
+pub(crate) fn padded_rotation(q: glam::Quat) -> [f64; 12] {
+    let q = q.as_dquat();
+    let s = 2.0 / q.length_squared();
+    let (x2, y2, z2) = (q.x * s, q.y * s, q.z * s);
+    let (xx, xy, xz) = (q.x * x2, q.x * y2, q.x * z2);
+    let (yy, yz, zz) = (q.y * y2, q.y * z2, q.z * z2);
+    let (wx, wy, wz) = (q.w * x2, q.w * y2, q.w * z2);
+    [
+        1.0 - (yy + zz),
+        xy + wz,
+        xz - wy,
+        0.0,
+        xy - wz,
+        1.0 - (xx + zz),
+        yz + wx,
+        0.0,
+        xz + wy,
+        yz - wx,
+        1.0 - (xx + yy),
+        0.0,
+    ]
 }
 
 /// The matrix [`pad_columns`] padded (exactly).
@@ -239,6 +335,32 @@ mod tests {
             &[0.0; 2],
             &mut [0.0; 2]
         ));
+    }
+
+    #[test]
+    fn padded_rotation_is_the_normalised_quaternions_matrix() {
+        let mut rng = StdRng::seed_from_u64(5);
+        for _ in 0..200 {
+            let q = glam::Quat::from_xyzw(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ) * rng.random_range(0.01..100.0);
+            let want = DMat3::from_quat(q.as_dquat().normalize());
+            let got = unpad_columns(&padded_rotation(q));
+            assert!(
+                (got - want)
+                    .abs()
+                    .to_cols_array()
+                    .iter()
+                    .all(|e| *e <= 1e-14),
+                "{q}: {got} vs {want}"
+            );
+            let p = padded_rotation(q);
+            assert_eq!([p[3], p[7], p[11]], [0.0; 3], "pad lanes");
+        }
+        assert!(!padded_rotation(glam::Quat::from_xyzw(0.0, 0.0, 0.0, 0.0))[0].is_finite());
     }
 
     #[test]

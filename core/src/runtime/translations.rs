@@ -54,17 +54,18 @@
 //!   per stream, from [`TranslationSolver::scratch`]), so one solver can be shared by many
 //!   streams; a solve then allocates nothing.
 
-use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
-    factorize_symbolic_cholesky,
+    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::{Conj, MatMut, Par, Side};
-use glam::{DMat3, DVec3, Quat, Vec3};
+use faer::{Par, Side};
+use glam::{DVec3, Quat, Vec3};
 
 use super::edge_skin::{EdgeSkin, EdgeSkinError};
+use super::lower_factor::{LowerFactor, Row4};
 use super::simd;
 use super::skin::{RigidTransform, SkinError, SkinWeights};
 
@@ -305,8 +306,9 @@ pub struct TranslationSolver {
     /// `k_edge - beta k_ctrl`.
     k_val: Vec<DVec3>,
     symbolic: SymbolicCholesky<usize>,
-    l_values: Vec<f64>,
-    solve_req: StackReq,
+    /// The numeric factor of `n_val` (simplicial: faer is asked for it), as the per-frame
+    /// substitutions read it.
+    factor: LowerFactor,
 }
 
 /// Per-stream buffers of [`TranslationSolver`]'s per-frame calls. Get one sized for a solver
@@ -318,11 +320,8 @@ pub struct TranslationScratch {
     /// matrix from it (exactly).
     rot: Vec<[f64; 12]>,
     acc: Vec<DVec3>,
-    /// Right-hand side and solution, column-major `bones x 3`.
-    rhs: Vec<f64>,
-    /// faer's workspace for the triangular solves, and what it was sized for.
-    mem: MemBuffer,
-    mem_req: StackReq,
+    /// Right-hand side and solution, a `[x, y, z, 0]` row per bone in the factor's order.
+    y: Vec<Row4>,
 }
 
 impl Default for TranslationScratch {
@@ -330,9 +329,7 @@ impl Default for TranslationScratch {
         Self {
             rot: Vec::new(),
             acc: Vec::new(),
-            rhs: Vec::new(),
-            mem: MemBuffer::new(StackReq::empty()),
-            mem_req: StackReq::empty(),
+            y: Vec::new(),
         }
     }
 }
@@ -341,7 +338,7 @@ impl Clone for TranslationScratch {
     /// A scratch of the same size (contents are per-call temporaries and are not copied).
     fn clone(&self) -> Self {
         let mut s = Self::default();
-        s.prepare(self.rot.len(), self.mem_req);
+        s.prepare(self.rot.len());
         s
     }
 }
@@ -350,22 +347,18 @@ impl std::fmt::Debug for TranslationScratch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("TranslationScratch")
             .field("bones", &self.rot.len())
-            .field("workspace", &self.mem_req)
             .finish()
     }
 }
 
 impl TranslationScratch {
-    /// Sizes the buffers for `bones` bones and a solve needing `req` of faer workspace.
-    fn prepare(&mut self, bones: usize, req: StackReq) {
+    /// Sizes the buffers for `bones` bones.
+    fn prepare(&mut self, bones: usize) {
         if self.rot.len() != bones {
-            self.rot.resize(bones, simd::pad_columns(&DMat3::IDENTITY));
+            self.rot
+                .resize(bones, simd::padded_rotation(Quat::IDENTITY));
             self.acc.resize(bones, DVec3::ZERO);
-            self.rhs.resize(3 * bones, 0.0);
-        }
-        if self.mem_req != req {
-            self.mem = MemBuffer::new(req);
-            self.mem_req = req;
+            self.y.resize(bones, [0.0; 4]);
         }
     }
 }
@@ -531,13 +524,17 @@ impl TranslationSolver {
             pattern,
             Side::Upper,
             SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
+            // Simplicial: the per-frame substitutions read its compressed columns
+            // (`lower_factor`); at these sizes (bones x bones, a few thousand entries) the
+            // supernodal blocks would not pay.
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+                ..Default::default()
+            },
         )
         .map_err(|e| TranslationError::Factorization {
             reason: format!("{e:?}"),
         })?;
-        let solve_req = symbolic.solve_in_place_scratch::<f64>(3, Par::Seq);
-        let l_values = vec![0.0; symbolic.len_val()];
         let n_val = vec![0.0; n_idx.len()];
         let k_val = vec![DVec3::ZERO; k_op.idx.len()];
         let (k_edge, k_ctrl) = k_op.val.iter().copied().unzip();
@@ -557,8 +554,7 @@ impl TranslationSolver {
             k_ctrl,
             k_val,
             symbolic,
-            l_values,
-            solve_req,
+            factor: LowerFactor::default(),
         };
         solver.set_beta(beta)?;
         Ok(solver)
@@ -586,7 +582,7 @@ impl TranslationSolver {
         for j in 0..self.bones {
             n_val[diag(j)] += ridge;
         }
-        let mut l_values = vec![0.0; self.l_values.len()];
+        let mut l_values = vec![0.0; self.symbolic.len_val()];
         let result = {
             let symbolic = SymbolicSparseColMatRef::new_checked(
                 self.bones,
@@ -619,7 +615,11 @@ impl TranslationSolver {
             });
         }
         self.n_val = n_val;
-        self.l_values = l_values;
+        self.factor =
+            LowerFactor::new(&self.symbolic, &l_values).ok_or(TranslationError::Factorization {
+                reason: "faer returned a supernodal factor where a simplicial one was asked for"
+                    .into(),
+            })?;
         self.beta = beta;
         for ((v, &e), &c) in self.k_val.iter_mut().zip(&self.k_edge).zip(&self.k_ctrl) {
             *v = e - beta * c;
@@ -637,14 +637,8 @@ impl TranslationSolver {
         out: &mut [Vec3],
     ) -> Result<(), TranslationError> {
         self.check_sizes(rotations.len(), controls.len(), out.len())?;
-        self.solve_rotations(
-            rotations
-                .iter()
-                .map(|q| DMat3::from_quat(q.as_dquat().normalize())),
-            controls,
-            scratch,
-        )?;
-        self.write(scratch, out.iter_mut());
+        self.solve_rotations(rotations.iter().copied(), controls, scratch)?;
+        self.write(scratch, |a, t| out[a] = t);
         Ok(())
     }
 
@@ -657,14 +651,8 @@ impl TranslationSolver {
         scratch: &mut TranslationScratch,
     ) -> Result<(), TranslationError> {
         self.check_sizes(bones.len(), controls.len(), bones.len())?;
-        self.solve_rotations(
-            bones
-                .iter()
-                .map(|b| DMat3::from_quat(b.rotation.as_dquat().normalize())),
-            controls,
-            scratch,
-        )?;
-        self.write(scratch, bones.iter_mut().map(|b| &mut b.translation));
+        self.solve_rotations(bones.iter().map(|b| b.rotation), controls, scratch)?;
+        self.write(scratch, |a, t| bones[a].translation = t);
         Ok(())
     }
 
@@ -672,13 +660,13 @@ impl TranslationSolver {
     /// scratch's rotation matrices and solves into the scratch.
     fn solve_rotations(
         &self,
-        rotations: impl Iterator<Item = DMat3>,
+        rotations: impl Iterator<Item = Quat>,
         controls: &[Vec3],
         scratch: &mut TranslationScratch,
     ) -> Result<(), TranslationError> {
-        scratch.prepare(self.bones, self.solve_req);
-        for (m, r) in scratch.rot.iter_mut().zip(rotations) {
-            *m = simd::pad_columns(&r);
+        scratch.prepare(self.bones);
+        for (m, q) in scratch.rot.iter_mut().zip(rotations) {
+            *m = simd::padded_rotation(q);
         }
         self.solve_prepared(scratch, controls)
     }
@@ -686,7 +674,7 @@ impl TranslationSolver {
     /// A scratch sized for this solver, so that even the first solve allocates nothing.
     pub fn scratch(&self) -> TranslationScratch {
         let mut s = TranslationScratch::default();
-        s.prepare(self.bones, self.solve_req);
+        s.prepare(self.bones);
         s
     }
 
@@ -717,7 +705,7 @@ impl TranslationSolver {
 
     /// Stored entries of the Cholesky factor.
     pub fn factor_len(&self) -> usize {
-        self.l_values.len()
+        self.factor.stored()
     }
 
     fn check_sizes(
@@ -796,25 +784,16 @@ impl TranslationSolver {
                 scratch.acc[b] += w * c;
             }
         }
-        for (a, s) in scratch.acc.iter().enumerate() {
-            scratch.rhs[a] = s.x;
-            scratch.rhs[n + a] = s.y;
-            scratch.rhs[2 * n + a] = s.z;
-        }
-        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut scratch.rhs, n, 3),
-            Par::Seq,
-            MemStack::new(&mut scratch.mem),
-        );
+        let acc = &scratch.acc;
+        self.factor
+            .solve(|a| [acc[a].x, acc[a].y, acc[a].z, 0.0], &mut scratch.y);
         Ok(())
     }
 
-    fn write<'a>(&self, scratch: &TranslationScratch, out: impl Iterator<Item = &'a mut Vec3>) {
-        let n = self.bones;
-        let r = &scratch.rhs;
-        for (a, t) in out.enumerate() {
-            *t = Vec3::new(r[a] as f32, r[n + a] as f32, r[2 * n + a] as f32);
+    /// Hands each bone's solved translation to `set(bone, t)`.
+    fn write(&self, scratch: &TranslationScratch, mut set: impl FnMut(usize, Vec3)) {
+        for (a, r) in self.factor.solution(&scratch.y) {
+            set(a, Vec3::new(r[0] as f32, r[1] as f32, r[2] as f32));
         }
     }
 }
