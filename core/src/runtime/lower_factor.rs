@@ -143,6 +143,7 @@ mod tests {
     /// triangle in compressed columns, its factor both ways, and a dense Gaussian-elimination
     /// solve as the independent reference.
     #[test]
+    #[allow(clippy::needless_range_loop)] // dense matrix indices read clearer than iterators
     fn both_substitutions_solve_the_dense_system() {
         let mut rng = StdRng::seed_from_u64(23);
         for n in [1usize, 2, 7, 40, 151] {

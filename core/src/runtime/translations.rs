@@ -314,6 +314,7 @@ pub struct TranslationSolver {
 /// Per-stream buffers of [`TranslationSolver`]'s per-frame calls. Get one sized for a solver
 /// from [`TranslationSolver::scratch`]; a `Default` one is sized by its first solve (the only
 /// allocation). Cloning gives a fresh buffer of the same size.
+#[derive(Default)]
 pub struct TranslationScratch {
     /// Each bone's rotation matrix as its three columns padded to four lanes
     /// ([`simd::pad_columns`]), the form the FMA kernel reads; the portable loop rebuilds the
@@ -324,15 +325,6 @@ pub struct TranslationScratch {
     y: Vec<Row4>,
 }
 
-impl Default for TranslationScratch {
-    fn default() -> Self {
-        Self {
-            rot: Vec::new(),
-            acc: Vec::new(),
-            y: Vec::new(),
-        }
-    }
-}
 
 impl Clone for TranslationScratch {
     /// A scratch of the same size (contents are per-call temporaries and are not copied).
