@@ -17,8 +17,11 @@
 //! for x, y and z: one row per edge with entries `w_k0,b - w_k1,b`, one row per control with
 //! entries `sqrt(beta) w_{i_l},b`. The normal matrix
 //! `N = A_e^T A_e + beta A_c^T A_c` is `n_b x n_b`, sparse (bones sharing an edge) and fixed:
-//! it is factored once with faer's sparse Cholesky (AMD fill-reducing ordering, sequential) when
-//! the solver is built and again, numerically only, in [`TranslationSolver::set_beta`].
+//! it is factored once with faer's sparse Cholesky (AMD fill-reducing ordering, sequential,
+//! simplicial) when the solver is built and again, numerically only, in
+//! [`TranslationSolver::set_beta`]. The per-frame substitutions are crease's own
+//! (`lower_factor`): the three coordinates share the factor, so each stored entry updates an
+//! `[x, y, z, 0]` row with one 4-wide multiply-add instead of three passes of faer's solve.
 //!
 //! The right-hand side is linear in the rotations: with
 //! `q_kb = a_kb - w_k0,b v_k0^0 + w_k1,b v_k1^0`,
@@ -317,7 +320,7 @@ pub struct TranslationSolver {
 #[derive(Default)]
 pub struct TranslationScratch {
     /// Each bone's rotation matrix as its three columns padded to four lanes
-    /// ([`simd::pad_columns`]), the form the FMA kernel reads; the portable loop rebuilds the
+    /// (`simd::padded_rotation`), the form the FMA kernel reads; the portable loop rebuilds the
     /// matrix from it (exactly).
     rot: Vec<[f64; 12]>,
     acc: Vec<DVec3>,
