@@ -245,8 +245,8 @@ pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
     [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
 }
 
-/// The rotation of `q` (any non-zero length: divided out, in f64) as [`pad_columns`] lays it
-/// out: the unit quaternion's matrix without its square root (`s = 2 / |q|^2` where the unit
+/// The rotation of `q` (any non-zero length: divided out, in f64), its three columns padded
+/// to four lanes (`[c0x c0y c0z 0 c1x .. c2z 0]`, as [`rotate_sum`] reads them): the unit quaternion's matrix without its square root (`s = 2 / |q|^2` where the unit
 /// form has 2). A zero or non-finite `q` gives non-finite entries.
 #[inline]
 pub(crate) fn padded_rotation(q: glam::Quat) -> [f64; 12] {
@@ -272,7 +272,7 @@ pub(crate) fn padded_rotation(q: glam::Quat) -> [f64; 12] {
     ]
 }
 
-/// The matrix [`pad_columns`] padded (exactly).
+/// The matrix whose columns [`padded_rotation`] padded (exactly).
 #[inline]
 pub(crate) fn unpad_columns(c: &[f64; 12]) -> glam::DMat3 {
     glam::DMat3::from_cols_array(&[c[0], c[1], c[2], c[4], c[5], c[6], c[8], c[9], c[10]])
