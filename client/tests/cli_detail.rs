@@ -130,3 +130,56 @@ fn train_synth_and_eval_with_the_detail_layer() {
         loo["local"]["base_rms_mean"]
     );
 }
+
+/// `--control-points` indices name vertices of the examples as read: with `--base-vertices`
+/// they move to the nearest base vertex at rest (as the manifest's list does), and one beyond
+/// the examples' vertex count is refused with that count.
+#[test]
+fn command_line_control_points_move_to_the_base() {
+    let Some(dir) = shared_data("cactus") else {
+        return;
+    };
+    let full = crease_core::mesh::examples::ExampleSet::load(&dir).unwrap();
+    let n = full.rest.vertex_count();
+    let given = [n as u32 - 1, 17, (n / 2) as u32];
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = tmp.path().join("cactus.crease");
+    let list = given.map(|v| v.to_string()).join(",");
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(&dir)
+            .args(COMMON)
+            .args(["--control-points", &list, "--out"])
+            .arg(&model_path),
+    );
+    let model = TrainedModel::load(&model_path).unwrap();
+    let base = &model.rig.rest;
+    let bbox = full.rest.bbox_diagonal_scale();
+    for (c, &v) in model.controls.iter().zip(&given) {
+        assert!((c.vertex as usize) < base.vertex_count());
+        // The base is a Laplacian-smoothed subset of about 1,200 of the 5,261 vertices: the
+        // nearest one lies within a few average edge lengths (a few % of the size).
+        let d = base.positions[c.vertex as usize].distance(full.rest.positions[v as usize]);
+        assert!(
+            d < 0.05 * bbox,
+            "control at full vertex {v}: base vertex {} is {d} away",
+            c.vertex
+        );
+    }
+    let out = crease()
+        .args(["train", "--examples"])
+        .arg(&dir)
+        .args(COMMON)
+        .args(["--control-points", &format!("3,{n}"), "--out"])
+        .arg(tmp.path().join("never.crease"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains(&format!("vertex {n} is out of range"))
+            && stderr.contains(&format!("have {n} vertices")),
+        "{stderr}"
+    );
+}

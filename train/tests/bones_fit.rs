@@ -355,3 +355,99 @@ fn cactus_fits_well_in_seconds() {
         "{fit_steps:?}"
     );
 }
+
+/// More bones than the clustering weighs exhaustively (issue 23: beyond
+/// `exhaustive_cluster_bones` a vertex weighs only the bones of its two-ring): a tube cut into
+/// 300 rigid segments, each moving on its own, fitted with 300 bones both ways. The two-ring
+/// candidates must fit as well as weighing every bone (within 10%; a torn motion like this one
+/// is hard for both: 300 independent segments from 6 poses), and well under not deforming.
+#[test]
+fn two_ring_clustering_fits_as_well_as_exhaustive() {
+    let mut rng = StdRng::seed_from_u64(7);
+    let (rings, around, segments) = (600usize, 8usize, 300usize);
+    let mesh = common::tube(rings, around, 60.0);
+    let n = mesh.vertex_count();
+    // Vertex i lies on ring i / around (the tube's layout), two rings a segment.
+    let segment = |i: usize| (i / around) * segments / rings;
+    let mut frames = vec![mesh.positions.clone()];
+    for _ in 0..6 {
+        let motions: Vec<RigidTransform> = (0..segments)
+            .map(|_| RigidTransform {
+                rotation: Quat::from_axis_angle(
+                    Vec3::new(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    )
+                    .normalize(),
+                    rng.random_range(-0.5..0.5),
+                ),
+                translation: Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                ),
+            })
+            .collect();
+        frames.push(
+            mesh.positions
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| {
+                    let m = motions[segment(i)];
+                    m.rotation * p + m.translation
+                })
+                .collect(),
+        );
+    }
+    let refs: Vec<&[Vec3]> = frames.iter().map(|f| f.as_slice()).collect();
+    let scale = mesh.bbox_diagonal_scale() as f64;
+    let rms = |skin: &SkinWeights, transforms: &[Vec<RigidTransform>]| {
+        let mut sse = 0.0f64;
+        for (t, frame) in frames.iter().enumerate().skip(1) {
+            let got = lbs(&mesh.positions, skin, &transforms[t]);
+            sse += got
+                .iter()
+                .zip(frame)
+                .map(|(a, b)| (*a - *b).length_squared() as f64)
+                .sum::<f64>();
+        }
+        (sse / (6 * n) as f64).sqrt() / scale
+    };
+    let still: f64 = {
+        let sse: f64 = frames[1..]
+            .iter()
+            .flat_map(|f| f.iter().zip(&mesh.positions))
+            .map(|(a, b)| (*a - *b).length_squared() as f64)
+            .sum();
+        (sse / (6 * n) as f64).sqrt() / scale
+    };
+    let mut fits = Vec::new();
+    for exhaustive_cluster_bones in [usize::MAX, 256] {
+        let options = FitOptions {
+            bones: segments,
+            max_influences: 2,
+            max_iterations: 10,
+            exhaustive_cluster_bones,
+            ..FitOptions::default()
+        };
+        let result = fit(
+            FitInput {
+                rest: &mesh,
+                frames: &refs,
+                rest_frame: Some(0),
+            },
+            &options,
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(result.bone_count > 256, "{} bones", result.bone_count);
+        check_weights(&result.skin, n, 2, result.bone_count);
+        fits.push(rms(&result.skin, &result.transforms));
+    }
+    let (exhaustive, two_ring) = (fits[0], fits[1]);
+    assert!(
+        two_ring <= 1.1 * exhaustive && two_ring < 0.25 * still,
+        "two-ring {two_ring:e}, exhaustive {exhaustive:e}, undeformed {still:e}"
+    );
+}

@@ -100,7 +100,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         args.methods.clone()
     };
     let options = EvalOptions {
-        train: args.regress.train_options(Method::Global, set)?,
+        train: args.regress.train_options(Method::Global, &layers)?,
         methods,
         beta: args.regress.beta,
         refine: args.refine,

@@ -11,6 +11,7 @@ use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 use crease_core::mesh::examples::{ExampleSet, NamedMesh};
 use crease_core::mesh::subdivision::subdivided_vertex_count;
+use crease_train::base::ControlSpec;
 use crease_train::detail::layer::{DetailFrames, DetailOptions};
 use crease_train::detail::{BaseSubset, Smoothing};
 
@@ -53,6 +54,32 @@ pub struct Layers {
 }
 
 impl Layers {
+    /// `--control-points` for these layers ([`common::control_spec`] on the base): vertex
+    /// indices given on the command line name vertices of the examples as read, so with an
+    /// automatic split (`--base-vertices`) they move to the nearest base vertex at rest, as the
+    /// manifest's list does.
+    pub fn control_spec(&self, arg: Option<&str>) -> anyhow::Result<ControlSpec> {
+        let spec = common::control_spec(arg, &self.base)?;
+        let (Some(_), ControlSpec::Vertices(given), Some(subset), Some(full)) =
+            (arg, &spec, &self.subset, &self.detailed)
+        else {
+            return Ok(spec);
+        };
+        let n = full.rest.vertex_count();
+        if let Some(&v) = given.iter().find(|&&v| v as usize >= n) {
+            bail!(
+                "--control-points: vertex {v} is out of range: the examples ({}) have {n} vertices",
+                full.rest_name
+            );
+        }
+        Ok(ControlSpec::Vertices(
+            given
+                .iter()
+                .map(|&v| nearest_subset_vertex(subset, &full.rest.positions, v))
+                .collect(),
+        ))
+    }
+
     /// The detailed frames for the detail layer's training, if any.
     pub fn detail_frames(&self) -> Option<FramesParts<'_>> {
         self.detailed

@@ -57,7 +57,7 @@ pub struct TrainArgs {
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let layers = layers::load(&args.examples, &args.detail, None)?;
     let set = &layers.base;
-    let mut options = args.regress.train_options(args.method, set)?;
+    let mut options = args.regress.train_options(args.method, &layers)?;
     options.detail = layers::detail_options(&args.detail, &layers)?;
     let frames: Vec<&[crease_core::glam::Vec3]> = set.frames();
     let names: Vec<String> = set.names();

@@ -9,8 +9,6 @@ use crease_train::pipeline::{EdgeModel, TrainOptions};
 use crease_train::regress::{KernelChoice, Method, RegressOptions};
 use crease_train::select::SelectGrid;
 
-use super::common;
-
 /// Regression options shared by `train` and `eval`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RegressArgs {
@@ -22,8 +20,8 @@ pub struct RegressArgs {
     pub max_influences: usize,
     /// Control points: `auto:N` (PCA + varimax), `auto` (= auto:8), `select:N` (auto:N improved by
     /// swaps with 2N PCA + varimax representatives, scored by leave-one-out inside the training
-    /// set), or vertex
-    /// indices `12,400,7`. Default: the manifest's list, else auto:8.
+    /// set), or vertex indices `12,400,7` of the examples as read (with --base-vertices they
+    /// move to the nearest base vertex). Default: the manifest's list, else auto:8.
     #[arg(long, value_name = "SPEC")]
     pub control_points: Option<String>,
     /// Control points per bone for the geometry-local methods (HZY11 k_c).
@@ -63,8 +61,9 @@ impl RegressArgs {
     pub fn train_options(
         &self,
         method: Method,
-        set: &crease_core::mesh::ExampleSet,
+        layers: &super::layers::Layers,
     ) -> anyhow::Result<TrainOptions> {
+        let set = &layers.base;
         if !(self.beta.is_finite() && self.beta > 0.0) {
             bail!("--beta must be > 0, got {}", self.beta);
         }
@@ -116,7 +115,7 @@ impl RegressArgs {
                 max_influences: self.max_influences,
                 ..FitOptions::default()
             },
-            controls: common::control_spec(self.control_points.as_deref(), set)?,
+            controls: layers.control_spec(self.control_points.as_deref())?,
             // The manifest's names go with the manifest's points.
             control_names: self
                 .control_points

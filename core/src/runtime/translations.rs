@@ -328,7 +328,6 @@ pub struct TranslationScratch {
     y: Vec<Row4>,
 }
 
-
 impl Clone for TranslationScratch {
     /// A scratch of the same size (contents are per-call temporaries and are not copied).
     fn clone(&self) -> Self {

@@ -23,6 +23,8 @@ const MIN_SPLIT_VERTICES: usize = 6;
 const MAX_STALLED_ROUNDS: usize = 3;
 /// Vertices per parallel work item in the assignment step.
 const ASSIGN_CHUNK: usize = 256;
+/// Most distinct candidate bones of one vertex's two-ring kept.
+const MAX_CANDIDATES: usize = 32;
 
 /// Result of clustering: `bones` bones, one label per vertex, transforms `[t * bones + b]`.
 pub(crate) struct Clustering {
@@ -49,7 +51,13 @@ pub(crate) fn cluster(
     let mut best_bones = 0;
     for round in 1.. {
         for _ in 0..options.cluster_iterations.max(1) {
-            let changed = assign(problem, &xf, bones, &mut labels);
+            let changed = assign(
+                problem,
+                &xf,
+                bones,
+                &mut labels,
+                options.exhaustive_cluster_bones,
+            );
             let (b, kept) = compact(&mut labels, bones);
             xf = select_bones(&xf, bones, &kept, problem.f);
             bones = b;
@@ -112,7 +120,23 @@ fn trajectory_error(
 
 /// Lloyd assignment: every vertex takes the bone of least trajectory error. Returns how many
 /// vertices changed bone.
-fn assign(problem: &Problem, xf: &[Rigid], bones: usize, labels: &mut [u32]) -> usize {
+///
+/// Candidates (issue 23): up to `exhaustive` bones every bone; beyond, the bones that
+/// label the vertex's two-ring at the start of the step (Jacobi: all read the same labels).
+/// Every bone is then a connected patch grown from a seed, and a vertex's best bone is its own
+/// or a neighbouring patch's; weighing all bones made the step `O(n * bones)`, 27 of the
+/// 38 s that clustering 1,355 bones on a 49K-vertex hand took, for moves that the candidate
+/// set makes within a ring per iteration.
+fn assign(
+    problem: &Problem,
+    xf: &[Rigid],
+    bones: usize,
+    labels: &mut [u32],
+    exhaustive: usize,
+) -> usize {
+    if bones > exhaustive {
+        return assign_local(problem, xf, bones, labels);
+    }
     let f = problem.f;
     let changed = par::map_chunks_mut(
         labels,
@@ -134,6 +158,53 @@ fn assign(problem: &Problem, xf: &[Rigid], bones: usize, labels: &mut [u32]) -> 
                     if e < best_e {
                         best_e = e;
                         best = b;
+                    }
+                }
+                changed += usize::from(*label != best as u32);
+                *label = best as u32;
+            }
+            changed
+        },
+    );
+    changed.into_iter().sum()
+}
+
+/// [`assign`] over the bones of each vertex's two-ring.
+fn assign_local(problem: &Problem, xf: &[Rigid], bones: usize, labels: &mut [u32]) -> usize {
+    let f = problem.f;
+    let before = labels.to_vec();
+    let changed = par::map_chunks_mut(
+        labels,
+        ASSIGN_CHUNK,
+        || (),
+        |_, c, chunk| {
+            let mut changed = 0;
+            for (j, label) in chunk.iter_mut().enumerate() {
+                let i = c * ASSIGN_CHUNK + j;
+                let mut cand = [0u32; MAX_CANDIDATES];
+                cand[0] = before[i];
+                let mut len = 1;
+                let mut push = |b: u32| {
+                    if len < MAX_CANDIDATES && !cand[..len].contains(&b) {
+                        cand[len] = b;
+                        len += 1;
+                    }
+                };
+                for &u in problem.neighbours(i) {
+                    push(before[u as usize]);
+                    for &w in problem.neighbours(u as usize) {
+                        push(before[w as usize]);
+                    }
+                }
+                let p = problem.rest[i];
+                let traj = &problem.traj[i * f..(i + 1) * f];
+                let mut best = cand[0] as usize;
+                let mut best_e = trajectory_error(xf, bones, best, p, traj, f32::INFINITY);
+                for &b in &cand[1..len] {
+                    let e = trajectory_error(xf, bones, b as usize, p, traj, best_e);
+                    if e < best_e {
+                        best_e = e;
+                        best = b as usize;
                     }
                 }
                 changed += usize::from(*label != best as u32);

@@ -61,6 +61,9 @@ pub struct FitOptions {
     /// influencing it or its mesh neighbours: lets influence cross cluster borders that the
     /// one-ring does not reach yet.
     pub nearest_bones: usize,
+    /// Beyond this many bones, a clustering vertex weighs only the bones of its two-ring
+    /// instead of every bone (issue 23: the exhaustive step is `O(vertices * bones)`).
+    pub exhaustive_cluster_bones: usize,
 }
 
 impl Default for FitOptions {
@@ -73,6 +76,7 @@ impl Default for FitOptions {
             cluster_iterations: 12,
             transform_passes: 2,
             nearest_bones: 6,
+            exhaustive_cluster_bones: 256,
         }
     }
 }
