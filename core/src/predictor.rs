@@ -314,6 +314,12 @@ impl Predictor {
         &self.model
     }
 
+    /// The translation solver (FKY08 eq. 11) this predictor built for the model: its sizes
+    /// are what a frame's solve costs.
+    pub fn translation_solver(&self) -> &TranslationSolver {
+        &self.solver
+    }
+
     /// Current control-point weight of the translation solve.
     pub fn beta(&self) -> f32 {
         self.beta

@@ -1,0 +1,277 @@
+//! Per-frame stages of a trained model, single thread, each beside its floor measured in the
+//! same run (issue 23): the papers' scale is a 49K-vertex base, ~1,300 bones and a 195K-vertex
+//! detail layer.
+//!
+//! ```sh
+//! cargo build --release -p crease-core --example frame_stages
+//! RAYON_NUM_THREADS=1 target/release/examples/frame_stages MODEL.crease TEST_MANIFEST V1,V2,..
+//! ```
+//!
+//! The control frames are the test manifest's poses read at the vertices `V1,V2,..` (of the
+//! test meshes: with a model trained by `--base-vertices`, the full-mesh vertices its
+//! `--control-points` named). Stages, each timed over [`FRAMES`] frames (median and minimum):
+//!
+//! - `rotations`: the regression (`RotationModel::predict`);
+//! - `transforms`: rotations, the confidence and the eq. 11 translation solve
+//!   (`Predictor::predict_transforms`); `translations` is the difference of the two;
+//! - `skin`: packed LBS of the base (`Predictor::skin`);
+//! - `detail regress`: `h = D xi + b`; `detail synth`: `S · base`, normals, `+ h n`;
+//! - `encode base` / `encode detail`: the vertex codec (16 bits, a keyframe every 30).
+//!
+//! Floors: memory-bound stages against `memcpy` of the bytes they read and write at least (the
+//! skin: rest positions, the non-zero weights as 6-byte slots, the output; detail regress: `D`,
+//! `b` and `h`; detail synth: base, `h` and the output, stencils not counted; encode: the
+//! positions); compute-bound ones (rotations, translations) against their multiply-adds at this
+//! CPU's measured fused multiply-add rate (8 f32 or 4 f64 lanes, eight independent chains).
+#![allow(clippy::unwrap_used, clippy::expect_used)] // a measuring tool: a failure names its line
+
+use std::hint::black_box;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crease_core::codec::{FrameEncoder, QuantBox};
+use crease_core::glam::Vec3;
+use crease_core::mesh::ExampleSet;
+use crease_core::model::TrainedModel;
+use crease_core::predictor::Predictor;
+use crease_core::runtime::detail::DetailSynth;
+use crease_core::runtime::predict::GroupRegression;
+
+/// Frames per figure.
+const FRAMES: usize = 200;
+
+/// Median and minimum of `f` over `n` runs after a tenth as many warm-up runs.
+fn timings(n: usize, mut f: impl FnMut()) -> (Duration, Duration) {
+    for _ in 0..n / 10 + 1 {
+        f();
+    }
+    let mut t: Vec<Duration> = (0..n)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed()
+        })
+        .collect();
+    t.sort();
+    (t[n / 2], t[0])
+}
+
+/// A copy of `bytes` bytes, as a floor's timing.
+fn memcpy(bytes: usize) -> (Duration, Duration) {
+    let src = vec![1u8; bytes];
+    let mut dst = vec![0u8; bytes];
+    timings(FRAMES, || {
+        dst.copy_from_slice(black_box(&src));
+        black_box(&dst);
+    })
+}
+
+/// Fused multiply-adds per second of this core, f32 and f64, from eight independent chains of
+/// lane arrays the compiler vectorises (`-C target-cpu` is not assumed: plain `mul_add` on
+/// arrays compiles to the baseline's SIMD, so this is measured with the same code generation
+/// the portable loops get; the FMA kernels' rate is at most twice it).
+fn fma_rates() -> (f64, f64) {
+    fn rate<const L: usize, T: Copy + std::ops::Mul<Output = T> + std::ops::Add<Output = T>>(
+        one: T,
+        k: T,
+    ) -> f64 {
+        let mut acc = [[one; L]; 8];
+        let n = 2_000_000usize;
+        let t = Instant::now();
+        for _ in 0..n {
+            for a in acc.iter_mut() {
+                for x in a.iter_mut() {
+                    *x = *x * k + k;
+                }
+            }
+            black_box(&acc);
+        }
+        (n * 8 * L) as f64 / t.elapsed().as_secs_f64()
+    }
+    (rate::<8, f32>(1.0, 0.999_99), rate::<4, f64>(1.0, 0.999_99))
+}
+
+/// The 16-bit box around `p`, padded by a quarter of its largest side (the codec bench's).
+fn quant_box(p: &[Vec3]) -> QuantBox {
+    let lo = p.iter().fold(Vec3::INFINITY, |a, &b| a.min(b));
+    let hi = p.iter().fold(Vec3::NEG_INFINITY, |a, &b| a.max(b));
+    QuantBox::from_bounds(lo, hi, 0.25, 16).unwrap()
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: frame_stages MODEL.crease TEST_MANIFEST V1,V2,..";
+    let model = Arc::new(TrainedModel::load(args.get(1).expect(usage)).expect("model"));
+    let test = ExampleSet::load(args.get(2).expect(usage)).expect("test manifest");
+    let vertices: Vec<usize> = args
+        .get(3)
+        .expect(usage)
+        .split(',')
+        .map(|v| v.trim().parse().expect("vertex index"))
+        .collect();
+    assert_eq!(vertices.len(), model.controls.len(), "one vertex per control point");
+    let frames: Vec<Vec<Vec3>> = test
+        .examples
+        .iter()
+        .map(|e| vertices.iter().map(|&v| e.mesh.positions[v]).collect())
+        .collect();
+    let predictor = Predictor::new(model.clone(), None).expect("predictor");
+    let mut ctx = predictor.new_context();
+    let n = model.rig.rest.vertex_count();
+    let bones = model.rig.bone_count;
+    let mut k = 0;
+    let mut next = || {
+        k = (k + 1) % frames.len();
+        k
+    };
+    let mut rows: Vec<(String, (Duration, Duration), String)> = Vec::new();
+
+    // Compute floors: multiply-adds per frame at the measured rate.
+    let (f32_rate, f64_rate) = fma_rates();
+    let rot_fmas: usize = model
+        .rotations
+        .groups
+        .iter()
+        .map(|g| match &g.regression {
+            GroupRegression::Global(op) => op.m.len(),
+            GroupRegression::PoseLocal(models) => {
+                let per = models.first().map_or(0, |m| m.operator.m.len());
+                per * model.rotations.blend_poses.min(models.len())
+            }
+        })
+        .sum();
+    let solver = predictor.translation_solver();
+    let trans_fmas = 9 * solver.rotation_operator_len() + 2 * 4 * solver.factor_len();
+    let floor = |fmas: usize, rate: f64| Duration::from_secs_f64(fmas as f64 / rate);
+
+    let mut scratch = Default::default();
+    let mut rot = vec![Default::default(); bones];
+    let r = timings(FRAMES, || {
+        let i = next();
+        model.rotations.predict(&frames[i], &mut scratch, &mut rot);
+    });
+    rows.push((
+        "rotations".into(),
+        r,
+        format!(
+            "{rot_fmas} f32 FMAs: {:.1} us at this core's rate",
+            floor(rot_fmas, f32_rate).as_secs_f64() * 1e6
+        ),
+    ));
+    let t = timings(FRAMES, || {
+        let i = next();
+        predictor
+            .predict_transforms(&mut ctx, &frames[i], None)
+            .unwrap();
+    });
+    rows.push(("transforms".into(), t, String::new()));
+    rows.push((
+        "  translations".into(),
+        (t.0.saturating_sub(r.0), t.1.saturating_sub(r.1)),
+        format!(
+            "{trans_fmas} f64 FMAs (K {} entries x 9, factor {} x 2 x 4 lanes): {:.1} us",
+            solver.rotation_operator_len(),
+            solver.factor_len(),
+            floor(trans_fmas, f64_rate).as_secs_f64() * 1e6
+        ),
+    ));
+    let skin = timings(FRAMES, || predictor.skin(&mut ctx).unwrap());
+    let slots: usize = (0..n)
+        .map(|v| model.rig.skin.vertex(v).1.iter().filter(|&&w| w > 0.0).count())
+        .sum();
+    let skin_bytes = 12 * n + 6 * slots + 12 * n;
+    rows.push((
+        "skin".into(),
+        skin,
+        format!("{} KB read + written", skin_bytes / 1024),
+    ));
+    rows.push((
+        "  memcpy".into(),
+        memcpy(skin_bytes),
+        String::new(),
+    ));
+    let base_frame = timings(FRAMES, || {
+        let i = next();
+        black_box(predictor.predict(&mut ctx, &frames[i], None).unwrap()[0]);
+    });
+    rows.push(("base frame".into(), base_frame, String::new()));
+
+    let qbox = quant_box(&model.rig.rest.positions);
+    let mut enc = FrameEncoder::new(n, qbox, 30).unwrap();
+    let mut out = Vec::new();
+    let base = ctx.positions().to_vec();
+    rows.push((
+        "encode base".into(),
+        timings(FRAMES, || {
+            enc.encode(&base, None, &mut out).unwrap();
+        }),
+        format!("{} bytes a frame", out.len()),
+    ));
+    rows.push(("  memcpy".into(), memcpy(12 * n), String::new()));
+
+    if let Some(detail) = &model.detail {
+        let nv = detail.regressor.vertex_count();
+        let ex = detail.regressor.example_count();
+        let x: Vec<f32> = ctx.controls().iter().flat_map(|p| p.to_array()).collect();
+        let mut xi = vec![0.0; ex];
+        let mut h = vec![0.0; nv];
+        rows.push((
+            "detail regress".into(),
+            timings(FRAMES, || detail.regressor.predict(&x, &mut xi, &mut h)),
+            format!("D {nv} x {ex}"),
+        ));
+        rows.push((
+            "  memcpy".into(),
+            memcpy(4 * nv * ex + 8 * nv),
+            String::new(),
+        ));
+        let mut synth = DetailSynth::from_mesh(&model.rig.rest, detail.levels).unwrap();
+        let mut high = vec![Vec3::ZERO; nv];
+        rows.push((
+            "detail synth".into(),
+            timings(FRAMES, || synth.synthesize(&base, &h, &mut high).unwrap()),
+            format!("{nv} vertices"),
+        ));
+        rows.push((
+            "  memcpy".into(),
+            memcpy(12 * n + 4 * nv + 12 * nv),
+            String::new(),
+        ));
+        rows.push((
+            "detail frame".into(),
+            timings(FRAMES, || {
+                black_box(predictor.predict_detail(&mut ctx).unwrap()[0]);
+            }),
+            String::new(),
+        ));
+        let qbox = quant_box(&high);
+        let mut enc = FrameEncoder::new(nv, qbox, 30).unwrap();
+        rows.push((
+            "encode detail".into(),
+            timings(FRAMES, || {
+                enc.encode(&high, None, &mut out).unwrap();
+            }),
+            format!("{} bytes a frame", out.len()),
+        ));
+        rows.push(("  memcpy".into(), memcpy(12 * nv), String::new()));
+    }
+
+    println!(
+        "{} base vertices, {bones} bones, {} controls, {} test frames; single thread unless \
+         RAYON_NUM_THREADS says otherwise; FMA rate {:.2} G f32/s, {:.2} G f64/s (portable code)",
+        n,
+        model.controls.len(),
+        frames.len(),
+        f32_rate / 1e9,
+        f64_rate / 1e9
+    );
+    println!("| stage | median µs | min µs | note |");
+    println!("|---|---|---|---|");
+    for (name, (median, min), note) in rows {
+        println!(
+            "| {name} | {:.1} | {:.1} | {note} |",
+            median.as_secs_f64() * 1e6,
+            min.as_secs_f64() * 1e6
+        );
+    }
+}
