@@ -9,7 +9,9 @@
 //!
 //! The control frames are the test manifest's poses read at the vertices `V1,V2,..` (of the
 //! test meshes: with a model trained by `--base-vertices`, the full-mesh vertices its
-//! `--control-points` named). Stages, each timed over [`FRAMES`] frames (median and minimum):
+//! `--control-points` named). Stages, each timed over `FRAMES` frames (200; the environment's
+//! `FRAMES` overrides it, e.g. a few for instruction counts under callgrind; median and
+//! minimum):
 //!
 //! - `rotations`: the regression (`RotationModel::predict`);
 //! - `transforms`: rotations, the confidence and the eq. 11 translation solve
@@ -38,8 +40,14 @@ use crease_core::predictor::Predictor;
 use crease_core::runtime::detail::DetailSynth;
 use crease_core::runtime::predict::GroupRegression;
 
-/// Frames per figure.
-const FRAMES: usize = 200;
+/// Frames per figure: the environment's `FRAMES`, else 200.
+fn frames_per_figure() -> usize {
+    std::env::var("FRAMES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(200)
+}
 
 /// Median and minimum of `f` over `n` runs after a tenth as many warm-up runs.
 fn timings(n: usize, mut f: impl FnMut()) -> (Duration, Duration) {
@@ -61,7 +69,7 @@ fn timings(n: usize, mut f: impl FnMut()) -> (Duration, Duration) {
 fn memcpy(bytes: usize) -> (Duration, Duration) {
     let src = vec![1u8; bytes];
     let mut dst = vec![0u8; bytes];
-    timings(FRAMES, || {
+    timings(frames_per_figure(), || {
         dst.copy_from_slice(black_box(&src));
         black_box(&dst);
     })
@@ -176,7 +184,7 @@ fn main() {
 
     let mut scratch = Default::default();
     let mut rot = vec![Default::default(); bones];
-    let r = timings(FRAMES, || {
+    let r = timings(frames_per_figure(), || {
         let i = next();
         model.rotations.predict(&frames[i], &mut scratch, &mut rot);
     });
@@ -188,7 +196,7 @@ fn main() {
             floor(rot_fmas, f32_rate).as_secs_f64() * 1e6
         ),
     ));
-    let t = timings(FRAMES, || {
+    let t = timings(frames_per_figure(), || {
         let i = next();
         predictor
             .predict_transforms(&mut ctx, &frames[i], None)
@@ -205,7 +213,7 @@ fn main() {
             floor(trans_fmas, f64_rate).as_secs_f64() * 1e6
         ),
     ));
-    let skin = timings(FRAMES, || predictor.skin(&mut ctx).unwrap());
+    let skin = timings(frames_per_figure(), || predictor.skin(&mut ctx).unwrap());
     let slots: usize = (0..n)
         .map(|v| model.rig.skin.vertex(v).1.iter().filter(|&&w| w > 0.0).count())
         .sum();
@@ -220,7 +228,7 @@ fn main() {
         memcpy(skin_bytes),
         String::new(),
     ));
-    let base_frame = timings(FRAMES, || {
+    let base_frame = timings(frames_per_figure(), || {
         let i = next();
         black_box(predictor.predict(&mut ctx, &frames[i], None).unwrap()[0]);
     });
@@ -232,7 +240,7 @@ fn main() {
     let base = ctx.positions().to_vec();
     rows.push((
         "encode base".into(),
-        timings(FRAMES, || {
+        timings(frames_per_figure(), || {
             enc.encode(&base, None, &mut out).unwrap();
         }),
         format!("{} bytes a frame", out.len()),
@@ -247,7 +255,7 @@ fn main() {
         let mut h = vec![0.0; nv];
         rows.push((
             "detail regress".into(),
-            timings(FRAMES, || detail.regressor.predict(&x, &mut xi, &mut h)),
+            timings(frames_per_figure(), || detail.regressor.predict(&x, &mut xi, &mut h)),
             format!("D {nv} x {ex}"),
         ));
         rows.push((
@@ -259,7 +267,7 @@ fn main() {
         let mut high = vec![Vec3::ZERO; nv];
         rows.push((
             "detail synth".into(),
-            timings(FRAMES, || synth.synthesize(&base, &h, &mut high).unwrap()),
+            timings(frames_per_figure(), || synth.synthesize(&base, &h, &mut high).unwrap()),
             format!("{nv} vertices"),
         ));
         rows.push((
@@ -269,7 +277,7 @@ fn main() {
         ));
         rows.push((
             "detail frame".into(),
-            timings(FRAMES, || {
+            timings(frames_per_figure(), || {
                 black_box(predictor.predict_detail(&mut ctx).unwrap()[0]);
             }),
             String::new(),
@@ -278,7 +286,7 @@ fn main() {
         let mut enc = FrameEncoder::new(nv, qbox, 30).unwrap();
         rows.push((
             "encode detail".into(),
-            timings(FRAMES, || {
+            timings(frames_per_figure(), || {
                 enc.encode(&high, None, &mut out).unwrap();
             }),
             format!("{} bytes a frame", out.len()),
