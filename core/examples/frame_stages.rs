@@ -82,32 +82,10 @@ fn fma_rates() -> (f64, f64) {
     let n = 4_000_000usize;
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
-        use std::arch::x86_64::{__m256, __m256d};
-        let f32_rate = simd.vectorize(|| {
-            let k: __m256 = simd.avx._mm256_set1_ps(0.999_99);
-            let mut acc = [simd.avx._mm256_set1_ps(1.0); 8];
-            let t = Instant::now();
-            for _ in 0..n {
-                for a in acc.iter_mut() {
-                    *a = simd.fma._mm256_fmadd_ps(*a, k, k);
-                }
-            }
-            black_box(&acc);
-            (n * 8 * 8) as f64 / t.elapsed().as_secs_f64()
-        });
-        let f64_rate = simd.vectorize(|| {
-            let k: __m256d = simd.avx._mm256_set1_pd(0.999_99);
-            let mut acc = [simd.avx._mm256_set1_pd(1.0); 8];
-            let t = Instant::now();
-            for _ in 0..n {
-                for a in acc.iter_mut() {
-                    *a = simd.fma._mm256_fmadd_pd(*a, k, k);
-                }
-            }
-            black_box(&acc);
-            (n * 8 * 4) as f64 / t.elapsed().as_secs_f64()
-        });
-        return (f32_rate, f64_rate);
+        return (
+            simd.vectorize(Chains { simd, n, f64: false }),
+            simd.vectorize(Chains { simd, n, f64: true }),
+        );
     }
     fn rate<const L: usize, T: Copy + std::ops::Mul<Output = T> + std::ops::Add<Output = T>>(
         one: T,
@@ -126,7 +104,54 @@ fn fma_rates() -> (f64, f64) {
         }
         (n * 8 * L) as f64 / t.elapsed().as_secs_f64()
     }
-    (rate::<8, f32>(1.0, 0.999_99, n), rate::<4, f64>(1.0, 0.999_99, n))
+    (
+        rate::<8, f32>(1.0, 0.999_99, n),
+        rate::<4, f64>(1.0, 0.999_99, n),
+    )
+}
+
+/// Eight independent chains of `n` 8-wide f32 (or 4-wide f64) fused multiply-adds; the rate.
+/// A struct, not a closure, so that pulp's AVX2 + FMA context inlines its body (as
+/// `runtime::simd`'s kernels: a closure's body was compiled without the features, its
+/// intrinsics as calls).
+#[cfg(target_arch = "x86_64")]
+struct Chains {
+    simd: pulp::x86::V3,
+    n: usize,
+    f64: bool,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl pulp::NullaryFnOnce for Chains {
+    type Output = f64;
+
+    #[inline(always)]
+    fn call(self) -> f64 {
+        let Chains { simd, n, f64 } = self;
+        let t = Instant::now();
+        let lanes = if f64 {
+            let k = simd.avx._mm256_set1_pd(0.999_99);
+            let mut acc = [simd.avx._mm256_set1_pd(1.0); 8];
+            for _ in 0..n {
+                for a in acc.iter_mut() {
+                    *a = simd.fma._mm256_fmadd_pd(*a, k, k);
+                }
+            }
+            black_box(&acc);
+            4
+        } else {
+            let k = simd.avx._mm256_set1_ps(0.999_99);
+            let mut acc = [simd.avx._mm256_set1_ps(1.0); 8];
+            for _ in 0..n {
+                for a in acc.iter_mut() {
+                    *a = simd.fma._mm256_fmadd_ps(*a, k, k);
+                }
+            }
+            black_box(&acc);
+            8
+        };
+        (n * 8 * lanes) as f64 / t.elapsed().as_secs_f64()
+    }
 }
 
 /// The 16-bit box around `p`, padded by a quarter of its largest side (the codec bench's).
@@ -147,7 +172,11 @@ fn main() {
         .split(',')
         .map(|v| v.trim().parse().expect("vertex index"))
         .collect();
-    assert_eq!(vertices.len(), model.controls.len(), "one vertex per control point");
+    assert_eq!(
+        vertices.len(),
+        model.controls.len(),
+        "one vertex per control point"
+    );
     let frames: Vec<Vec<Vec3>> = test
         .examples
         .iter()
@@ -215,7 +244,16 @@ fn main() {
     ));
     let skin = timings(frames_per_figure(), || predictor.skin(&mut ctx).unwrap());
     let slots: usize = (0..n)
-        .map(|v| model.rig.skin.vertex(v).1.iter().filter(|&&w| w > 0.0).count())
+        .map(|v| {
+            model
+                .rig
+                .skin
+                .vertex(v)
+                .1
+                .iter()
+                .filter(|&&w| w > 0.0)
+                .count()
+        })
         .sum();
     let skin_bytes = 12 * n + 6 * slots + 12 * n;
     rows.push((
@@ -223,11 +261,7 @@ fn main() {
         skin,
         format!("{} KB read + written", skin_bytes / 1024),
     ));
-    rows.push((
-        "  memcpy".into(),
-        memcpy(skin_bytes),
-        String::new(),
-    ));
+    rows.push(("  memcpy".into(), memcpy(skin_bytes), String::new()));
     let base_frame = timings(frames_per_figure(), || {
         let i = next();
         black_box(predictor.predict(&mut ctx, &frames[i], None).unwrap()[0]);
@@ -255,7 +289,9 @@ fn main() {
         let mut h = vec![0.0; nv];
         rows.push((
             "detail regress".into(),
-            timings(frames_per_figure(), || detail.regressor.predict(&x, &mut xi, &mut h)),
+            timings(frames_per_figure(), || {
+                detail.regressor.predict(&x, &mut xi, &mut h)
+            }),
             format!("D {nv} x {ex}"),
         ));
         rows.push((
@@ -267,7 +303,9 @@ fn main() {
         let mut high = vec![Vec3::ZERO; nv];
         rows.push((
             "detail synth".into(),
-            timings(frames_per_figure(), || synth.synthesize(&base, &h, &mut high).unwrap()),
+            timings(frames_per_figure(), || {
+                synth.synthesize(&base, &h, &mut high).unwrap()
+            }),
             format!("{nv} vertices"),
         ));
         rows.push((

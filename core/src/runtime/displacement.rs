@@ -145,8 +145,9 @@ impl DetailRegressor {
         }
     }
 
-    /// `h = D xi + b` for a kernel vector `xi` into `out`. Rows split over the rayon pool with
-    /// the `parallel` feature. Allocates nothing.
+    /// `h = D xi + b` for a kernel vector `xi` into `out`: with AVX2 + FMA where the CPU has
+    /// them (`runtime::simd::dot_rows`, as [`LinearOperator::apply`]), else a row at a time.
+    /// Rows split over the rayon pool with the `parallel` feature. Allocates nothing.
     ///
     /// # Panics
     /// If `xi` is not one value per example or `out` not one per vertex.
@@ -161,7 +162,15 @@ impl DetailRegressor {
                 return;
             }
             let m = &m[first * n..(first + rows.len()) * n];
-            for ((o, row), &b) in rows.iter_mut().zip(m.chunks_exact(n)).zip(&b[first..]) {
+            let b = &b[first..first + rows.len()];
+            // AVX2 + FMA where the CPU has them and a row has 8 examples or more (issue 23:
+            // the portable loop ran this memory-bound mat-vec at twice its copy's time).
+            if let Some(simd) = super::simd::fma()
+                && super::simd::dot_rows(simd, m, xi, b, rows)
+            {
+                return;
+            }
+            for ((o, row), &b) in rows.iter_mut().zip(m.chunks_exact(n)).zip(b) {
                 *o = row.iter().zip(xi).map(|(a, x)| a * x).sum::<f32>() + b;
             }
         });

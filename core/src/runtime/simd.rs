@@ -52,7 +52,6 @@ pub(crate) fn fma() -> Option<Fma> {
 /// return `false` (the caller's portable loop runs them).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn dot_rows(simd: Fma, m: &[f32], xi: &[f32], b: &[f32], out: &mut [f32]) -> bool {
-    use std::arch::x86_64::__m256;
     let cols = xi.len();
     if cols < 8 || m.len() != out.len() * cols || b.len() != out.len() {
         return false;
@@ -68,25 +67,104 @@ pub(crate) fn dot_rows(simd: Fma, m: &[f32], xi: &[f32], b: &[f32], out: &mut [f
     };
     let mut tail_x = [0.0f32; 8];
     tail_x[counted..].copy_from_slice(&xi[cols - 8 + counted..]);
-    simd.vectorize(|| {
-        let avx = simd.avx;
-        let tail_x: __m256 = bytemuck::cast(tail_x);
-        for ((row, o), &bias) in m.chunks_exact(cols).zip(out.iter_mut()).zip(b) {
-            let mut acc = avx._mm256_setzero_ps();
-            for c in 0..full {
-                let a: [f32; 8] = row[8 * c..8 * c + 8].try_into().expect("8 columns");
-                let x: [f32; 8] = xi[8 * c..8 * c + 8].try_into().expect("8 columns");
-                acc = simd
-                    .fma
-                    ._mm256_fmadd_ps(bytemuck::cast(a), bytemuck::cast(x), acc);
-            }
-            let a: [f32; 8] = row[cols - 8..].try_into().expect("8 columns");
-            acc = simd.fma._mm256_fmadd_ps(bytemuck::cast(a), tail_x, acc);
-            *o = sum8(simd, acc) + bias;
-        }
+    simd.vectorize(DotRows {
+        simd,
+        m,
+        xi,
+        b,
+        out,
+        full,
+        tail_x,
     });
     true
 }
+
+/// [`dot_rows`]' loop, inlined into pulp's AVX2 + FMA context: a closure's body that is not
+/// inlined there is compiled without those features, and every intrinsic in it becomes a call
+/// (what the detail regressor's frame measured, 147 instructions a row, until this was split
+/// out; pulp: "the given function must be inlined").
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn dot_rows_body(
+    simd: Fma,
+    m: &[f32],
+    xi: &[f32],
+    b: &[f32],
+    out: &mut [f32],
+    full: usize,
+    tail_x: [f32; 8],
+) {
+    use std::arch::x86_64::__m256;
+    let cols = xi.len();
+    let avx = simd.avx;
+    let tail_x: __m256 = bytemuck::cast(tail_x);
+    for ((row, o), &bias) in m.chunks_exact(cols).zip(out.iter_mut()).zip(b) {
+        let mut acc = avx._mm256_setzero_ps();
+        for c in 0..full {
+            let a: [f32; 8] = row[8 * c..8 * c + 8].try_into().expect("8 columns");
+            let x: [f32; 8] = xi[8 * c..8 * c + 8].try_into().expect("8 columns");
+            acc = simd
+                .fma
+                ._mm256_fmadd_ps(bytemuck::cast(a), bytemuck::cast(x), acc);
+        }
+        let a: [f32; 8] = row[cols - 8..].try_into().expect("8 columns");
+        acc = simd.fma._mm256_fmadd_ps(bytemuck::cast(a), tail_x, acc);
+        *o = sum8(simd, acc) + bias;
+    }
+}
+
+/// The kernels' arguments as [`Fma::vectorize`]'s operation: a struct whose `call` is
+/// `#[inline(always)]`, so that the kernel's body is compiled inside pulp's AVX2 + FMA context.
+/// A closure handed over instead is called through `FnOnce::call_once`, which the compiler did
+/// not inline once the kernel's body was inlined into it: the body was then compiled without
+/// the features and every intrinsic in it became a call (the detail regressor measured 147
+/// instructions a row so; pulp: "the given function must be inlined").
+#[cfg(target_arch = "x86_64")]
+macro_rules! vectorized {
+    ($name:ident { $($field:ident: $ty:ty),* $(,)? } => $body:ident) => {
+        struct $name<'a> {
+            simd: Fma,
+            $($field: $ty),*
+        }
+
+        impl pulp::NullaryFnOnce for $name<'_> {
+            type Output = ();
+
+            #[inline(always)]
+            fn call(self) {
+                $body(self.simd, $(self.$field),*)
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+vectorized!(DotRows {
+    m: &'a [f32],
+    xi: &'a [f32],
+    b: &'a [f32],
+    out: &'a mut [f32],
+    full: usize,
+    tail_x: [f32; 8],
+} => dot_rows_body);
+
+#[cfg(target_arch = "x86_64")]
+vectorized!(RotateSum {
+    ptr: &'a [usize],
+    idx: &'a [u32],
+    val: &'a [glam::DVec3],
+    rot: &'a [[f64; 12]],
+    acc: &'a mut [glam::DVec3],
+} => rotate_sum_body);
+
+#[cfg(target_arch = "x86_64")]
+vectorized!(LowerSolve4 {
+    col_ptr: &'a [u32],
+    row_idx: &'a [u32],
+    val: &'a [f64],
+    inv_diag: &'a [f64],
+    y: &'a mut [[f64; 4]],
+} => lower_solve4_body);
 
 /// The 8 lanes of `v` summed: `(v0+v4) + (v1+v5)` and `(v2+v6) + (v3+v7)`, then those two.
 #[cfg(target_arch = "x86_64")]
@@ -119,43 +197,71 @@ pub(crate) fn rotate_sum(
     rot: &[[f64; 12]],
     acc: &mut [glam::DVec3],
 ) {
-    use std::arch::x86_64::__m256d;
-    simd.vectorize(|| {
-        let avx = simd.avx;
-        // One accumulator per column and per entry parity: six independent chains of fused
-        // multiply-adds (one chain would wait out the FMA's latency three times per entry).
-        let entry = |p: usize, sum: &mut [__m256d; 3]| {
-            let cols: &[[f64; 4]; 3] = bytemuck::cast_ref(&rot[idx[p] as usize]);
-            let v = val[p];
-            for (s, (c, x)) in sum.iter_mut().zip(cols.iter().zip([v.x, v.y, v.z])) {
-                *s = simd
-                    .fma
-                    ._mm256_fmadd_pd(bytemuck::cast(*c), avx._mm256_set1_pd(x), *s);
-            }
-        };
-        for (a, s) in acc.iter_mut().enumerate() {
-            let zero = avx._mm256_setzero_pd();
-            let mut even = [zero; 3];
-            let mut odd = [zero; 3];
-            let (start, end) = (ptr[a], ptr[a + 1]);
-            let mut p = start;
-            while p + 1 < end {
-                entry(p, &mut even);
-                entry(p + 1, &mut odd);
-                p += 2;
-            }
-            if p < end {
-                entry(p, &mut even);
-            }
-            let add = |a, b| avx._mm256_add_pd(a, b);
-            let sum = add(
-                add(add(even[0], odd[0]), add(even[1], odd[1])),
-                add(even[2], odd[2]),
-            );
-            let s4: [f64; 4] = bytemuck::cast(sum);
-            *s = glam::DVec3::new(s4[0], s4[1], s4[2]);
-        }
+    simd.vectorize(RotateSum {
+        simd,
+        ptr,
+        idx,
+        val,
+        rot,
+        acc,
     });
+}
+
+/// [`rotate_sum`]'s loop, inlined into pulp's AVX2 + FMA context (see [`dot_rows_body`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn rotate_sum_body(
+    simd: Fma,
+    ptr: &[usize],
+    idx: &[u32],
+    val: &[glam::DVec3],
+    rot: &[[f64; 12]],
+    acc: &mut [glam::DVec3],
+) {
+    let avx = simd.avx;
+    // One accumulator per column and per entry parity: six independent chains of fused
+    // multiply-adds (one chain would wait out the FMA's latency three times per entry).
+    for (a, s) in acc.iter_mut().enumerate() {
+        let zero = avx._mm256_setzero_pd();
+        let mut even = [zero; 3];
+        let mut odd = [zero; 3];
+        let (start, end) = (ptr[a], ptr[a + 1]);
+        let mut p = start;
+        while p + 1 < end {
+            rotate_entry(simd, &rot[idx[p] as usize], val[p], &mut even);
+            rotate_entry(simd, &rot[idx[p + 1] as usize], val[p + 1], &mut odd);
+            p += 2;
+        }
+        if p < end {
+            rotate_entry(simd, &rot[idx[p] as usize], val[p], &mut even);
+        }
+        let sum = avx._mm256_add_pd(
+            avx._mm256_add_pd(
+                avx._mm256_add_pd(even[0], odd[0]),
+                avx._mm256_add_pd(even[1], odd[1]),
+            ),
+            avx._mm256_add_pd(even[2], odd[2]),
+        );
+        let s4: [f64; 4] = bytemuck::cast(sum);
+        *s = glam::DVec3::new(s4[0], s4[1], s4[2]);
+    }
+}
+
+/// `sum[c] += column c of the padded rotation * v[c]`, one broadcast and FMA a column.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn rotate_entry(
+    simd: Fma,
+    rot: &[f64; 12],
+    v: glam::DVec3,
+    sum: &mut [std::arch::x86_64::__m256d; 3],
+) {
+    let cols: &[[f64; 4]; 3] = bytemuck::cast_ref(rot);
+    for (s, (c, x)) in sum.iter_mut().zip(cols.iter().zip([v.x, v.y, v.z])) {
+        *s = simd
+            .fma
+            ._mm256_fmadd_pd(bytemuck::cast(*c), simd.avx._mm256_set1_pd(x), *s);
+    }
 }
 
 /// Off x86-64 there is no FMA kernel.
@@ -185,43 +291,62 @@ pub(crate) fn lower_solve4(
     inv_diag: &[f64],
     y: &mut [[f64; 4]],
 ) {
+    simd.vectorize(LowerSolve4 {
+        simd,
+        col_ptr,
+        row_idx,
+        val,
+        inv_diag,
+        y,
+    });
+}
+
+/// [`lower_solve4`]'s passes, inlined into pulp's AVX2 + FMA context (see [`dot_rows_body`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lower_solve4_body(
+    simd: Fma,
+    col_ptr: &[u32],
+    row_idx: &[u32],
+    val: &[f64],
+    inv_diag: &[f64],
+    y: &mut [[f64; 4]],
+) {
     use std::arch::x86_64::__m256d;
     let n = y.len();
-    simd.vectorize(|| {
-        let avx = simd.avx;
-        let fma = simd.fma;
-        for j in 0..n {
-            let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
-            let yj = avx._mm256_mul_pd(bytemuck::cast(y[j]), avx._mm256_set1_pd(inv_diag[j]));
-            y[j] = bytemuck::cast(yj);
-            let neg = avx._mm256_sub_pd(avx._mm256_setzero_pd(), yj);
-            for p in start + 1..end {
-                let yi = &mut y[row_idx[p] as usize];
-                let v: __m256d =
-                    fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), neg, bytemuck::cast(*yi));
-                *yi = bytemuck::cast(v);
-            }
+    let avx = simd.avx;
+    let fma = simd.fma;
+    for j in 0..n {
+        let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
+        let yj = avx._mm256_mul_pd(bytemuck::cast(y[j]), avx._mm256_set1_pd(inv_diag[j]));
+        y[j] = bytemuck::cast(yj);
+        let neg = avx._mm256_sub_pd(avx._mm256_setzero_pd(), yj);
+        for p in start + 1..end {
+            let yi = &mut y[row_idx[p] as usize];
+            let v: __m256d =
+                fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), neg, bytemuck::cast(*yi));
+            *yi = bytemuck::cast(v);
         }
-        for j in (0..n).rev() {
-            let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
-            let zero = avx._mm256_setzero_pd();
-            let (mut even, mut odd) = (zero, zero);
-            let mut p = start + 1;
-            while p + 1 < end {
-                let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
-                let b: __m256d = bytemuck::cast(y[row_idx[p + 1] as usize]);
-                even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
-                odd = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p + 1]), b, odd);
-                p += 2;
-            }
-            if p < end {
-                let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
-                even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
-            }
-            let s = avx._mm256_sub_pd(bytemuck::cast(y[j]), avx._mm256_add_pd(even, odd));
-            y[j] = bytemuck::cast(avx._mm256_mul_pd(s, avx._mm256_set1_pd(inv_diag[j])));
+    }
+    for j in (0..n).rev() {
+        let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
+        let zero = avx._mm256_setzero_pd();
+        let (mut even, mut odd) = (zero, zero);
+        let mut p = start + 1;
+        while p + 1 < end {
+            let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
+            let b: __m256d = bytemuck::cast(y[row_idx[p + 1] as usize]);
+            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
+            odd = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p + 1]), b, odd);
+            p += 2;
         }
-    });
+        if p < end {
+            let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
+            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
+        }
+        let s = avx._mm256_sub_pd(bytemuck::cast(y[j]), avx._mm256_add_pd(even, odd));
+        y[j] = bytemuck::cast(avx._mm256_mul_pd(s, avx._mm256_set1_pd(inv_diag[j])));
+    }
 }
 
 /// Off x86-64 there is no FMA kernel.
