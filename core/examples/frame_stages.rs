@@ -83,7 +83,11 @@ fn fma_rates() -> (f64, f64) {
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
         return (
-            simd.vectorize(Chains { simd, n, f64: false }),
+            simd.vectorize(Chains {
+                simd,
+                n,
+                f64: false,
+            }),
             simd.vectorize(Chains { simd, n, f64: true }),
         );
     }
