@@ -183,3 +183,26 @@ fn command_line_control_points_move_to_the_base() {
         "{stderr}"
     );
 }
+
+/// `--base-vertices N --no-detail`: the base is still the N-vertex subset (it was the full mesh:
+/// the split was skipped with the detail layer), and the model has no detail layer.
+#[test]
+fn no_detail_still_splits_the_base() {
+    let Some(dir) = shared_data("cactus") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = tmp.path().join("cactus.crease");
+    run_ok(
+        crease()
+            .args(["train", "--examples"])
+            .arg(&dir)
+            .args(COMMON)
+            .args(["--no-detail", "--control-points", "auto:6", "--out"])
+            .arg(&model_path),
+    );
+    let model = TrainedModel::load(&model_path).unwrap();
+    assert!(model.detail.is_none());
+    let n = model.rig.rest.vertex_count();
+    assert!((1176..=1224).contains(&n), "{n} base vertices");
+}

@@ -85,6 +85,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 base,
                 detailed: None,
                 subset: None,
+                train_detail: false,
             };
             (layers(train), Some(layers(test)))
         }

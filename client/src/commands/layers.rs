@@ -37,7 +37,8 @@ pub struct DetailArgs {
     /// largest bounding-box side; rays finding nothing fall back to the closest point.
     #[arg(long, default_value_t = DetailOptions::default().max_distance, value_name = "FRACTION")]
     pub detail_ray: f32,
-    /// Train and evaluate the base layer only, even when detailed examples are present.
+    /// Train and evaluate the base layer only, even when detailed examples are present (with
+    /// --base-vertices the base is still the subset).
     #[arg(long)]
     pub no_detail: bool,
 }
@@ -51,6 +52,9 @@ pub struct Layers {
     pub detailed: Option<ExampleSet>,
     /// The vertex subset, when the base was split off automatically.
     pub subset: Option<BaseSubset>,
+    /// Whether the detail layer trains (`--no-detail` says no; the examples as read stay in
+    /// `detailed` after a split, for the control points' mapping).
+    pub train_detail: bool,
 }
 
 impl Layers {
@@ -84,6 +88,7 @@ impl Layers {
     pub fn detail_frames(&self) -> Option<FramesParts<'_>> {
         self.detailed
             .as_ref()
+            .filter(|_| self.train_detail)
             .map(|d| (d.frames(), d.rest.triangles.as_slice()))
     }
 }
@@ -100,11 +105,12 @@ pub fn frames<'a>(parts: &'a FramesParts<'a>) -> DetailFrames<'a> {
 /// with this subset (the training set's, for a test set) instead of simplifying again.
 pub fn load(path: &Path, args: &DetailArgs, subset: Option<&BaseSubset>) -> anyhow::Result<Layers> {
     let set = common::load_examples(path)?;
-    if args.no_detail {
+    if args.no_detail && args.base_vertices.is_none() {
         return Ok(Layers {
             base: set,
             detailed: None,
             subset: None,
+            train_detail: false,
         });
     }
     let Some(target) = args.base_vertices else {
@@ -122,6 +128,7 @@ pub fn load(path: &Path, args: &DetailArgs, subset: Option<&BaseSubset>) -> anyh
             base: set,
             detailed,
             subset: None,
+            train_detail: true,
         });
     };
     if set.detailed.is_some() {
@@ -184,6 +191,7 @@ pub fn load(path: &Path, args: &DetailArgs, subset: Option<&BaseSubset>) -> anyh
         base,
         detailed: Some(set),
         subset: Some(subset),
+        train_detail: !args.no_detail,
     })
 }
 
