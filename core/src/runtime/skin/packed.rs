@@ -364,9 +364,7 @@ fn packed_chunks<I, T>(
     // One run of whole blocks with the chosen kernel (inside `vectorize` the FMA one is compiled
     // for AVX2 + FMA).
     let run = |offsets: &[u32], rest: &[Vec3], out: &mut [Vec3]| match fma {
-        Some(simd) => fma::vectorize(simd, || {
-            packed_kernel(table, offsets, slots, rest, out, fma::Blend(simd));
-        }),
+        Some(simd) => fma::run(simd, table, offsets, slots, rest, out),
         None => packed_kernel(table, offsets, slots, rest, out, Portable),
     };
     #[cfg(feature = "parallel")]
@@ -489,10 +487,52 @@ mod fma {
 
     use super::{BlockBlend, LANES, RowTable, Slot};
 
-    /// Runs `f` compiled for AVX2 + FMA (everything it inlines; the kernel is `inline(always)`).
+    /// [`super::packed_kernel`] with [`Blend`], compiled for AVX2 + FMA: handed to pulp as a
+    /// struct whose `call` is inlined into its feature context (a closure's `call_once` was not
+    /// always inlined there, leaving the intrinsics as calls: ARCHITECTURE.md, "Per-frame
+    /// SIMD").
     #[inline(always)]
-    pub(super) fn vectorize(simd: V3, f: impl FnOnce()) {
-        simd.vectorize(f);
+    pub(super) fn run<I: Copy, T: RowTable<I> + ?Sized>(
+        simd: V3,
+        table: &T,
+        offsets: &[u32],
+        slots: &[Slot<I>],
+        rest: &[Vec3],
+        out: &mut [Vec3],
+    ) {
+        simd.vectorize(Run {
+            simd,
+            table,
+            offsets,
+            slots,
+            rest,
+            out,
+        });
+    }
+
+    struct Run<'a, I, T: ?Sized> {
+        simd: V3,
+        table: &'a T,
+        offsets: &'a [u32],
+        slots: &'a [Slot<I>],
+        rest: &'a [Vec3],
+        out: &'a mut [Vec3],
+    }
+
+    impl<I: Copy, T: RowTable<I> + ?Sized> pulp::NullaryFnOnce for Run<'_, I, T> {
+        type Output = ();
+
+        #[inline(always)]
+        fn call(self) {
+            super::packed_kernel(
+                self.table,
+                self.offsets,
+                self.slots,
+                self.rest,
+                self.out,
+                Blend(self.simd),
+            );
+        }
     }
 
     /// [`PackedKernel::Fma`](super::PackedKernel::Fma)'s block.
@@ -555,7 +595,14 @@ mod fma {
     use crate::runtime::simd::Fma;
     pub(super) use crate::runtime::simd::fma as token;
 
-    pub(super) fn vectorize(simd: Fma, _f: impl FnOnce()) {
+    pub(super) fn run<I, T: ?Sized>(
+        simd: Fma,
+        _table: &T,
+        _offsets: &[u32],
+        _slots: &[super::Slot<I>],
+        _rest: &[glam::Vec3],
+        _out: &mut [glam::Vec3],
+    ) {
         match simd {}
     }
 
