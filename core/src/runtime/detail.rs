@@ -364,6 +364,8 @@ pub struct DetailSynth {
     /// The intermediate levels' vertices (`levels - 1` buffers) of the factored product.
     stages: Vec<Vec<Vec3>>,
     normals: Vec<Vec3>,
+    /// The current level's input as 4-lane rows (`subdivide_padded`); sized by the first frame.
+    padded: Vec<[f32; 4]>,
 }
 
 impl DetailSynth {
@@ -378,6 +380,7 @@ impl DetailSynth {
             .map(|s| vec![Vec3::ZERO; s.rows()])
             .collect();
         let grouped = loop_groups(subdivision.triangles());
+        let max_input = steps.iter().map(SparseMatrix::columns).max().unwrap_or(0);
         DetailSynth {
             stages,
             topology: Arc::new(DetailTopology {
@@ -388,6 +391,7 @@ impl DetailSynth {
             method: NormalsMethod::Auto,
             high: vec![Vec3::ZERO; n],
             normals: vec![Vec3::ZERO; n],
+            padded: Vec::with_capacity(max_input),
         }
     }
 
@@ -476,10 +480,10 @@ impl DetailSynth {
         for (k, step) in inner.iter().enumerate() {
             let (done, rest) = self.stages.split_at_mut(k);
             let input = done.last().map_or(base, Vec::as_slice);
-            subdivide_into(step, input, &mut rest[0])?;
+            subdivide_padded(step, input, &mut self.padded, &mut rest[0])?;
         }
         let input = self.stages.last().map_or(base, Vec::as_slice);
-        subdivide_into(last, input, &mut self.high)
+        subdivide_padded(last, input, &mut self.padded, &mut self.high)
     }
 
     /// Whether this frame's normals are gathered (resolves [`NormalsMethod::Auto`]).
@@ -558,6 +562,24 @@ fn normalize_and_displace_kernel(high: &[Vec3], h: &[f32], normals: &mut [Vec3],
 fn subdivide_into(s: &SparseMatrix, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
     s.check(base, out.len())?;
     fill_rows(out, PARALLEL_CHUNK, |first, o| s.apply_rows(base, first, o));
+    Ok(())
+}
+
+/// [`subdivide_into`] through `padded`, `base` copied into it as 4-lane rows first
+/// ([`SparseMatrix::apply_rows_padded`]: one load an entry, FMA where the CPU has it).
+fn subdivide_padded(
+    s: &SparseMatrix,
+    base: &[Vec3],
+    padded: &mut Vec<[f32; 4]>,
+    out: &mut [Vec3],
+) -> Result<(), DetailError> {
+    s.check(base, out.len())?;
+    padded.clear();
+    padded.extend(base.iter().map(|p| [p.x, p.y, p.z, 0.0]));
+    let x = padded.as_slice();
+    fill_rows(out, PARALLEL_CHUNK, |first, o| {
+        s.apply_rows_padded(x, first, o)
+    });
     Ok(())
 }
 

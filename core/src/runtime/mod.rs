@@ -31,7 +31,7 @@ pub mod kernel;
 mod lower_factor;
 pub mod predict;
 pub mod refine;
-mod simd;
+pub(crate) mod simd;
 pub mod skin;
 pub mod translations;
 

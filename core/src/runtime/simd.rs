@@ -13,6 +13,8 @@
 //!   right-hand side of the translation solve (FKY08 eq. 11);
 //! - [`lower_solve4`]: that solve's forward and backward substitutions, the three coordinates
 //!   at once ([`super::lower_factor`]);
+//! - [`sparse_rows4`]: the detail layer's sparse `S · base` on 4-lane positions
+//!   (`mesh::subdivision`);
 //!
 //! The packed LBS kernel lives beside its private layout in `skin::packed`.
 
@@ -156,6 +158,15 @@ vectorized!(RotateSum {
     rot: &'a [[f64; 12]],
     acc: &'a mut [glam::DVec3],
 } => rotate_sum_body);
+
+#[cfg(target_arch = "x86_64")]
+vectorized!(SparseRows4 {
+    ptr: &'a [u32],
+    cols: &'a [u32],
+    vals: &'a [f32],
+    x: &'a [[f32; 4]],
+    out: &'a mut [glam::Vec3],
+} => sparse_rows4_body);
 
 #[cfg(target_arch = "x86_64")]
 vectorized!(LowerSolve4 {
@@ -368,6 +379,67 @@ pub(crate) fn lower_solve4(
 pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
     let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
     [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
+}
+
+/// `out[r] = sum over p in ptr[r]..ptr[r+1] of vals[p] * x[cols[p]]` with FMA, `x` padded to
+/// four lanes: per stored entry one 16-byte load, one broadcast and one fused multiply-add (the
+/// sparse `S · base` of the detail layer, `mesh::subdivision`).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn sparse_rows4(
+    simd: Fma,
+    ptr: &[u32],
+    cols: &[u32],
+    vals: &[f32],
+    x: &[[f32; 4]],
+    out: &mut [glam::Vec3],
+) {
+    simd.vectorize(SparseRows4 {
+        simd,
+        ptr,
+        cols,
+        vals,
+        x,
+        out,
+    });
+}
+
+/// [`sparse_rows4`]'s loop, inlined into pulp's AVX2 + FMA context (see [`dot_rows_body`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sparse_rows4_body(
+    simd: Fma,
+    ptr: &[u32],
+    cols: &[u32],
+    vals: &[f32],
+    x: &[[f32; 4]],
+    out: &mut [glam::Vec3],
+) {
+    let mut start = ptr[0] as usize;
+    for (o, &end) in out.iter_mut().zip(&ptr[1..]) {
+        let end = end as usize;
+        let mut acc = simd.sse._mm_setzero_ps();
+        for (&c, &w) in cols[start..end].iter().zip(&vals[start..end]) {
+            acc =
+                simd.fma
+                    ._mm_fmadd_ps(simd.sse._mm_set1_ps(w), bytemuck::cast(x[c as usize]), acc);
+        }
+        let a: [f32; 4] = bytemuck::cast(acc);
+        *o = glam::Vec3::new(a[0], a[1], a[2]);
+        start = end;
+    }
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) fn sparse_rows4(
+    simd: Fma,
+    _ptr: &[u32],
+    _cols: &[u32],
+    _vals: &[f32],
+    _x: &[[f32; 4]],
+    _out: &mut [glam::Vec3],
+) {
+    match simd {}
 }
 
 /// The rotation of `q` (any non-zero length: divided out, in f64), its three columns padded
