@@ -28,6 +28,9 @@
 //! chains), which no kernel with loads in its loop reaches.
 #![allow(clippy::unwrap_used, clippy::expect_used)] // a measuring tool: a failure names its line
 
+#[path = "../benches/common/mod.rs"]
+mod common;
+
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -40,6 +43,8 @@ use crease_core::predictor::Predictor;
 use crease_core::runtime::detail::DetailSynth;
 use crease_core::runtime::predict::GroupRegression;
 
+use common::timings;
+
 /// Frames per figure: the environment's `FRAMES`, else 200.
 fn frames_per_figure() -> usize {
     std::env::var("FRAMES")
@@ -47,22 +52,6 @@ fn frames_per_figure() -> usize {
         .and_then(|v| v.parse().ok())
         .filter(|&n| n > 0)
         .unwrap_or(200)
-}
-
-/// Median and minimum of `f` over `n` runs after a tenth as many warm-up runs.
-fn timings(n: usize, mut f: impl FnMut()) -> (Duration, Duration) {
-    for _ in 0..n / 10 + 1 {
-        f();
-    }
-    let mut t: Vec<Duration> = (0..n)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed()
-        })
-        .collect();
-    t.sort();
-    (t[n / 2], t[0])
 }
 
 /// A copy of `bytes` bytes, as a floor's timing.

@@ -146,20 +146,8 @@ fn assign(
             let mut changed = 0;
             for (j, label) in chunk.iter_mut().enumerate() {
                 let i = c * ASSIGN_CHUNK + j;
-                let p = problem.rest[i];
                 let traj = &problem.traj[i * f..(i + 1) * f];
-                let mut best = *label as usize;
-                let mut best_e = trajectory_error(xf, bones, best, p, traj, f32::INFINITY);
-                for b in 0..bones {
-                    if b == best {
-                        continue;
-                    }
-                    let e = trajectory_error(xf, bones, b, p, traj, best_e);
-                    if e < best_e {
-                        best_e = e;
-                        best = b;
-                    }
-                }
+                let best = best_bone(xf, bones, problem.rest[i], traj, *label as usize, 0..bones);
                 changed += usize::from(*label != best as u32);
                 *label = best as u32;
             }
@@ -167,6 +155,28 @@ fn assign(
         },
     );
     changed.into_iter().sum()
+}
+
+/// The bone of least trajectory error among `own` and `others` (`own` wins ties; `others`
+/// may name `own` again).
+fn best_bone(
+    xf: &[Rigid],
+    bones: usize,
+    p: Vec3A,
+    traj: &[Vec3A],
+    own: usize,
+    others: impl Iterator<Item = usize>,
+) -> usize {
+    let mut best = own;
+    let mut best_e = trajectory_error(xf, bones, own, p, traj, f32::INFINITY);
+    for b in others.filter(|&b| b != own) {
+        let e = trajectory_error(xf, bones, b, p, traj, best_e);
+        if e < best_e {
+            best_e = e;
+            best = b;
+        }
+    }
+    best
 }
 
 /// [`assign`] over the bones of each vertex's two-ring.
@@ -196,17 +206,9 @@ fn assign_local(problem: &Problem, xf: &[Rigid], bones: usize, labels: &mut [u32
                         push(before[w as usize]);
                     }
                 }
-                let p = problem.rest[i];
                 let traj = &problem.traj[i * f..(i + 1) * f];
-                let mut best = cand[0] as usize;
-                let mut best_e = trajectory_error(xf, bones, best, p, traj, f32::INFINITY);
-                for &b in &cand[1..len] {
-                    let e = trajectory_error(xf, bones, b as usize, p, traj, best_e);
-                    if e < best_e {
-                        best_e = e;
-                        best = b as usize;
-                    }
-                }
+                let others = cand[1..len].iter().map(|&b| b as usize);
+                let best = best_bone(xf, bones, problem.rest[i], traj, cand[0] as usize, others);
                 changed += usize::from(*label != best as u32);
                 *label = best as u32;
             }
