@@ -234,32 +234,10 @@ impl SparseMatrix {
         }
     }
 
-    /// [`SparseMatrix::apply_rows`] from `x` padded to four lanes (`[x, y, z, 0]`, at least
-    /// [`SparseMatrix::columns`] of them): one load a stored entry instead of four, and with
-    /// AVX2 + FMA where the CPU has them (`runtime::simd::sparse_rows4`) one broadcast and one
-    /// fused multiply-add (issue 23: 19 instructions an entry before). The FMA rounds once per
-    /// entry, so the sums differ from [`SparseMatrix::apply_rows`]'s in the last bits.
-    ///
-    /// # Panics
-    /// As [`SparseMatrix::apply_rows`].
-    pub(crate) fn apply_rows_padded(&self, x: &[[f32; 4]], first_row: usize, out: &mut [Vec3]) {
-        let ptr = &self.row_ptr[first_row..=first_row + out.len()];
-        let x = &x[..self.columns];
-        if let Some(simd) = crate::runtime::simd::fma() {
-            crate::runtime::simd::sparse_rows4(simd, ptr, &self.cols, &self.vals, x, out);
-            return;
-        }
-        let mut start = ptr[0] as usize;
-        for (o, &end) in out.iter_mut().zip(&ptr[1..]) {
-            let end = end as usize;
-            let mut acc = Vec3A::ZERO;
-            for (&c, &w) in self.cols[start..end].iter().zip(&self.vals[start..end]) {
-                let p = x[c as usize];
-                acc += Vec3A::new(p[0], p[1], p[2]) * w;
-            }
-            *o = acc.into();
-            start = end;
-        }
+    /// The compressed rows: `row_ptr` (one more than the rows), then each stored entry's
+    /// column and value. For kernels outside this module (`runtime::detail`'s 4-lane product).
+    pub(crate) fn parts(&self) -> (&[u32], &[u32], &[f32]) {
+        (&self.row_ptr, &self.cols, &self.vals)
     }
 
     /// Checks `x` against the column count and an output length against the row count.
@@ -822,55 +800,6 @@ mod tests {
         // Edge [0, 1] is on the boundary.
         assert_eq!(m.row(4), (&[0, 1][..], &[0.5, 0.5][..]));
         assert_eq!(s.triangles().len(), 8);
-    }
-
-    /// The padded (FMA where the CPU has it) product against the matrix's rows summed in
-    /// f64, on a subdivided grid with boundary and interior rows, every row split point.
-    #[test]
-    fn padded_rows_equal_f64_sums() {
-        let mut m = Mesh::default();
-        for j in 0..4u32 {
-            for i in 0..5u32 {
-                m.positions.push(Vec3::new(
-                    i as f32 * 1.1,
-                    j as f32 * 0.9,
-                    ((i * 3 + j * 5) % 7) as f32 * 0.3 - 1.0,
-                ));
-            }
-        }
-        for j in 0..3u32 {
-            for i in 0..4u32 {
-                let id = |a: u32, b: u32| b * 5 + a;
-                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        let s = LoopSubdivision::new(&m, 1).unwrap();
-        let mat = s.matrix();
-        let padded: Vec<[f32; 4]> = m.positions.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect();
-        for first in [0, 1, 7, mat.rows() - 1] {
-            let mut out = vec![Vec3::NAN; mat.rows() - first];
-            mat.apply_rows_padded(&padded, first, &mut out);
-            for (k, o) in out.iter().enumerate() {
-                let (cols, vals) = mat.row(first + k);
-                let mut want = [0.0f64; 3];
-                let mut scale = 0.0f64;
-                for (&c, &w) in cols.iter().zip(vals) {
-                    let p = m.positions[c as usize];
-                    for (a, x) in want.iter_mut().zip([p.x, p.y, p.z]) {
-                        *a += f64::from(w) * f64::from(x);
-                    }
-                    scale += f64::from(w.abs()) * f64::from(p.abs().max_element());
-                }
-                for (got, w) in [o.x, o.y, o.z].into_iter().zip(want) {
-                    assert!(
-                        (f64::from(got) - w).abs() <= 4.0 * f64::from(f32::EPSILON) * scale,
-                        "row {}: {got} vs {w}",
-                        first + k
-                    );
-                }
-            }
-        }
     }
 
     #[test]

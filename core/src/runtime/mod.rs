@@ -31,7 +31,7 @@ pub mod kernel;
 mod lower_factor;
 pub mod predict;
 pub mod refine;
-pub(crate) mod simd;
+mod simd;
 pub mod skin;
 pub mod translations;
 
