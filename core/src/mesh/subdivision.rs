@@ -802,6 +802,31 @@ mod tests {
         assert_eq!(s.triangles().len(), 8);
     }
 
+    /// The documented triangle order (module docs), which `runtime::detail`'s grouped normal
+    /// scatter relies on: each coarser triangle `[a, b, c]` becomes `[a, ab, ca]`,
+    /// `[ab, b, bc]`, `[ca, bc, c]`, `[ab, bc, ca]`, in place, at every level.
+    #[test]
+    fn children_come_in_groups_of_four_in_place() {
+        let m = quad();
+        let one = LoopSubdivision::new(&m, 1).unwrap();
+        let two = LoopSubdivision::new(&m, 2).unwrap();
+        for (coarse, fine) in [
+            (&m.triangles[..], one.triangles()),
+            (one.triangles(), two.triangles()),
+        ] {
+            assert_eq!(fine.len(), 4 * coarse.len());
+            for (t, g) in coarse.iter().zip(fine.chunks_exact(4)) {
+                let [a, b, c] = *t;
+                let (ab, bc, ca) = (g[0][1], g[1][2], g[0][2]);
+                assert_eq!(
+                    [g[0], g[1], g[2], g[3]],
+                    [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]],
+                    "children of {t:?}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn bad_levels_and_sizes_are_errors() {
         for levels in [0, MAX_LEVELS + 1] {

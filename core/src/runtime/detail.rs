@@ -346,10 +346,6 @@ pub enum NormalsMethod {
 struct DetailTopology {
     subdivision: LoopSubdivision,
     fans: VertexFans,
-    /// Whether the subdivided triangles come in Loop's groups of four children
-    /// (`[a, ab, ca]`, `[ab, b, bc]`, `[ca, bc, c]`, `[ab, bc, ca]`), which the scatter then
-    /// sums a group at a time ([`scatter_groups`]).
-    grouped: bool,
 }
 
 /// The per-frame detail synthesis of HZY11 eq. 4 (module docs): `S`, the subdivided topology,
@@ -379,15 +375,10 @@ impl DetailSynth {
             .iter()
             .map(|s| vec![Vec3::ZERO; s.rows()])
             .collect();
-        let grouped = loop_groups(subdivision.triangles());
         let max_input = steps.iter().map(SparseMatrix::columns).max().unwrap_or(0);
         DetailSynth {
             stages,
-            topology: Arc::new(DetailTopology {
-                subdivision,
-                fans,
-                grouped,
-            }),
+            topology: Arc::new(DetailTopology { subdivision, fans }),
             method: NormalsMethod::Auto,
             high: vec![Vec3::ZERO; n],
             normals: vec![Vec3::ZERO; n],
@@ -462,12 +453,11 @@ impl DetailSynth {
                 .fans
                 .normals_and_displace(&self.high, h, &mut self.normals, out);
         }
-        let triangles = self.topology.subdivision.triangles();
-        if self.topology.grouped {
-            scatter_groups(&self.high, triangles, &mut self.normals);
-        } else {
-            accumulate_face_normals(&self.high, triangles, &mut self.normals);
-        }
+        scatter_groups(
+            &self.high,
+            self.topology.subdivision.triangles(),
+            &mut self.normals,
+        );
         normalize_and_displace(&self.high, h, &mut self.normals, out);
         Ok(())
     }
@@ -499,20 +489,13 @@ impl DetailSynth {
     }
 }
 
-/// Whether `triangles` are Loop children in groups of four, in `LoopSubdivision`'s order.
-fn loop_groups(triangles: &[[u32; 3]]) -> bool {
-    triangles.len().is_multiple_of(4)
-        && triangles.chunks_exact(4).all(|g| {
-            let (ab, bc, ca) = (g[0][1], g[1][2], g[0][2]);
-            g[1][0] == ab && g[3] == [ab, bc, ca] && g[2][0] == ca && g[2][1] == bc
-        })
-}
-
-/// [`accumulate_face_normals`] a group of four Loop children at a time (issue 23): the
-/// corners `a`, `b`, `c` get one child's face normal, the edge points `ab`, `bc`, `ca` the sum
-/// of three, so six read-modify-writes a group instead of twelve, and six index loads instead
-/// of twelve. The same face normals, summed in another order (within rounding of the plain
-/// scatter).
+/// [`accumulate_face_normals`] a group of four Loop children at a time (issue 23), for
+/// triangles in [`LoopSubdivision::triangles`]' order (`[a, ab, ca]`, `[ab, b, bc]`,
+/// `[ca, bc, c]`, `[ab, bc, ca]` per coarser triangle: the module's documented order, checked
+/// by its tests): the corners `a`, `b`, `c` get one child's face normal, the edge points `ab`,
+/// `bc`, `ca` the sum of three, so six read-modify-writes a group instead of twelve, and six
+/// index loads instead of twelve. The same face normals, summed in another order (within
+/// rounding of the plain scatter).
 fn scatter_groups(positions: &[Vec3], triangles: &[[u32; 3]], acc: &mut [Vec3]) {
     acc.fill(Vec3::ZERO);
     for g in triangles.chunks_exact(4) {
@@ -649,23 +632,30 @@ mod tests {
         assert_eq!(a[4], Vec3::ZERO);
     }
 
-    #[test]
-    fn fan_normals_match_scatter_normals_with_inconsistent_winding() {
-        // A 3 x 3 grid of quads with bumpy heights, one triangle flipped.
+    /// A grid of `nx x ny` vertices at `at(i, j)`, two triangles a quad.
+    fn grid(nx: u32, ny: u32, at: impl Fn(u32, u32) -> Vec3) -> Mesh {
         let mut m = Mesh::default();
-        for j in 0..4u32 {
-            for i in 0..4u32 {
-                let z = ((i * 7 + j * 3) % 5) as f32 * 0.1;
-                m.positions.push(Vec3::new(i as f32, j as f32, z));
+        for j in 0..ny {
+            for i in 0..nx {
+                m.positions.push(at(i, j));
             }
         }
-        for j in 0..3u32 {
-            for i in 0..3u32 {
-                let id = |a: u32, b: u32| b * 4 + a;
+        let id = |a: u32, b: u32| b * nx + a;
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
                 m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
                 m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
             }
         }
+        m
+    }
+
+    #[test]
+    fn fan_normals_match_scatter_normals_with_inconsistent_winding() {
+        // A 3 x 3 grid of quads with bumpy heights, one triangle flipped.
+        let mut m = grid(4, 4, |i, j| {
+            Vec3::new(i as f32, j as f32, ((i * 7 + j * 3) % 5) as f32 * 0.1)
+        });
         m.triangles[7].swap(1, 2);
         let fans = VertexFans::new(m.vertex_count(), &m.triangles);
         let mut a = vec![Vec3::NAN; m.vertex_count()];
@@ -682,23 +672,11 @@ mod tests {
     #[test]
     fn grouped_scatter_sums_the_same_face_normals() {
         // A bumpy grid, subdivided twice: its final triangles are Loop's groups of four.
-        let mut m = Mesh::default();
-        for j in 0..5u32 {
-            for i in 0..6u32 {
-                let z = ((i * 7 + j * 3) % 5) as f32 * 0.1;
-                m.positions.push(Vec3::new(i as f32, j as f32 * 1.3, z));
-            }
-        }
-        for j in 0..4u32 {
-            for i in 0..5u32 {
-                let id = |a: u32, b: u32| b * 6 + a;
-                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let m = grid(6, 5, |i, j| {
+            Vec3::new(i as f32, j as f32 * 1.3, ((i * 7 + j * 3) % 5) as f32 * 0.1)
+        });
         let synth = DetailSynth::from_mesh(&m, 2).unwrap();
         let tris = synth.topology.subdivision.triangles();
-        assert!(synth.topology.grouped && loop_groups(tris));
         let mut high = vec![Vec3::ZERO; synth.vertex_count()];
         synth.subdivide(&m.positions, &mut high).unwrap();
         let mut grouped = vec![Vec3::NAN; high.len()];
@@ -711,34 +689,19 @@ mod tests {
                 "{g} vs {p}"
             );
         }
-        // Any other order is not grouped, and falls back to the plain scatter.
-        let mut shuffled = tris.to_vec();
-        shuffled.swap(0, 5);
-        assert!(!loop_groups(&shuffled));
-        assert!(!loop_groups(&tris[..6]));
     }
 
     /// The padded (FMA where the CPU has it) product against the matrix's rows summed in
     /// f64, on a subdivided grid with boundary and interior rows, every row split point.
     #[test]
     fn padded_rows_equal_f64_sums() {
-        let mut m = Mesh::default();
-        for j in 0..4u32 {
-            for i in 0..5u32 {
-                m.positions.push(Vec3::new(
-                    i as f32 * 1.1,
-                    j as f32 * 0.9,
-                    ((i * 3 + j * 5) % 7) as f32 * 0.3 - 1.0,
-                ));
-            }
-        }
-        for j in 0..3u32 {
-            for i in 0..4u32 {
-                let id = |a: u32, b: u32| b * 5 + a;
-                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
+        let m = grid(5, 4, |i, j| {
+            Vec3::new(
+                i as f32 * 1.1,
+                j as f32 * 0.9,
+                ((i * 3 + j * 5) % 7) as f32 * 0.3 - 1.0,
+            )
+        });
         let s = LoopSubdivision::new(&m, 1).unwrap();
         let mat = s.matrix();
         let padded: Vec<[f32; 4]> = m.positions.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect();

@@ -145,8 +145,8 @@ impl DetailRegressor {
         }
     }
 
-    /// `h = D xi + b` for a kernel vector `xi` into `out`: with AVX2 + FMA where the CPU has
-    /// them (`runtime::simd::dot_rows`, as [`LinearOperator::apply`]), else a row at a time.
+    /// `h = D xi + b` for a kernel vector `xi` into `out` ([`LinearOperator::apply_rows`]:
+    /// AVX2 with FMA where the CPU has them, else a row at a time).
     /// Rows split over the rayon pool with the `parallel` feature. Allocates nothing.
     ///
     /// # Panics
@@ -155,24 +155,8 @@ impl DetailRegressor {
         assert_eq!(out.len(), self.vertex_count(), "h length != vertices");
         let n = self.example_count();
         assert_eq!(xi.len(), n, "xi length != examples");
-        let (m, b) = (&self.operator.m, &self.operator.b);
         fill_rows(out, ROWS_PER_TASK, |first, rows| {
-            if n == 0 {
-                rows.copy_from_slice(&b[first..first + rows.len()]);
-                return;
-            }
-            let m = &m[first * n..(first + rows.len()) * n];
-            let b = &b[first..first + rows.len()];
-            // AVX2 + FMA where the CPU has them and a row has 8 examples or more (issue 23:
-            // the portable loop ran this memory-bound mat-vec at twice its copy's time).
-            if let Some(simd) = super::simd::fma()
-                && super::simd::dot_rows(simd, m, xi, b, rows)
-            {
-                return;
-            }
-            for ((o, row), &b) in rows.iter_mut().zip(m.chunks_exact(n)).zip(b) {
-                *o = row.iter().zip(xi).map(|(a, x)| a * x).sum::<f32>() + b;
-            }
+            self.operator.apply_rows(xi, first, rows)
         });
     }
 }

@@ -18,7 +18,8 @@
 //! - [`detail`]: the detail layer's synthesis (HZY11 eq. 4): `S · base`, normals, `+ h n`.
 //! - [`displacement`]: the detail regressor `h(c) = D xi(c) + b` (HZY11 §5.2).
 //! - `simd`: the hand-written AVX2 + FMA kernels (regression operators, the translation
-//!   solve's right-hand side), chosen at run time, each beside a portable loop.
+//!   solve's right-hand side and substitutions, the detail layer's `S · base`), chosen at run
+//!   time, each beside a portable loop.
 //! - [`filter`]: the One Euro filter (Casiez et al. 2012), the input smoothing of a room's
 //!   control points.
 

@@ -57,18 +57,29 @@ impl LinearOperator {
     /// columns (`runtime::simd`), else a row at a time.
     #[inline]
     pub fn apply(&self, xi: &[f32], out: &mut [f32]) {
+        self.apply_rows(xi, 0, out);
+    }
+
+    /// [`LinearOperator::apply`] for the rows `first .. first + out.len()` only (a task's share
+    /// of a large operator, e.g. the detail regressor's). An operator of no columns writes `b`.
+    ///
+    /// # Panics
+    /// If the rows run past [`LinearOperator::rows`].
+    #[inline]
+    pub fn apply_rows(&self, xi: &[f32], first: usize, out: &mut [f32]) {
         debug_assert_eq!(xi.len(), self.cols);
+        let b = &self.b[first..first + out.len()];
+        if self.cols == 0 {
+            out.copy_from_slice(b);
+            return;
+        }
+        let m = &self.m[first * self.cols..(first + out.len()) * self.cols];
         if let Some(simd) = super::simd::fma()
-            && super::simd::dot_rows(simd, &self.m, xi, &self.b, out)
+            && super::simd::dot_rows(simd, m, xi, b, out)
         {
             return;
         }
-        for ((row, o), b) in self
-            .m
-            .chunks_exact(self.cols)
-            .zip(out.iter_mut())
-            .zip(&self.b)
-        {
+        for ((row, o), b) in m.chunks_exact(self.cols).zip(out.iter_mut()).zip(b) {
             *o = row.iter().zip(xi).map(|(a, x)| a * x).sum::<f32>() + b;
         }
     }

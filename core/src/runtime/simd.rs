@@ -14,7 +14,7 @@
 //! - [`lower_solve4`]: that solve's forward and backward substitutions, the three coordinates
 //!   at once ([`super::lower_factor`]);
 //! - [`sparse_rows4`]: the detail layer's sparse `S · base` on 4-lane positions
-//!   (`mesh::subdivision`);
+//!   (`runtime::detail`);
 //!
 //! The packed LBS kernel lives beside its private layout in `skin::packed`.
 
@@ -331,11 +331,10 @@ fn lower_solve4_body(
         let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
         let yj = avx._mm256_mul_pd(bytemuck::cast(y[j]), avx._mm256_set1_pd(inv_diag[j]));
         y[j] = bytemuck::cast(yj);
-        let neg = avx._mm256_sub_pd(avx._mm256_setzero_pd(), yj);
         for p in start + 1..end {
             let yi = &mut y[row_idx[p] as usize];
             let v: __m256d =
-                fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), neg, bytemuck::cast(*yi));
+                fma._mm256_fnmadd_pd(avx._mm256_set1_pd(val[p]), yj, bytemuck::cast(*yi));
             *yi = bytemuck::cast(v);
         }
     }
@@ -383,7 +382,7 @@ pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
 
 /// `out[r] = sum over p in ptr[r]..ptr[r+1] of vals[p] * x[cols[p]]` with FMA, `x` padded to
 /// four lanes: per stored entry one 16-byte load, one broadcast and one fused multiply-add (the
-/// sparse `S · base` of the detail layer, `mesh::subdivision`).
+/// sparse `S · base` of the detail layer, `runtime::detail`).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn sparse_rows4(
     simd: Fma,

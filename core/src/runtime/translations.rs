@@ -610,7 +610,7 @@ impl TranslationSolver {
         }
         self.n_val = n_val;
         self.factor =
-            LowerFactor::new(&self.symbolic, &l_values).ok_or(TranslationError::Factorization {
+            LowerFactor::new(&self.symbolic, l_values).ok_or(TranslationError::Factorization {
                 reason: "faer returned a supernodal factor where a simplicial one was asked for"
                     .into(),
             })?;

@@ -134,10 +134,8 @@ fn assign(
     labels: &mut [u32],
     exhaustive: usize,
 ) -> usize {
-    if bones > exhaustive {
-        return assign_local(problem, xf, bones, labels);
-    }
     let f = problem.f;
+    let before = labels.to_vec();
     let changed = par::map_chunks_mut(
         labels,
         ASSIGN_CHUNK,
@@ -146,8 +144,15 @@ fn assign(
             let mut changed = 0;
             for (j, label) in chunk.iter_mut().enumerate() {
                 let i = c * ASSIGN_CHUNK + j;
-                let traj = &problem.traj[i * f..(i + 1) * f];
-                let best = best_bone(xf, bones, problem.rest[i], traj, *label as usize, 0..bones);
+                let (p, traj) = (problem.rest[i], &problem.traj[i * f..(i + 1) * f]);
+                let own = before[i] as usize;
+                let best = if bones <= exhaustive {
+                    best_bone(xf, bones, p, traj, own, 0..bones)
+                } else {
+                    let (cand, len) = two_ring_bones(problem, &before, i);
+                    let others = cand[..len].iter().map(|&b| b as usize);
+                    best_bone(xf, bones, p, traj, own, others)
+                };
                 changed += usize::from(*label != best as u32);
                 *label = best as u32;
             }
@@ -179,43 +184,25 @@ fn best_bone(
     best
 }
 
-/// [`assign`] over the bones of each vertex's two-ring.
-fn assign_local(problem: &Problem, xf: &[Rigid], bones: usize, labels: &mut [u32]) -> usize {
-    let f = problem.f;
-    let before = labels.to_vec();
-    let changed = par::map_chunks_mut(
-        labels,
-        ASSIGN_CHUNK,
-        || (),
-        |_, c, chunk| {
-            let mut changed = 0;
-            for (j, label) in chunk.iter_mut().enumerate() {
-                let i = c * ASSIGN_CHUNK + j;
-                let mut cand = [0u32; MAX_CANDIDATES];
-                cand[0] = before[i];
-                let mut len = 1;
-                let mut push = |b: u32| {
-                    if len < MAX_CANDIDATES && !cand[..len].contains(&b) {
-                        cand[len] = b;
-                        len += 1;
-                    }
-                };
-                for &u in problem.neighbours(i) {
-                    push(before[u as usize]);
-                    for &w in problem.neighbours(u as usize) {
-                        push(before[w as usize]);
-                    }
-                }
-                let traj = &problem.traj[i * f..(i + 1) * f];
-                let others = cand[1..len].iter().map(|&b| b as usize);
-                let best = best_bone(xf, bones, problem.rest[i], traj, cand[0] as usize, others);
-                changed += usize::from(*label != best as u32);
-                *label = best as u32;
-            }
-            changed
-        },
-    );
-    changed.into_iter().sum()
+/// The distinct bones labelling vertex `i`'s two-ring (its own first), at most
+/// [`MAX_CANDIDATES`]: `(bones, count)`.
+fn two_ring_bones(problem: &Problem, labels: &[u32], i: usize) -> ([u32; MAX_CANDIDATES], usize) {
+    let mut cand = [0u32; MAX_CANDIDATES];
+    cand[0] = labels[i];
+    let mut len = 1;
+    let mut push = |b: u32| {
+        if len < MAX_CANDIDATES && !cand[..len].contains(&b) {
+            cand[len] = b;
+            len += 1;
+        }
+    };
+    for &u in problem.neighbours(i) {
+        push(labels[u as usize]);
+        for &w in problem.neighbours(u as usize) {
+            push(labels[w as usize]);
+        }
+    }
+    (cand, len)
 }
 
 /// Renumbers labels so that bones without vertices disappear. Returns the new bone count and,

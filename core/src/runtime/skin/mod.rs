@@ -6,8 +6,9 @@
 //! - [`skin_lbs_packed`]: the same LBS on a [`PackedSkin`] (the weights rearranged once:
 //!   non-zero influences only, narrow indices, four vertices blended side by side); ~1.35x
 //!   faster than [`skin_lbs`] on the horse and bit for bit with the portable kernel, ~1.9x with
-//!   AVX2 + FMA where the CPU has them and within a few ulps ([`PackedKernel`]). The per-frame path ([`crate::predictor`]) uses it;
-//!   [`skin_lbs`] stays for one-off calls and as its reference.
+//!   AVX2 + FMA where the CPU has them and within a few ulps ([`PackedKernel`]). The
+//!   per-frame path ([`crate::predictor`]) uses it; [`skin_lbs`] stays for one-off calls and as
+//!   its reference.
 //! - [`skin_dqs`]: dual-quaternion skinning (Kavan, Collins, Zara, O'Sullivan, "Skinning with
 //!   dual quaternions", I3D 2007; extended as "Geometric skinning with approximate dual
 //!   quaternion blending", TOG 2008), which does not collapse volume at twisting joints the way
