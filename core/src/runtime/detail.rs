@@ -549,7 +549,7 @@ fn subdivide_into(s: &SparseMatrix, base: &[Vec3], out: &mut [Vec3]) -> Result<(
 }
 
 /// [`subdivide_into`] through `padded`, `base` copied into it as 4-lane rows first
-/// ([`SparseMatrix::apply_rows_padded`]: one load an entry, FMA where the CPU has it).
+/// ([`apply_rows_padded`]: one load an entry, FMA where the CPU has it).
 fn subdivide_padded(
     s: &SparseMatrix,
     base: &[Vec3],
