@@ -690,8 +690,17 @@ impl Predictor {
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
         let (frame, base) = self.prepare_detail(ctx, regressor)?;
-        regressor.predict(&frame.x, &mut frame.xi, &mut frame.h);
-        frame.synth.synthesize(base, &frame.h, &mut frame.out)?;
+        let xi = &mut frame.xi[..regressor.example_count()];
+        regressor.kernel_vector(&frame.x, xi);
+        let xi = &*xi;
+        // h = D xi + b regressed block by block inside the synthesis's last pass (one sweep of
+        // D beside the positions it moves, HZY11 eq. 4).
+        frame.synth.synthesize_regressed(
+            base,
+            &|first, rows| regressor.apply_rows(xi, first, rows),
+            &mut frame.h,
+            &mut frame.out,
+        )?;
         Ok(&frame.out)
     }
 

@@ -166,7 +166,7 @@ fn synthesize_with_zero_displacement_is_s_times_base() {
         let mut scatter = vec![Vec3::ZERO; n];
         scatter_normals(&out, synth.subdivision().triangles(), &mut scatter).unwrap();
         for i in 0..n {
-            let got = synth.normals()[i];
+            let got = Vec3::from(synth.normals()[i]);
             assert!((got - scatter[i]).length() < 1e-5, "{method:?} vertex {i}");
             assert_close(got, reference[i], 1e-5, &format!("{method:?} normal {i}"));
         }

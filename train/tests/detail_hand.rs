@@ -42,7 +42,7 @@ fn training_poses_reproduce_their_detailed_meshes() {
         let b = base.posed_mesh(pose, Layers::default());
         let d = detailed.posed_mesh(pose, Layers::default());
         synth.synthesize(&b.positions, &zero, &mut high).unwrap();
-        let n = synth.normals().to_vec();
+        let n: Vec<Vec3> = synth.normals().iter().map(|&n| n.into()).collect();
         let target = DisplacementTarget::new(&d.positions, &d.triangles).unwrap();
         let mut hi = vec![0.0; nv];
         let stats = target.displacements(&high, &n, 0.0015, &mut hi).unwrap();

@@ -176,7 +176,10 @@ impl VertexFans {
     /// Area-weighted unit vertex normals of `positions` into `out` (one per vertex). A vertex
     /// whose triangles have no area (or that has none) gets `Vec3::ZERO`, as in
     /// [`crate::mesh::compute_vertex_normals`]: a displacement along it is no displacement.
-    pub fn normals(&self, positions: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
+    pub fn normals<P>(&self, positions: &[P], out: &mut [Vec3]) -> Result<(), DetailError>
+    where
+        P: Copy + Into<Vec3A> + Sync,
+    {
         let n = self.vertex_count();
         check_len("positions", n, positions.len())?;
         check_len("normals", n, out.len())?;
@@ -191,7 +194,12 @@ impl VertexFans {
     /// # Panics
     /// If the range runs past [`VertexFans::vertex_count`] or a corner is outside `positions`.
     #[inline]
-    pub fn normals_rows(&self, positions: &[Vec3], first: usize, out: &mut [Vec3]) {
+    pub fn normals_rows<P: Copy + Into<Vec3A>>(
+        &self,
+        positions: &[P],
+        first: usize,
+        out: &mut [Vec3],
+    ) {
         for (i, o) in out.iter_mut().enumerate() {
             *o = self.normal(positions, first + i).into();
         }
@@ -202,9 +210,9 @@ impl VertexFans {
     /// every normal is that of the undisplaced mesh.
     pub fn normals_and_displace(
         &self,
-        high: &[Vec3],
+        high: &[Vec3A],
         h: &[f32],
-        normals: &mut [Vec3],
+        normals: &mut [Vec3A],
         out: &mut [Vec3],
     ) -> Result<(), DetailError> {
         let n = self.vertex_count();
@@ -235,10 +243,10 @@ impl VertexFans {
     #[inline]
     pub fn normals_and_displace_rows(
         &self,
-        high: &[Vec3],
+        high: &[Vec3A],
         h: &[f32],
         first: usize,
-        normals: &mut [Vec3],
+        normals: &mut [Vec3A],
         out: &mut [Vec3],
     ) {
         let rows = out.len();
@@ -250,32 +258,32 @@ impl VertexFans {
         for (i, ((o, nm), &hv)) in iter {
             let v = first + i;
             let n = self.normal(high, v);
-            *nm = n.into();
-            *o = (Vec3A::from(high[v]) + hv * n).into();
+            *nm = n;
+            *o = (high[v] + hv * n).into();
         }
     }
 
     /// The unit area-weighted normal of vertex `v`: the sum of `d_i × d_i+1` along its chains,
     /// `d_i = p[r_i] - p[v]`.
     #[inline(always)]
-    fn normal(&self, positions: &[Vec3], v: usize) -> Vec3A {
+    fn normal<P: Copy + Into<Vec3A>>(&self, positions: &[P], v: usize) -> Vec3A {
         let chain = &self.chains[self.offsets[v] as usize..self.offsets[v + 1] as usize];
-        let p = Vec3A::from(positions[v]);
+        let p: Vec3A = positions[v].into();
         let mut it = chain.iter();
         let Some(&r) = it.next() else {
             return Vec3A::ZERO;
         };
-        let mut q = Vec3A::from(positions[r as usize]) - p;
+        let mut q = positions[r as usize].into() - p;
         let mut n = Vec3A::ZERO;
         while let Some(&r) = it.next() {
             if r == BREAK {
                 match it.next() {
-                    Some(&r) => q = Vec3A::from(positions[r as usize]) - p,
+                    Some(&r) => q = positions[r as usize].into() - p,
                     None => break,
                 }
                 continue;
             }
-            let d = Vec3A::from(positions[r as usize]) - p;
+            let d = positions[r as usize].into() - p;
             n += q.cross(d);
             q = d;
         }
@@ -340,28 +348,56 @@ pub enum NormalsMethod {
     Gather,
 }
 
-/// `S` and the one-ring table: the immutable part of a [`DetailSynth`], shared between its
-/// clones (one per stream of frames) through an `Arc`.
+/// `S`, the one-ring table and Loop's groups: the immutable part of a [`DetailSynth`], shared
+/// between its clones (one per stream of frames) through an `Arc`.
 #[derive(Debug)]
 struct DetailTopology {
     subdivision: LoopSubdivision,
     fans: VertexFans,
+    /// Every group of four subdivided triangles as its six vertices `[a, b, c, ab, bc, ca]`
+    /// ([`loop_groups`]): half the bytes of the triangles the scatter would otherwise read.
+    groups: Vec<[u32; 6]>,
 }
+
+/// Rows of `h` regressed at a time in [`DetailSynth::synthesize_regressed`]'s last pass: 256
+/// rows of a 14-example `D` are 14 KB, so a block's rows of `D`, its `h` and its positions meet
+/// in the first-level cache instead of `h` making a round trip through memory.
+pub const H_BLOCK: usize = 256;
+
+/// Writes the displacements `h` of the vertices `first .. first + rows.len()` into `rows`
+/// (e.g. `D xi + b` for those rows,
+/// [`DetailRegressor::apply_rows`](super::displacement::DetailRegressor::apply_rows)).
+pub type RegressRows<'a> = &'a (dyn Fn(usize, &mut [f32]) + Sync);
 
 /// The per-frame detail synthesis of HZY11 eq. 4 (module docs): `S`, the subdivided topology,
 /// and reusable buffers for `S · base` and the normals. Cloning shares `S` and the topology and
 /// copies only the buffers, so each stream of frames clones its own from one built per model.
+///
+/// Its buffers hold 4-lane positions ([`Vec3A`]): the sparse product reads a vertex in one load
+/// and writes it in one store, and so do the normal scatter's loads and read-modify-writes
+/// (issue 23: a 3-lane `Vec3` takes two loads and an insert, a store two).
 #[derive(Clone, Debug)]
 pub struct DetailSynth {
     topology: Arc<DetailTopology>,
     method: NormalsMethod,
-    /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
-    high: Vec<Vec3>,
+    /// The frame's base positions as 4-lane rows, the first level's input.
+    base: Vec<Vec3A>,
     /// The intermediate levels' vertices (`levels - 1` buffers) of the factored product.
-    stages: Vec<Vec<Vec3>>,
-    normals: Vec<Vec3>,
-    /// The current level's input as 4-lane rows (`subdivide_padded`); sized by the first frame.
-    padded: Vec<[f32; 4]>,
+    stages: Vec<Vec<Vec3A>>,
+    /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
+    high: Vec<Vec3A>,
+    normals: Vec<Vec3A>,
+}
+
+/// Where a frame's displacements come from.
+enum Heights<'a> {
+    /// Computed by the caller.
+    Given(&'a [f32]),
+    /// Regressed block by block into `h` by `rows` during the last pass.
+    Regressed {
+        h: &'a mut [f32],
+        rows: RegressRows<'a>,
+    },
 }
 
 impl DetailSynth {
@@ -370,19 +406,23 @@ impl DetailSynth {
     pub fn new(subdivision: LoopSubdivision) -> DetailSynth {
         let n = subdivision.vertex_count();
         let fans = VertexFans::new(n, subdivision.triangles());
+        let groups = loop_groups(subdivision.triangles());
         let steps = subdivision.steps();
         let stages = steps[..steps.len().saturating_sub(1)]
             .iter()
-            .map(|s| vec![Vec3::ZERO; s.rows()])
+            .map(|s| vec![Vec3A::ZERO; s.rows()])
             .collect();
-        let max_input = steps.iter().map(SparseMatrix::columns).max().unwrap_or(0);
         DetailSynth {
             stages,
-            topology: Arc::new(DetailTopology { subdivision, fans }),
+            base: Vec::with_capacity(subdivision.base_vertex_count()),
+            topology: Arc::new(DetailTopology {
+                subdivision,
+                fans,
+                groups,
+            }),
             method: NormalsMethod::Auto,
-            high: vec![Vec3::ZERO; n],
-            normals: vec![Vec3::ZERO; n],
-            padded: Vec::with_capacity(max_input),
+            high: vec![Vec3A::ZERO; n],
+            normals: vec![Vec3A::ZERO; n],
         }
     }
 
@@ -425,13 +465,16 @@ impl DetailSynth {
 
     /// The unit normals of the undisplaced subdivided mesh `S · base` from the last
     /// [`DetailSynth::synthesize`] (zeros before the first).
-    pub fn normals(&self) -> &[Vec3] {
+    pub fn normals(&self) -> &[Vec3A] {
         &self.normals
     }
 
     /// `out = S · base` (rows split over the pool with the `parallel` feature).
     pub fn subdivide(&self, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
-        subdivide_into(self.topology.subdivision.matrix(), base, out)
+        let s = self.topology.subdivision.matrix();
+        s.check(base, out.len())?;
+        fill_rows(out, PARALLEL_CHUNK, |first, o| s.apply_rows(base, first, o));
+        Ok(())
     }
 
     /// HZY11 eq. 4: `out = S · base + h ⊙ n(S · base)`. `base` has
@@ -445,35 +488,78 @@ impl DetailSynth {
         out: &mut [Vec3],
     ) -> Result<(), DetailError> {
         check_len("displacements h", self.vertex_count(), h.len())?;
+        self.synthesize_heights(base, Heights::Given(h), out)
+    }
+
+    /// [`DetailSynth::synthesize`] with `h` regressed during the last pass: `rows(first,
+    /// block)` fills `h[first .. first + block.len()]` just before those vertices are displaced
+    /// (blocks of [`H_BLOCK`] on one thread), so the regression's matrix streams through the
+    /// cache once beside the positions it moves instead of in a pass of its own that evicts
+    /// them (issue 23). Afterwards `h` holds every vertex's displacement. Allocates nothing.
+    pub fn synthesize_regressed(
+        &mut self,
+        base: &[Vec3],
+        rows: RegressRows<'_>,
+        h: &mut [f32],
+        out: &mut [Vec3],
+    ) -> Result<(), DetailError> {
+        check_len("displacements h", self.vertex_count(), h.len())?;
+        self.synthesize_heights(base, Heights::Regressed { h, rows }, out)
+    }
+
+    fn synthesize_heights(
+        &mut self,
+        base: &[Vec3],
+        heights: Heights<'_>,
+        out: &mut [Vec3],
+    ) -> Result<(), DetailError> {
         check_len("output", self.vertex_count(), out.len())?;
         self.subdivide_steps(base)?;
+        let n = self.vertex_count();
+        let (h, pooled): (&[f32], bool) = match heights {
+            Heights::Given(h) => (h, pooled(n)),
+            Heights::Regressed { h, rows } if pooled(n) || self.gathers() => {
+                // Several threads (or the gather): regress in a parallel pass of its own.
+                fill_rows(h, PARALLEL_CHUNK, rows);
+                (h, pooled(n))
+            }
+            Heights::Regressed { h, rows } => {
+                scatter_groups(&self.high, &self.topology.groups, &mut self.normals);
+                regress_and_displace(rows, &self.high, h, &mut self.normals, out);
+                return Ok(());
+            }
+        };
         if self.gathers() {
             return self
                 .topology
                 .fans
                 .normals_and_displace(&self.high, h, &mut self.normals, out);
         }
-        scatter_groups(
-            &self.high,
-            self.topology.subdivision.triangles(),
-            &mut self.normals,
-        );
-        normalize_and_displace(&self.high, h, &mut self.normals, out);
+        scatter_groups(&self.high, &self.topology.groups, &mut self.normals);
+        normalize_and_displace(&self.high, h, &mut self.normals, out, pooled);
         Ok(())
     }
 
     /// `self.high = S · base` as the one-level products in turn
-    /// ([`LoopSubdivision::steps`]).
+    /// ([`LoopSubdivision::steps`]), each from and to 4-lane rows ([`apply_rows_padded`]).
     fn subdivide_steps(&mut self, base: &[Vec3]) -> Result<(), DetailError> {
         let steps = self.topology.subdivision.steps();
         let (last, inner) = steps.split_last().expect("at least one level");
+        steps[0].check(base, steps[0].rows())?;
+        self.base.clear();
+        self.base.extend(base.iter().map(|&p| Vec3A::from(p)));
         for (k, step) in inner.iter().enumerate() {
             let (done, rest) = self.stages.split_at_mut(k);
-            let input = done.last().map_or(base, Vec::as_slice);
-            subdivide_padded(step, input, &mut self.padded, &mut rest[0])?;
+            let input = done.last().unwrap_or(&self.base);
+            fill_rows(&mut rest[0], PARALLEL_CHUNK, |first, o| {
+                apply_rows_padded(step, input, first, o)
+            });
         }
-        let input = self.stages.last().map_or(base, Vec::as_slice);
-        subdivide_padded(last, input, &mut self.padded, &mut self.high)
+        let input = self.stages.last().unwrap_or(&self.base);
+        fill_rows(&mut self.high, PARALLEL_CHUNK, |first, o| {
+            apply_rows_padded(last, input, first, o)
+        });
+        Ok(())
     }
 
     /// Whether this frame's normals are gathered (resolves [`NormalsMethod::Auto`]).
@@ -481,47 +567,82 @@ impl DetailSynth {
         match self.method {
             NormalsMethod::Scatter => false,
             NormalsMethod::Gather => true,
-            #[cfg(feature = "parallel")]
-            NormalsMethod::Auto => use_pool(self.vertex_count(), PARALLEL_CHUNK),
-            #[cfg(not(feature = "parallel"))]
-            NormalsMethod::Auto => false,
+            NormalsMethod::Auto => pooled(self.vertex_count()),
         }
     }
 }
 
-/// [`accumulate_face_normals`] a group of four Loop children at a time (issue 23), for
-/// triangles in [`LoopSubdivision::triangles`]' order (`[a, ab, ca]`, `[ab, b, bc]`,
-/// `[ca, bc, c]`, `[ab, bc, ca]` per coarser triangle: the module's documented order, checked
-/// by its tests): the corners `a`, `b`, `c` get one child's face normal, the edge points `ab`,
-/// `bc`, `ca` the sum of three, so six read-modify-writes a group instead of twelve, and six
-/// index loads instead of twelve. The same face normals, summed in another order (within
+/// Whether passes over `n` vertices split over the rayon pool.
+fn pooled(n: usize) -> bool {
+    #[cfg(feature = "parallel")]
+    return use_pool(n, PARALLEL_CHUNK);
+    #[cfg(not(feature = "parallel"))]
+    {
+        let _ = n;
+        false
+    }
+}
+
+/// The six vertices `[a, b, c, ab, bc, ca]` of each group of four triangles in
+/// [`LoopSubdivision::triangles`]' order (`[a, ab, ca]`, `[ab, b, bc]`, `[ca, bc, c]`,
+/// `[ab, bc, ca]` per coarser triangle: the module's documented order, checked by its tests).
+fn loop_groups(triangles: &[[u32; 3]]) -> Vec<[u32; 6]> {
+    triangles
+        .chunks_exact(4)
+        .map(|g| [g[0][0], g[1][1], g[2][2], g[0][1], g[1][2], g[0][2]])
+        .collect()
+}
+
+/// [`accumulate_face_normals`] a group of four Loop children at a time (issue 23, groups from
+/// [`loop_groups`]): the corners `a`, `b`, `c` get one child's face normal, the edge points
+/// `ab`, `bc`, `ca` the sum of three, so six read-modify-writes a group instead of twelve, and
+/// six index loads instead of twelve. The same face normals, summed in another order (within
 /// rounding of the plain scatter).
-fn scatter_groups(positions: &[Vec3], triangles: &[[u32; 3]], acc: &mut [Vec3]) {
-    acc.fill(Vec3::ZERO);
-    for g in triangles.chunks_exact(4) {
-        let [a, ab, ca] = g[0].map(|i| i as usize);
-        let [b, bc] = [g[1][1] as usize, g[1][2] as usize];
-        let c = g[2][2] as usize;
-        let p = |i: usize| Vec3A::from(positions[i]);
-        let (pa, pb, pc, pab, pbc, pca) = (p(a), p(b), p(c), p(ab), p(bc), p(ca));
+fn scatter_groups(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
+    acc.fill(Vec3A::ZERO);
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = super::simd::fma() {
+        simd.vectorize(v3::ScatterGroups {
+            positions,
+            groups,
+            acc,
+        });
+        return;
+    }
+    scatter_groups_body(positions, groups, acc);
+}
+
+/// [`scatter_groups`] after the zeroing: the same code for every instruction set.
+#[inline(always)]
+fn scatter_groups_body(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
+    for g in groups {
+        let [a, b, c, ab, bc, ca] = g.map(|i| i as usize);
+        let (pa, pb, pc) = (positions[a], positions[b], positions[c]);
+        let (pab, pbc, pca) = (positions[ab], positions[bc], positions[ca]);
         let n0 = (pab - pa).cross(pca - pa);
         let n1 = (pb - pab).cross(pbc - pab);
         let n2 = (pbc - pca).cross(pc - pca);
         let n3 = (pbc - pab).cross(pca - pab);
-        acc[a] += Vec3::from(n0);
-        acc[b] += Vec3::from(n1);
-        acc[c] += Vec3::from(n2);
-        acc[ab] += Vec3::from(n0 + n1 + n3);
-        acc[bc] += Vec3::from(n1 + n2 + n3);
-        acc[ca] += Vec3::from(n0 + n2 + n3);
+        acc[a] += n0;
+        acc[b] += n1;
+        acc[c] += n2;
+        acc[ab] += n0 + n1 + n3;
+        acc[bc] += n1 + n2 + n3;
+        acc[ca] += n0 + n2 + n3;
     }
 }
 
 /// Normalises the accumulated normals in place and writes `out = high + h ⊙ n`, all slices of
-/// equal length (checked by the caller); split over the pool with the `parallel` feature.
-fn normalize_and_displace(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &mut [Vec3]) {
+/// equal length (checked by the caller); split over the pool when `pooled`.
+fn normalize_and_displace(
+    high: &[Vec3A],
+    h: &[f32],
+    normals: &mut [Vec3A],
+    out: &mut [Vec3],
+    pooled: bool,
+) {
     #[cfg(feature = "parallel")]
-    if use_pool(out.len(), PARALLEL_CHUNK) {
+    if pooled {
         use rayon::prelude::*;
         out.par_chunks_mut(PARALLEL_CHUNK)
             .zip(normals.par_chunks_mut(PARALLEL_CHUNK))
@@ -530,51 +651,146 @@ fn normalize_and_displace(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &
             .for_each(|(((o, n), p), h)| normalize_and_displace_kernel(p, h, n, o));
         return;
     }
+    let _ = pooled;
     normalize_and_displace_kernel(high, h, normals, out);
 }
 
-#[inline]
-fn normalize_and_displace_kernel(high: &[Vec3], h: &[f32], normals: &mut [Vec3], out: &mut [Vec3]) {
-    for (((o, n), &p), &h) in out.iter_mut().zip(normals).zip(high).zip(h) {
-        *n = n.normalize_or_zero();
-        *o = p + h * *n;
+/// The detail passes written in plain Rust (glam's 4-lane vectors, arrays the compiler
+/// vectorises) compiled a second time for AVX2 + FMA, chosen at run time: three-operand
+/// instructions instead of SSE2's copies, 8-wide square roots and divisions. Each is a struct
+/// whose `call` is inlined into pulp's feature context (ARCHITECTURE.md, "Per-frame SIMD").
+#[cfg(target_arch = "x86_64")]
+mod v3 {
+    use glam::{Vec3, Vec3A};
+
+    use super::RegressRows;
+
+    /// [`super::scatter_groups_body`].
+    pub(super) struct ScatterGroups<'a> {
+        pub(super) positions: &'a [Vec3A],
+        pub(super) groups: &'a [[u32; 6]],
+        pub(super) acc: &'a mut [Vec3A],
+    }
+
+    impl pulp::NullaryFnOnce for ScatterGroups<'_> {
+        type Output = ();
+
+        #[inline(always)]
+        fn call(self) {
+            super::scatter_groups_body(self.positions, self.groups, self.acc);
+        }
+    }
+
+    /// The fused last pass of [`super::DetailSynth::synthesize_regressed`] on one thread.
+    pub(super) struct RegressAndDisplace<'a> {
+        pub(super) rows: RegressRows<'a>,
+        pub(super) high: &'a [Vec3A],
+        pub(super) h: &'a mut [f32],
+        pub(super) normals: &'a mut [Vec3A],
+        pub(super) out: &'a mut [Vec3],
+    }
+
+    impl pulp::NullaryFnOnce for RegressAndDisplace<'_> {
+        type Output = ();
+
+        #[inline(always)]
+        fn call(self) {
+            super::regress_and_displace_body(self.rows, self.high, self.h, self.normals, self.out);
+        }
     }
 }
 
-/// `out = s · base`, rows split over the pool with the `parallel` feature.
-fn subdivide_into(s: &SparseMatrix, base: &[Vec3], out: &mut [Vec3]) -> Result<(), DetailError> {
-    s.check(base, out.len())?;
-    fill_rows(out, PARALLEL_CHUNK, |first, o| s.apply_rows(base, first, o));
-    Ok(())
-}
-
-/// [`subdivide_into`] through `padded`, `base` copied into it as 4-lane rows first
-/// ([`apply_rows_padded`]: one load an entry, FMA where the CPU has it).
-fn subdivide_padded(
-    s: &SparseMatrix,
-    base: &[Vec3],
-    padded: &mut Vec<[f32; 4]>,
+/// The single-threaded last pass with `h` regressed a block of [`H_BLOCK`] at a time.
+fn regress_and_displace(
+    rows: RegressRows<'_>,
+    high: &[Vec3A],
+    h: &mut [f32],
+    normals: &mut [Vec3A],
     out: &mut [Vec3],
-) -> Result<(), DetailError> {
-    s.check(base, out.len())?;
-    padded.clear();
-    padded.extend(base.iter().map(|p| [p.x, p.y, p.z, 0.0]));
-    let x = padded.as_slice();
-    fill_rows(out, PARALLEL_CHUNK, |first, o| {
-        apply_rows_padded(s, x, first, o)
-    });
-    Ok(())
+) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = super::simd::fma() {
+        simd.vectorize(v3::RegressAndDisplace {
+            rows,
+            high,
+            h,
+            normals,
+            out,
+        });
+        return;
+    }
+    regress_and_displace_body(rows, high, h, normals, out);
 }
 
-/// [`SparseMatrix::apply_rows`] from `x` padded to four lanes (`[x, y, z, 0]`, at least
-/// [`SparseMatrix::columns`] of them): one load a stored entry instead of four, and with
-/// AVX2 + FMA where the CPU has them (`runtime::simd::sparse_rows4`) one broadcast and one fused
-/// multiply-add (issue 23: 19 instructions an entry before). The FMA rounds once per entry, so
-/// the sums differ from [`SparseMatrix::apply_rows`]'s in the last bits.
+#[inline(always)]
+fn regress_and_displace_body(
+    rows: RegressRows<'_>,
+    high: &[Vec3A],
+    h: &mut [f32],
+    normals: &mut [Vec3A],
+    out: &mut [Vec3],
+) {
+    let blocks = h
+        .chunks_mut(H_BLOCK)
+        .zip(out.chunks_mut(H_BLOCK))
+        .zip(normals.chunks_mut(H_BLOCK))
+        .zip(high.chunks(H_BLOCK));
+    for (k, (((h, o), nm), p)) in blocks.enumerate() {
+        rows(k * H_BLOCK, h);
+        normalize_and_displace_kernel(p, h, nm, o);
+    }
+}
+
+/// Vertices whose reciprocal lengths [`normalize_and_displace_kernel`] takes together.
+const NORMALIZE_BATCH: usize = 8;
+
+/// [`normalize_and_displace`] on the calling thread. `Vec3A::normalize_or_zero` bit for bit,
+/// but the square roots and divisions of [`NORMALIZE_BATCH`] vertices are taken as one array
+/// (vector `sqrt` and `div`, issue 23): one per vertex, they occupied the divider ~8 cycles a
+/// vertex, about a tenth of the synthesis.
+#[inline(always)]
+fn normalize_and_displace_kernel(
+    high: &[Vec3A],
+    h: &[f32],
+    normals: &mut [Vec3A],
+    out: &mut [Vec3],
+) {
+    let batches = out
+        .chunks_mut(NORMALIZE_BATCH)
+        .zip(normals.chunks_mut(NORMALIZE_BATCH))
+        .zip(high.chunks(NORMALIZE_BATCH))
+        .zip(h.chunks(NORMALIZE_BATCH));
+    for (((o, n), p), h) in batches {
+        // 1 / |n| as `normalize_or_zero` computes it: the same dot product, IEEE sqrt and
+        // division (lanes past a short last batch hold 1 / 0, unused).
+        let mut rcp = [0.0f32; NORMALIZE_BATCH];
+        for (r, v) in rcp.iter_mut().zip(n.iter()) {
+            *r = v.length_squared();
+        }
+        for r in &mut rcp {
+            *r = 1.0 / r.sqrt();
+        }
+        for ((((o, n), &p), &h), &r) in o.iter_mut().zip(n).zip(p).zip(h).zip(&rcp) {
+            *n = if r.is_finite() && r > 0.0 {
+                *n * r
+            } else {
+                Vec3A::ZERO
+            };
+            *o = (p + h * *n).into();
+        }
+    }
+}
+
+/// [`SparseMatrix::apply_rows`] on 4-lane rows (at least [`SparseMatrix::columns`] of them):
+/// one load a stored entry instead of three lanes' worth, and with AVX2 + FMA where the CPU has
+/// them (`runtime::simd::sparse_rows4`) one broadcast and one fused multiply-add (issue 23: 19
+/// instructions an entry before). The FMA rounds once per entry, so the sums differ from
+/// [`SparseMatrix::apply_rows`]'s in the last bits. The fourth lane is summed like the others
+/// and means nothing.
 ///
 /// # Panics
 /// As [`SparseMatrix::apply_rows`].
-fn apply_rows_padded(s: &SparseMatrix, x: &[[f32; 4]], first_row: usize, out: &mut [Vec3]) {
+fn apply_rows_padded(s: &SparseMatrix, x: &[Vec3A], first_row: usize, out: &mut [Vec3A]) {
     let (row_ptr, cols, vals) = s.parts();
     let ptr = &row_ptr[first_row..=first_row + out.len()];
     let x = &x[..s.columns()];
@@ -587,10 +803,9 @@ fn apply_rows_padded(s: &SparseMatrix, x: &[[f32; 4]], first_row: usize, out: &m
         let end = end as usize;
         let mut acc = Vec3A::ZERO;
         for (&c, &w) in cols[start..end].iter().zip(&vals[start..end]) {
-            let p = x[c as usize];
-            acc += Vec3A::new(p[0], p[1], p[2]) * w;
+            acc += x[c as usize] * w;
         }
-        *o = acc.into();
+        *o = acc;
         start = end;
     }
 }
@@ -679,13 +894,14 @@ mod tests {
         let tris = synth.topology.subdivision.triangles();
         let mut high = vec![Vec3::ZERO; synth.vertex_count()];
         synth.subdivide(&m.positions, &mut high).unwrap();
-        let mut grouped = vec![Vec3::NAN; high.len()];
+        let high4: Vec<Vec3A> = high.iter().map(|&p| p.into()).collect();
+        let mut grouped = vec![Vec3A::NAN; high.len()];
         let mut plain = vec![Vec3::NAN; high.len()];
-        scatter_groups(&high, tris, &mut grouped);
+        scatter_groups(&high4, &loop_groups(tris), &mut grouped);
         accumulate_face_normals(&high, tris, &mut plain);
-        for (g, p) in grouped.iter().zip(&plain) {
+        for (g, p) in grouped.iter().map(|&g| Vec3::from(g)).zip(&plain) {
             assert!(
-                (*g - *p).length() <= 1e-5 * p.length().max(1e-3),
+                (g - *p).length() <= 1e-5 * p.length().max(1e-3),
                 "{g} vs {p}"
             );
         }
@@ -704,9 +920,9 @@ mod tests {
         });
         let s = LoopSubdivision::new(&m, 1).unwrap();
         let mat = s.matrix();
-        let padded: Vec<[f32; 4]> = m.positions.iter().map(|p| [p.x, p.y, p.z, 0.0]).collect();
+        let padded: Vec<Vec3A> = m.positions.iter().map(|&p| p.into()).collect();
         for first in [0, 1, 7, mat.rows() - 1] {
-            let mut out = vec![Vec3::NAN; mat.rows() - first];
+            let mut out = vec![Vec3A::NAN; mat.rows() - first];
             apply_rows_padded(mat, &padded, first, &mut out);
             for (k, o) in out.iter().enumerate() {
                 let (cols, vals) = mat.row(first + k);
@@ -728,6 +944,83 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The fused synthesis (h regressed a block at a time inside the last pass) against an
+    /// independent frame: the composed `S` applied with `SparseMatrix::apply_rows`, the plain
+    /// scatter's normals, and `h` from the same row function, on a mesh of several blocks.
+    #[test]
+    fn regressed_synthesis_equals_the_unfused_frame() {
+        let m = grid(13, 11, |i, j| {
+            Vec3::new(i as f32 * 0.7, j as f32, ((i * 5 + j * 3) % 7) as f32 * 0.2)
+        });
+        let mut synth = DetailSynth::from_mesh(&m, 2).unwrap();
+        let n = synth.vertex_count();
+        assert!(
+            n > 4 * H_BLOCK + 7,
+            "{n} vertices: want several blocks and a partial one"
+        );
+        let height = |v: usize| ((v * 37) % 101) as f32 * 1e-3 - 0.05;
+        let rows = |first: usize, rows: &mut [f32]| {
+            for (k, r) in rows.iter_mut().enumerate() {
+                *r = height(first + k);
+            }
+        };
+        let mut h = vec![f32::NAN; n];
+        let mut out = vec![Vec3::NAN; n];
+        synth
+            .synthesize_regressed(&m.positions, &rows, &mut h, &mut out)
+            .unwrap();
+
+        let mut high = vec![Vec3::ZERO; n];
+        synth.subdivide(&m.positions, &mut high).unwrap();
+        let mut normals = vec![Vec3::ZERO; n];
+        scatter_normals(&high, synth.subdivision().triangles(), &mut normals).unwrap();
+        for v in 0..n {
+            assert_eq!(h[v], height(v), "h[{v}]");
+            let want = high[v] + height(v) * normals[v];
+            assert!(
+                (out[v] - want).length() < 1e-5,
+                "vertex {v}: {} vs {want}",
+                out[v]
+            );
+            let got = Vec3::from(synth.normals()[v]);
+            assert!((got - normals[v]).length() < 1e-5, "normal {v}");
+        }
+        // The given-h path writes the same frame.
+        let mut given = vec![Vec3::NAN; n];
+        synth.synthesize(&m.positions, &h, &mut given).unwrap();
+        assert_eq!(given, out);
+        let e = synth
+            .synthesize_regressed(&m.positions, &rows, &mut h[1..], &mut out)
+            .unwrap_err();
+        assert!(e.to_string().contains("displacements h has"), "{e}");
+    }
+
+    /// The batched normalisation is `normalize_or_zero` bit for bit, zero and subnormal
+    /// lengths included, with a partial last batch.
+    #[test]
+    fn batched_normalize_equals_normalize_or_zero() {
+        let mut normals: Vec<Vec3A> = (0..29)
+            .map(|i| {
+                let t = i as f32 * 0.731;
+                Vec3A::new(t.sin() * 3.0, t.cos() * 0.01, (t * 1.7).sin() * 1e-3)
+            })
+            .collect();
+        normals[3] = Vec3A::ZERO;
+        normals[11] = Vec3A::new(1e-30, 0.0, 0.0);
+        normals[20] = Vec3A::new(3e38, 3e38, 0.0);
+        let high: Vec<Vec3A> = (0..29).map(|i| Vec3A::splat(i as f32 * 0.1)).collect();
+        let h: Vec<f32> = (0..29).map(|i| (i as f32 - 14.0) * 1e-3).collect();
+        let want_n: Vec<Vec3A> = normals.iter().map(|n| n.normalize_or_zero()).collect();
+        let mut got_n = normals.clone();
+        let mut out = vec![Vec3::NAN; 29];
+        normalize_and_displace_kernel(&high, &h, &mut got_n, &mut out);
+        for v in 0..29 {
+            assert_eq!(Vec3::from(got_n[v]), Vec3::from(want_n[v]), "normal {v}");
+            assert_eq!(out[v], Vec3::from(high[v] + h[v] * want_n[v]), "vertex {v}");
+        }
+        assert_eq!(Vec3::from(got_n[3]), Vec3::ZERO);
     }
 
     #[test]

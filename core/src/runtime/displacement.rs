@@ -159,6 +159,19 @@ impl DetailRegressor {
             self.operator.apply_rows(xi, first, rows)
         });
     }
+
+    /// The rows `first .. first + out.len()` of `h = D xi + b` for a kernel vector `xi` into
+    /// `out`, on the calling thread: [`DetailRegressor::apply`] a block at a time (the detail
+    /// synthesis regresses each block of vertices just before it displaces them,
+    /// `DetailSynth::synthesize_regressed`). Allocates nothing.
+    ///
+    /// # Panics
+    /// If `xi` is not one value per example or the rows run past the vertices.
+    #[inline]
+    pub fn apply_rows(&self, xi: &[f32], first: usize, out: &mut [f32]) {
+        assert_eq!(xi.len(), self.example_count(), "xi length != examples");
+        self.operator.apply_rows(xi, first, out);
+    }
 }
 
 /// The cascaded input of [`DetailInput::Rotations`]: each rotation as a unit quaternion with

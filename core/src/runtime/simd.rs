@@ -164,8 +164,8 @@ vectorized!(SparseRows4 {
     ptr: &'a [u32],
     cols: &'a [u32],
     vals: &'a [f32],
-    x: &'a [[f32; 4]],
-    out: &'a mut [glam::Vec3],
+    x: &'a [glam::Vec3A],
+    out: &'a mut [glam::Vec3A],
 } => sparse_rows4_body);
 
 #[cfg(target_arch = "x86_64")]
@@ -380,17 +380,18 @@ pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
     [x.x, x.y, x.z, 0.0, y.x, y.y, y.z, 0.0, z.x, z.y, z.z, 0.0]
 }
 
-/// `out[r] = sum over p in ptr[r]..ptr[r+1] of vals[p] * x[cols[p]]` with FMA, `x` padded to
-/// four lanes: per stored entry one 16-byte load, one broadcast and one fused multiply-add (the
-/// sparse `S · base` of the detail layer, `runtime::detail`).
+/// `out[r] = sum over p in ptr[r]..ptr[r+1] of vals[p] * x[cols[p]]` with FMA on 4-lane rows
+/// (all four lanes summed): per stored entry one 16-byte load, one broadcast and one fused
+/// multiply-add (rows of four entries unrolled), per row one 16-byte store (the sparse `S · base` of the detail layer,
+/// `runtime::detail`).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn sparse_rows4(
     simd: Fma,
     ptr: &[u32],
     cols: &[u32],
     vals: &[f32],
-    x: &[[f32; 4]],
-    out: &mut [glam::Vec3],
+    x: &[glam::Vec3A],
+    out: &mut [glam::Vec3A],
 ) {
     simd.vectorize(SparseRows4 {
         simd,
@@ -410,20 +411,31 @@ fn sparse_rows4_body(
     ptr: &[u32],
     cols: &[u32],
     vals: &[f32],
-    x: &[[f32; 4]],
-    out: &mut [glam::Vec3],
+    x: &[glam::Vec3A],
+    out: &mut [glam::Vec3A],
 ) {
     let mut start = ptr[0] as usize;
     for (o, &end) in out.iter_mut().zip(&ptr[1..]) {
         let end = end as usize;
-        let mut acc = simd.sse._mm_setzero_ps();
-        for (&c, &w) in cols[start..end].iter().zip(&vals[start..end]) {
-            acc =
-                simd.fma
-                    ._mm_fmadd_ps(simd.sse._mm_set1_ps(w), bytemuck::cast(x[c as usize]), acc);
-        }
-        let a: [f32; 4] = bytemuck::cast(acc);
-        *o = glam::Vec3::new(a[0], a[1], a[2]);
+        let (c, w) = (&cols[start..end], &vals[start..end]);
+        let acc = if let (Ok(c), Ok(w)) = (<&[u32; 4]>::try_from(c), <&[f32; 4]>::try_from(w)) {
+            // Four entries (Loop's interior edge points, three in four rows): unrolled, in two
+            // chains.
+            let term = |k: usize| (simd.sse._mm_set1_ps(w[k]), x[c[k] as usize].into());
+            let ((w0, x0), (w1, x1), (w2, x2), (w3, x3)) = (term(0), term(1), term(2), term(3));
+            let a = simd.fma._mm_fmadd_ps(w1, x1, simd.sse._mm_mul_ps(w0, x0));
+            let b = simd.fma._mm_fmadd_ps(w3, x3, simd.sse._mm_mul_ps(w2, x2));
+            simd.sse._mm_add_ps(a, b)
+        } else {
+            let mut acc = simd.sse._mm_setzero_ps();
+            for (&c, &w) in c.iter().zip(w) {
+                acc = simd
+                    .fma
+                    ._mm_fmadd_ps(simd.sse._mm_set1_ps(w), x[c as usize].into(), acc);
+            }
+            acc
+        };
+        *o = acc.into();
         start = end;
     }
 }
@@ -435,8 +447,8 @@ pub(crate) fn sparse_rows4(
     _ptr: &[u32],
     _cols: &[u32],
     _vals: &[f32],
-    _x: &[[f32; 4]],
-    _out: &mut [glam::Vec3],
+    _x: &[glam::Vec3A],
+    _out: &mut [glam::Vec3A],
 ) {
     match simd {}
 }

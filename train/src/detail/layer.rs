@@ -121,6 +121,7 @@ pub fn resample(
     let nv = synth.vertex_count();
     let zero = vec![0.0; nv];
     let mut high = vec![Vec3::ZERO; nv];
+    let mut normals = Vec::with_capacity(nv);
     let mut stats = ExtractStats::default();
     let mut all = Vec::with_capacity(base_frames.len());
     for (example, (base, target)) in base_frames.iter().zip(detailed.frames).enumerate() {
@@ -131,8 +132,10 @@ pub fn resample(
         synth.synthesize(base, &zero, &mut high)?;
         let target = DisplacementTarget::new(target, detailed.triangles).map_err(wrap)?;
         let mut h = vec![0.0; nv];
+        normals.clear();
+        normals.extend(synth.normals().iter().map(|&n| Vec3::from(n)));
         let s = target
-            .displacements(&high, synth.normals(), max_distance, &mut h)
+            .displacements(&high, &normals, max_distance, &mut h)
             .map_err(wrap)?;
         stats = stats.merge(s);
         all.push(h);
