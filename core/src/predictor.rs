@@ -27,7 +27,7 @@ use glam::{Quat, Vec3};
 use crate::model::TrainedModel;
 use crate::runtime::confidence::{Confidence, ConfidenceScratch};
 use crate::runtime::detail::{DetailError, DetailSynth};
-use crate::runtime::displacement::{DetailInput, DetailRegressor, rotations_input};
+use crate::runtime::displacement::{BlockedRows, DetailInput, DetailRegressor, rotations_input};
 use crate::runtime::predict::RotationScratch;
 use crate::runtime::refine::{BoneRefiner, RefineScratch};
 use crate::runtime::skin::{
@@ -93,15 +93,23 @@ pub struct Predictor {
     skinning: Skinning,
     solver: TranslationSolver,
     beta: f32,
-    /// `S` and its topology for the detail layer, built by the first call that needs it (a
+    /// `S`, its topology and the blocked `D` for the detail layer, built by the first call that needs it (a
     /// predictor nobody asks for detail never builds it), then cloned, buffers and all, into a
     /// context by its first detail frame; the topology is shared.
-    detail: OnceLock<Result<DetailSynth, DetailError>>,
+    detail: OnceLock<Result<DetailRuntime, DetailError>>,
     /// The bone-level refinement after the regression, when switched on
     /// ([`Predictor::set_refinement`]).
     refine: Option<(BoneRefiner, Refinement)>,
     /// The scale of the per-frame confidence (`None` for a model of one example).
     confidence: Option<Confidence>,
+}
+
+/// The detail layer's per-frame structures, built from the model on its first detail frame:
+/// the synthesis every context clones, and `D` in blocks of rows for the regression.
+#[derive(Debug)]
+struct DetailRuntime {
+    synth: DetailSynth,
+    d: BlockedRows,
 }
 
 /// The bone-level refinement's settings (`runtime::refine`, issue 20).
@@ -281,14 +289,22 @@ impl Predictor {
 
     /// The detail layer's synthesis: `Ok(None)` for a model without one; built on first use.
     fn detail_synth(&self) -> Result<Option<&DetailSynth>, PredictError> {
+        Ok(self.detail_runtime()?.map(|d| &d.synth))
+    }
+
+    /// The detail layer's per-frame structures, built on first use.
+    fn detail_runtime(&self) -> Result<Option<&DetailRuntime>, PredictError> {
         let Some(layer) = &self.model.detail else {
             return Ok(None);
         };
-        let built = self
-            .detail
-            .get_or_init(|| DetailSynth::from_mesh(&self.model.rig.rest, layer.levels));
+        let built = self.detail.get_or_init(|| {
+            Ok(DetailRuntime {
+                synth: DetailSynth::from_mesh(&self.model.rig.rest, layer.levels)?,
+                d: BlockedRows::new(&layer.regressor),
+            })
+        });
         match built {
-            Ok(synth) => Ok(Some(synth)),
+            Ok(d) => Ok(Some(d)),
             Err(e) => Err(e.clone().into()),
         }
     }
@@ -689,18 +705,26 @@ impl Predictor {
         ctx: &'c mut FrameContext,
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
+        // The model's own regressor in its blocked form (built once), another one as it is.
+        let blocked = self.detail_runtime()?.map(|d| &d.d).filter(|_| {
+            self.model
+                .detail
+                .as_ref()
+                .is_some_and(|l| std::ptr::eq(&l.regressor, regressor))
+        });
         let (frame, base) = self.prepare_detail(ctx, regressor)?;
         let xi = &mut frame.xi[..regressor.example_count()];
         regressor.kernel_vector(&frame.x, xi);
         let xi = &*xi;
         // h = D xi + b regressed block by block inside the synthesis's last pass (one sweep of
         // D beside the positions it moves, HZY11 eq. 4).
-        frame.synth.synthesize_regressed(
-            base,
-            &|first, rows| regressor.apply_rows(xi, first, rows),
-            &mut frame.h,
-            &mut frame.out,
-        )?;
+        let rows = |first: usize, rows: &mut [f32]| match blocked {
+            Some(d) => d.apply_rows(xi, first, rows),
+            None => regressor.apply_rows(xi, first, rows),
+        };
+        frame
+            .synth
+            .synthesize_regressed(base, &rows, &mut frame.h, &mut frame.out)?;
         Ok(&frame.out)
     }
 

@@ -357,6 +357,102 @@ struct DetailTopology {
     /// Every group of four subdivided triangles as its six vertices `[a, b, c, ab, bc, ca]`
     /// ([`loop_groups`]): half the bytes of the triangles the scatter would otherwise read.
     groups: Vec<[u32; 6]>,
+    /// Each level's trailing rows of Loop edge points as stencils ([`EdgeStencils`]), one per
+    /// [`LoopSubdivision::steps`].
+    edges: Vec<EdgeStencils>,
+}
+
+/// The rows `first..` of one level's matrix that are Loop edge points (`3/8 (a + b) + 1/8 (c +
+/// d)` inside, `1/2 (a + b)` on the boundary), as their four vertices `[a, b, c, d]` (`[a, b,
+/// a, b]` on the boundary): 16 bytes a row instead of 36 in compressed rows, and no weights to
+/// load (issue 23: the detail frame's matrices, `D` among them, overflow the last-level cache,
+/// so its bytes are its time). Loop's documented order puts the edge points last; rows of any
+/// other form before them stay compressed rows.
+#[derive(Debug)]
+struct EdgeStencils {
+    first: usize,
+    quads: Vec<[u32; 4]>,
+}
+
+impl EdgeStencils {
+    /// The longest run of edge-point rows at the end of `s`.
+    fn new(s: &SparseMatrix) -> EdgeStencils {
+        let mut quads = Vec::new();
+        let mut first = s.rows();
+        while first > 0 {
+            let Some(q) = edge_stencil(s.row(first - 1)) else {
+                break;
+            };
+            quads.push(q);
+            first -= 1;
+        }
+        quads.reverse();
+        EdgeStencils { first, quads }
+    }
+}
+
+/// A row `(cols, vals)` as `[a, b, c, d]` with weights `3/8, 3/8, 1/8, 1/8` (exact in f32), or
+/// a `1/2, 1/2` row as `[a, b, a, b]` (`3/8 + 1/8 = 1/2`); `None` for any other row.
+fn edge_stencil((cols, vals): (&[u32], &[f32])) -> Option<[u32; 4]> {
+    match (cols, vals) {
+        (&[a, b], &[0.5, 0.5]) => Some([a, b, a, b]),
+        (&[_, _, _, _], &[_, _, _, _]) => {
+            let mut q = [0u32; 4];
+            let (mut wide, mut narrow) = (0, 2);
+            for (&c, &w) in cols.iter().zip(vals) {
+                if w == 0.375 && wide < 2 {
+                    q[wide] = c;
+                    wide += 1;
+                } else if w == 0.125 && narrow < 4 {
+                    q[narrow] = c;
+                    narrow += 1;
+                } else {
+                    return None;
+                }
+            }
+            Some(q)
+        }
+        _ => None,
+    }
+}
+
+/// `out[k] = 3/8 (x[a] + x[b]) + 1/8 (x[c] + x[d])` for `quads[k] = [a, b, c, d]`.
+#[inline(always)]
+fn edge_rows(quads: &[[u32; 4]], x: &[Vec3A], out: &mut [Vec3A]) {
+    for (o, q) in out.iter_mut().zip(quads) {
+        let [a, b, c, d] = q.map(|i| x[i as usize]);
+        *o = (a + b) * 0.375 + (c + d) * 0.125;
+    }
+}
+
+/// Rows `first .. first + out.len()` of `s · x` on 4-lane rows: compressed rows before
+/// `edges.first` ([`apply_rows_padded`]), stencils from there ([`edge_rows`]).
+fn apply_step(
+    s: &SparseMatrix,
+    edges: &EdgeStencils,
+    x: &[Vec3A],
+    first: usize,
+    out: &mut [Vec3A],
+) {
+    let split = edges.first.saturating_sub(first).min(out.len());
+    let (rows, stencils) = out.split_at_mut(split);
+    if !rows.is_empty() {
+        apply_rows_padded(s, x, first, rows);
+    }
+    if !stencils.is_empty() {
+        let quads = &edges.quads[first + split - edges.first..][..stencils.len()];
+        let x = &x[..s.columns()];
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = super::simd::fma() {
+            simd.vectorize(v3::EdgeRows {
+                quads,
+                x,
+                out: stencils,
+            });
+            return;
+        }
+        edge_rows(quads, x, stencils);
+    }
 }
 
 /// Rows of `h` regressed at a time in [`DetailSynth::synthesize_regressed`]'s last pass: 256
@@ -408,6 +504,7 @@ impl DetailSynth {
         let fans = VertexFans::new(n, subdivision.triangles());
         let groups = loop_groups(subdivision.triangles());
         let steps = subdivision.steps();
+        let edges = steps.iter().map(EdgeStencils::new).collect();
         let stages = steps[..steps.len().saturating_sub(1)]
             .iter()
             .map(|s| vec![Vec3A::ZERO; s.rows()])
@@ -419,6 +516,7 @@ impl DetailSynth {
                 subdivision,
                 fans,
                 groups,
+                edges,
             }),
             method: NormalsMethod::Auto,
             high: vec![Vec3A::ZERO; n],
@@ -543,21 +641,23 @@ impl DetailSynth {
     /// `self.high = S · base` as the one-level products in turn
     /// ([`LoopSubdivision::steps`]), each from and to 4-lane rows ([`apply_rows_padded`]).
     fn subdivide_steps(&mut self, base: &[Vec3]) -> Result<(), DetailError> {
-        let steps = self.topology.subdivision.steps();
+        let topology = &*self.topology;
+        let steps = topology.subdivision.steps();
         let (last, inner) = steps.split_last().expect("at least one level");
+        let last_edges = topology.edges.last().expect("one per level");
         steps[0].check(base, steps[0].rows())?;
         self.base.clear();
         self.base.extend(base.iter().map(|&p| Vec3A::from(p)));
-        for (k, step) in inner.iter().enumerate() {
+        for (k, (step, edges)) in inner.iter().zip(&topology.edges).enumerate() {
             let (done, rest) = self.stages.split_at_mut(k);
             let input = done.last().unwrap_or(&self.base);
             fill_rows(&mut rest[0], PARALLEL_CHUNK, |first, o| {
-                apply_rows_padded(step, input, first, o)
+                apply_step(step, edges, input, first, o)
             });
         }
         let input = self.stages.last().unwrap_or(&self.base);
         fill_rows(&mut self.high, PARALLEL_CHUNK, |first, o| {
-            apply_rows_padded(last, input, first, o)
+            apply_step(last, last_edges, input, first, o)
         });
         Ok(())
     }
@@ -615,6 +715,8 @@ fn scatter_groups(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
 /// [`scatter_groups`] after the zeroing: the same code for every instruction set.
 #[inline(always)]
 fn scatter_groups_body(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
+    // One length for both, so one bounds check an index serves the load and the update.
+    let acc = &mut acc[..positions.len()];
     for g in groups {
         let [a, b, c, ab, bc, ca] = g.map(|i| i as usize);
         let (pa, pb, pc) = (positions[a], positions[b], positions[c]);
@@ -664,6 +766,22 @@ mod v3 {
     use glam::{Vec3, Vec3A};
 
     use super::RegressRows;
+
+    /// [`super::edge_rows`].
+    pub(super) struct EdgeRows<'a> {
+        pub(super) quads: &'a [[u32; 4]],
+        pub(super) x: &'a [Vec3A],
+        pub(super) out: &'a mut [Vec3A],
+    }
+
+    impl pulp::NullaryFnOnce for EdgeRows<'_> {
+        type Output = ();
+
+        #[inline(always)]
+        fn call(self) {
+            super::edge_rows(self.quads, self.x, self.out);
+        }
+    }
 
     /// [`super::scatter_groups_body`].
     pub(super) struct ScatterGroups<'a> {
@@ -1021,6 +1139,58 @@ mod tests {
             assert_eq!(out[v], Vec3::from(high[v] + h[v] * want_n[v]), "vertex {v}");
         }
         assert_eq!(Vec3::from(got_n[3]), Vec3::ZERO);
+    }
+
+    /// The edge-point stencils cover Loop's edge rows (interior and boundary) and give the
+    /// matrix's sums (in f64) on every split of the rows.
+    #[test]
+    fn edge_stencils_equal_the_matrix_rows() {
+        let m = grid(6, 5, |i, j| {
+            Vec3::new(
+                i as f32 * 1.1,
+                j as f32 * 0.9,
+                ((i * 3 + j * 5) % 7) as f32 * 0.3,
+            )
+        });
+        let s = LoopSubdivision::new(&m, 1).unwrap();
+        let mat = s.matrix();
+        let edges = EdgeStencils::new(mat);
+        // Every edge row is a stencil: the run starts at the first edge point.
+        assert_eq!(edges.first, m.vertex_count());
+        assert_eq!(edges.quads.len(), mat.rows() - m.vertex_count());
+        assert!(edges.quads.iter().any(|q| q[0] == q[2]), "a boundary edge");
+        assert!(edges.quads.iter().any(|q| q[0] != q[2]), "an interior edge");
+        let x: Vec<Vec3A> = m.positions.iter().map(|&p| p.into()).collect();
+        for first in [0, 5, m.vertex_count(), mat.rows() - 3] {
+            let mut out = vec![Vec3A::NAN; mat.rows() - first];
+            apply_step(mat, &edges, &x, first, &mut out);
+            for (k, o) in out.iter().enumerate() {
+                let (cols, vals) = mat.row(first + k);
+                let mut scale = 0.0f64;
+                for (axis, got) in [o.x, o.y, o.z].into_iter().enumerate() {
+                    let mut want = 0.0f64;
+                    for (&c, &w) in cols.iter().zip(vals) {
+                        let p = f64::from(m.positions[c as usize][axis]);
+                        want += f64::from(w) * p;
+                        scale = scale.max(f64::from(w.abs()) * p.abs());
+                    }
+                    assert!(
+                        (f64::from(got) - want).abs()
+                            <= 8.0 * f64::from(f32::EPSILON) * scale.max(1.0),
+                        "row {} axis {axis}: {got} vs {want}",
+                        first + k
+                    );
+                }
+            }
+        }
+        // Rows of another form end the run.
+        let q = edge_stencil((&[1, 2, 3, 4], &[0.375, 0.375, 0.125, 0.126]));
+        assert_eq!(q, None);
+        assert_eq!(edge_stencil((&[1, 2], &[0.5, 0.5])), Some([1, 2, 1, 2]));
+        assert_eq!(
+            edge_stencil((&[1, 2, 3, 4], &[0.125, 0.375, 0.125, 0.375])),
+            Some([2, 4, 1, 3])
+        );
     }
 
     #[test]

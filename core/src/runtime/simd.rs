@@ -9,6 +9,8 @@
 //!
 //! - [`dot_rows`]: `out = m xi + b`, `m` row-major, for [`super::predict::LinearOperator`]
 //!   (the rotation regressors, FKY08 eq. 8, and the detail regressor, HZY11 §5.2);
+//! - [`block_rows8`]: the same product on `D` in blocks of eight rows stored column by
+//!   column, no horizontal sums (the detail regressor's per-frame form);
 //! - [`rotate_sum`]: `acc_a = sum_p R_{idx_p} k_p` over a sparse row structure, the
 //!   right-hand side of the translation solve (FKY08 eq. 11);
 //! - [`lower_solve4`]: that solve's forward and backward substitutions, the three coordinates
@@ -151,6 +153,14 @@ vectorized!(DotRows {
 } => dot_rows_body);
 
 #[cfg(target_arch = "x86_64")]
+vectorized!(BlockRows8 {
+    blocks: &'a [[f32; 8]],
+    xi: &'a [f32],
+    b: &'a [f32],
+    out: &'a mut [f32],
+} => block_rows8_body);
+
+#[cfg(target_arch = "x86_64")]
 vectorized!(RotateSum {
     ptr: &'a [usize],
     idx: &'a [u32],
@@ -192,6 +202,63 @@ fn sum8(simd: Fma, v: std::arch::x86_64::__m256) -> f32 {
 /// Off x86-64 there is no FMA kernel.
 #[cfg(not(target_arch = "x86_64"))]
 pub(crate) fn dot_rows(simd: Fma, _m: &[f32], _xi: &[f32], _b: &[f32], _out: &mut [f32]) -> bool {
+    match simd {}
+}
+
+/// `out = b + sum_l blocks[.., l] xi_l` for whole blocks of eight rows stored column by column
+/// (`runtime::displacement::BlockedRows`): per block and column one broadcast and one 8-wide
+/// fused multiply-add (two chains, even and odd columns), per block one store.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn block_rows8(simd: Fma, blocks: &[[f32; 8]], xi: &[f32], b: &[f32], out: &mut [f32]) {
+    simd.vectorize(BlockRows8 {
+        simd,
+        blocks,
+        xi,
+        b,
+        out,
+    });
+}
+
+/// [`block_rows8`]'s loop, inlined into pulp's AVX2 + FMA context (see [`dot_rows_body`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn block_rows8_body(simd: Fma, blocks: &[[f32; 8]], xi: &[f32], b: &[f32], out: &mut [f32]) {
+    let cols = xi.len();
+    let outs = out.chunks_exact_mut(8).zip(b.chunks_exact(8));
+    for ((o, b), block) in outs.zip(blocks.chunks_exact(cols)) {
+        let b: &[f32; 8] = b.try_into().expect("chunks of 8");
+        let mut even: std::arch::x86_64::__m256 = bytemuck::cast(*b);
+        let mut odd = simd.avx._mm256_setzero_ps();
+        let mut pairs = block.chunks_exact(2).zip(xi.chunks_exact(2));
+        for (c, x) in &mut pairs {
+            even =
+                simd.fma
+                    ._mm256_fmadd_ps(bytemuck::cast(c[0]), simd.avx._mm256_set1_ps(x[0]), even);
+            odd =
+                simd.fma
+                    ._mm256_fmadd_ps(bytemuck::cast(c[1]), simd.avx._mm256_set1_ps(x[1]), odd);
+        }
+        if cols % 2 == 1 {
+            even = simd.fma._mm256_fmadd_ps(
+                bytemuck::cast(block[cols - 1]),
+                simd.avx._mm256_set1_ps(xi[cols - 1]),
+                even,
+            );
+        }
+        let sum: [f32; 8] = bytemuck::cast(simd.avx._mm256_add_ps(even, odd));
+        o.copy_from_slice(&sum);
+    }
+}
+
+/// Off x86-64 there is no FMA kernel.
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) fn block_rows8(
+    simd: Fma,
+    _blocks: &[[f32; 8]],
+    _xi: &[f32],
+    _b: &[f32],
+    _out: &mut [f32],
+) {
     match simd {}
 }
 
