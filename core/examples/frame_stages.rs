@@ -4,12 +4,12 @@
 //!
 //! ```sh
 //! cargo build --release -p crease-core --example frame_stages
-//! RAYON_NUM_THREADS=1 target/release/examples/frame_stages MODEL.crease TEST_MANIFEST V1,V2,..
+//! RAYON_NUM_THREADS=1 target/release/examples/frame_stages MODEL.crease TEST_MANIFEST [V1,V2,..]
 //! ```
 //!
 //! The control frames are the test manifest's poses read at the vertices `V1,V2,..` (of the
 //! test meshes: with a model trained by `--base-vertices`, the full-mesh vertices its
-//! `--control-points` named). Stages, each timed over `FRAMES` frames (200; the environment's
+//! `--control-points` named), or at the model's own control vertices when none are given. Stages, each timed over `FRAMES` frames (200; the environment's
 //! `FRAMES` overrides it, e.g. a few for instruction counts under callgrind; median and
 //! minimum):
 //!
@@ -17,7 +17,9 @@
 //! - `transforms`: rotations, the confidence and the eq. 11 translation solve
 //!   (`Predictor::predict_transforms`); `translations` is the difference of the two;
 //! - `skin`: packed LBS of the base (`Predictor::skin`);
-//! - `detail regress`: `h = D xi + b`; `detail synth`: `S · base`, normals, `+ h n`;
+//! - `detail regress`: `h = D xi + b` (`D` in the frame's blocks of rows); `detail synth`:
+//!   `S · base`, normals, `+ h n`; `detail frame`: both as `Predictor::predict_detail` runs
+//!   them, the regression fused into the synthesis's last pass;
 //! - `encode base` / `encode detail`: the vertex codec (16 bits, a keyframe every 30).
 //!
 //! Floors: memory-bound stages against `memcpy` of the bytes they read and write at least (the
@@ -41,6 +43,7 @@ use crease_core::mesh::ExampleSet;
 use crease_core::model::TrainedModel;
 use crease_core::predictor::Predictor;
 use crease_core::runtime::detail::DetailSynth;
+use crease_core::runtime::displacement::BlockedRows;
 use crease_core::runtime::predict::GroupRegression;
 
 use common::timings;
@@ -156,15 +159,17 @@ fn quant_box(p: &[Vec3]) -> QuantBox {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: frame_stages MODEL.crease TEST_MANIFEST V1,V2,..";
+    let usage = "usage: frame_stages MODEL.crease TEST_MANIFEST [V1,V2,..]";
     let model = Arc::new(TrainedModel::load(args.get(1).expect(usage)).expect("model"));
     let test = ExampleSet::load(args.get(2).expect(usage)).expect("test manifest");
-    let vertices: Vec<usize> = args
-        .get(3)
-        .expect(usage)
-        .split(',')
-        .map(|v| v.trim().parse().expect("vertex index"))
-        .collect();
+    let vertices: Vec<usize> = match args.get(3) {
+        Some(list) => list
+            .split(',')
+            .map(|v| v.trim().parse().expect("vertex index"))
+            .collect(),
+        // The model's own control vertices (a model trained on the test meshes' topology).
+        None => model.controls.iter().map(|c| c.vertex as usize).collect(),
+    };
     assert_eq!(
         vertices.len(),
         model.controls.len(),
@@ -280,10 +285,13 @@ fn main() {
         let x: Vec<f32> = ctx.controls().iter().flat_map(|p| p.to_array()).collect();
         let mut xi = vec![0.0; ex];
         let mut h = vec![0.0; nv];
+        // The frame's form of D (blocks of eight rows, `BlockedRows`), alone.
+        let blocked = BlockedRows::new(&detail.regressor);
         rows.push((
             "detail regress".into(),
             timings(frames_per_figure(), || {
-                detail.regressor.predict(&x, &mut xi, &mut h)
+                detail.regressor.kernel_vector(&x, &mut xi);
+                blocked.apply_rows(&xi, 0, &mut h);
             }),
             format!("D {nv} x {ex}"),
         ));
