@@ -23,6 +23,8 @@ pub mod gltf;
 pub mod obj;
 pub mod ply;
 pub mod subdivision;
+#[cfg(test)]
+pub(crate) mod test_meshes;
 pub mod topology;
 
 pub use error::{Location, MeshError};

@@ -150,19 +150,7 @@ impl Adjacency {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Regular tetrahedron, outward-facing counter-clockwise triangles.
-    fn tetrahedron() -> Mesh {
-        Mesh {
-            positions: vec![
-                Vec3::new(1.0, 1.0, 1.0),
-                Vec3::new(1.0, -1.0, -1.0),
-                Vec3::new(-1.0, 1.0, -1.0),
-                Vec3::new(-1.0, -1.0, 1.0),
-            ],
-            triangles: vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]],
-        }
-    }
+    use crate::mesh::test_meshes::tetrahedron;
 
     /// An n x n grid of quads in the z = 0 plane, with uneven spacing so the area weights
     /// differ, split into counter-clockwise (seen from +Z) triangles.

@@ -270,8 +270,22 @@ fn displace_kernel(positions: &mut [Vec3], normals: &[Vec3], h: &[f32]) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_meshes::{grid, tetrahedron};
     use super::*;
+    use crate::mesh::Mesh;
+    use crate::mesh::test_meshes::{grid, tetrahedron};
+
+    /// The fans of `m` and their normals, checked against the triangle scatter's.
+    fn fans_against_scatter(m: &Mesh) -> (VertexFans, Vec<Vec3>) {
+        let fans = VertexFans::new(m.vertex_count(), &m.triangles);
+        let mut a = vec![Vec3::NAN; m.vertex_count()];
+        let mut b = vec![Vec3::NAN; m.vertex_count()];
+        fans.normals(&m.positions, &mut a).unwrap();
+        scatter_normals(&m.positions, &m.triangles, &mut b).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert!((*x - *y).length() < 1e-6, "{x} vs {y}");
+        }
+        (fans, a)
+    }
 
     #[test]
     fn fan_normals_match_scatter_normals_with_degenerate_and_isolated_vertices() {
@@ -282,14 +296,7 @@ mod tests {
         m.positions.push(Vec3::new(9.0, 9.0, 9.0));
         m.triangles.push([4, 5, 0]);
         m.positions[0] = Vec3::new(4.0, 0.0, 0.0);
-        let fans = VertexFans::new(m.vertex_count(), &m.triangles);
-        let mut a = vec![Vec3::NAN; m.vertex_count()];
-        let mut b = vec![Vec3::NAN; m.vertex_count()];
-        fans.normals(&m.positions, &mut a).unwrap();
-        scatter_normals(&m.positions, &m.triangles, &mut b).unwrap();
-        for (x, y) in a.iter().zip(&b) {
-            assert!((*x - *y).length() < 1e-6, "{x} vs {y}");
-        }
+        let (_, a) = fans_against_scatter(&m);
         assert_eq!(a[6], Vec3::ZERO);
         assert_eq!(a[4], Vec3::ZERO);
     }
@@ -301,14 +308,7 @@ mod tests {
             Vec3::new(i as f32, j as f32, ((i * 7 + j * 3) % 5) as f32 * 0.1)
         });
         m.triangles[7].swap(1, 2);
-        let fans = VertexFans::new(m.vertex_count(), &m.triangles);
-        let mut a = vec![Vec3::NAN; m.vertex_count()];
-        let mut b = vec![Vec3::NAN; m.vertex_count()];
-        fans.normals(&m.positions, &mut a).unwrap();
-        scatter_normals(&m.positions, &m.triangles, &mut b).unwrap();
-        for (x, y) in a.iter().zip(&b) {
-            assert!((*x - *y).length() < 1e-6, "{x} vs {y}");
-        }
+        let (fans, _) = fans_against_scatter(&m);
         // 18 triangles: 54 corners, plus one closing/separating entry per chain.
         assert!(fans.len() > 54, "{}", fans.len());
     }

@@ -353,9 +353,9 @@ fn apply_rows_padded(s: &SparseMatrix, x: &[Vec3A], first_row: usize, out: &mut 
 #[cfg(test)]
 mod tests {
     use super::super::DetailSynth;
-    use super::super::test_meshes::grid;
     use super::*;
     use crate::mesh::subdivision::LoopSubdivision;
+    use crate::mesh::test_meshes::grid;
 
     #[test]
     fn grouped_scatter_sums_the_same_face_normals() {
