@@ -303,15 +303,16 @@ fn rotate_sum_body(
         let zero = avx._mm256_setzero_pd();
         let mut even = [zero; 3];
         let mut odd = [zero; 3];
-        let (start, end) = (ptr[a], ptr[a + 1]);
-        let mut p = start;
-        while p + 1 < end {
-            rotate_entry(simd, &rot[idx[p] as usize], val[p], &mut even);
-            rotate_entry(simd, &rot[idx[p + 1] as usize], val[p + 1], &mut odd);
-            p += 2;
+        // The row's entries as slices, so that only the rotation lookup is bounds-checked.
+        let (idx, val) = (&idx[ptr[a]..ptr[a + 1]], &val[ptr[a]..ptr[a + 1]]);
+        let mut pairs = idx.chunks_exact(2).zip(val.chunks_exact(2));
+        for (i, v) in &mut pairs {
+            rotate_entry(simd, &rot[i[0] as usize], v[0], &mut even);
+            rotate_entry(simd, &rot[i[1] as usize], v[1], &mut odd);
         }
-        if p < end {
-            rotate_entry(simd, &rot[idx[p] as usize], val[p], &mut even);
+        if idx.len() % 2 == 1 {
+            let last = idx.len() - 1;
+            rotate_entry(simd, &rot[idx[last] as usize], val[last], &mut even);
         }
         let sum = avx._mm256_add_pd(
             avx._mm256_add_pd(
@@ -394,32 +395,36 @@ fn lower_solve4_body(
     let n = y.len();
     let avx = simd.avx;
     let fma = simd.fma;
+    // Each column's off-diagonal entries as slices, so that only the `y` accesses are
+    // bounds-checked.
+    let below = |j: usize| {
+        let (start, end) = (col_ptr[j] as usize + 1, col_ptr[j + 1] as usize);
+        (&row_idx[start..end], &val[start..end])
+    };
     for j in 0..n {
-        let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
         let yj = avx._mm256_mul_pd(bytemuck::cast(y[j]), avx._mm256_set1_pd(inv_diag[j]));
         y[j] = bytemuck::cast(yj);
-        for p in start + 1..end {
-            let yi = &mut y[row_idx[p] as usize];
-            let v: __m256d =
-                fma._mm256_fnmadd_pd(avx._mm256_set1_pd(val[p]), yj, bytemuck::cast(*yi));
-            *yi = bytemuck::cast(v);
+        let (rows, vals) = below(j);
+        for (&r, &v) in rows.iter().zip(vals) {
+            let yi = &mut y[r as usize];
+            let t: __m256d = fma._mm256_fnmadd_pd(avx._mm256_set1_pd(v), yj, bytemuck::cast(*yi));
+            *yi = bytemuck::cast(t);
         }
     }
     for j in (0..n).rev() {
-        let (start, end) = (col_ptr[j] as usize, col_ptr[j + 1] as usize);
         let zero = avx._mm256_setzero_pd();
         let (mut even, mut odd) = (zero, zero);
-        let mut p = start + 1;
-        while p + 1 < end {
-            let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
-            let b: __m256d = bytemuck::cast(y[row_idx[p + 1] as usize]);
-            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
-            odd = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p + 1]), b, odd);
-            p += 2;
+        let (rows, vals) = below(j);
+        let mut pairs = rows.chunks_exact(2).zip(vals.chunks_exact(2));
+        for (r, v) in &mut pairs {
+            let a: __m256d = bytemuck::cast(y[r[0] as usize]);
+            let b: __m256d = bytemuck::cast(y[r[1] as usize]);
+            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(v[0]), a, even);
+            odd = fma._mm256_fmadd_pd(avx._mm256_set1_pd(v[1]), b, odd);
         }
-        if p < end {
-            let a: __m256d = bytemuck::cast(y[row_idx[p] as usize]);
-            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(val[p]), a, even);
+        if rows.len() % 2 == 1 {
+            let a: __m256d = bytemuck::cast(y[rows[rows.len() - 1] as usize]);
+            even = fma._mm256_fmadd_pd(avx._mm256_set1_pd(vals[vals.len() - 1]), a, even);
         }
         let s = avx._mm256_sub_pd(bytemuck::cast(y[j]), avx._mm256_add_pd(even, odd));
         y[j] = bytemuck::cast(avx._mm256_mul_pd(s, avx._mm256_set1_pd(inv_diag[j])));
