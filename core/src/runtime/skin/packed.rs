@@ -487,6 +487,11 @@ mod fma {
 
     use super::{BlockBlend, LANES, RowTable, Slot};
 
+    /// `_mm_shuffle_ps`'s immediate: lanes `a`, `b` of its first operand, `c`, `d` of its second.
+    const fn imm(a: i32, b: i32, c: i32, d: i32) -> i32 {
+        a | (b << 2) | (c << 4) | (d << 6)
+    }
+
     /// [`super::packed_kernel`] with [`Blend`], compiled for AVX2 + FMA: handed to pulp as a
     /// struct whose `call` is inlined into its feature context (a closure's `call_once` was not
     /// always inlined there, leaving the intrinsics as calls: ARCHITECTURE.md, "Per-frame
@@ -567,24 +572,54 @@ mod fma {
                     rows2[l] = simd.fma._mm256_fmadd_ps(w, r2, rows2[l]);
                 }
             }
+            // Each vertex as (x, y, z, 1) in both halves, from the block's 12 rest floats
+            // loaded as three 16-byte rows [x0 y0 z0 x1], [y1 z1 x2 y2], [z2 x3 y3 z3].
+            let (sse, sse41, avx) = (simd.sse, simd.sse4_1, simd.avx);
+            let rows: &[[f32; 4]; 3] = bytemuck::cast_ref(rest);
+            let (a, b, c) = (
+                bytemuck::cast(rows[0]),
+                bytemuck::cast(rows[1]),
+                bytemuck::cast(rows[2]),
+            );
+            let one = sse._mm_set1_ps(1.0);
+            let x1y1 = sse._mm_shuffle_ps::<{ imm(3, 3, 0, 0) }>(a, b); // x1 x1 y1 y1
+            let z1w = sse._mm_shuffle_ps::<{ imm(1, 1, 0, 0) }>(b, one); // z1 z1 1 1
+            let z2w = sse._mm_shuffle_ps::<{ imm(0, 0, 0, 0) }>(c, one); // z2 z2 1 1
+            let p = [
+                sse41._mm_blend_ps::<0b1000>(a, one),
+                sse._mm_shuffle_ps::<{ imm(0, 2, 0, 2) }>(x1y1, z1w),
+                sse._mm_shuffle_ps::<{ imm(2, 3, 0, 2) }>(b, z2w),
+                sse41._mm_blend_ps::<0b1000>(sse._mm_shuffle_ps::<{ imm(1, 2, 3, 3) }>(c, c), one),
+            ];
             for l in 0..LANES {
-                let p = rest[l];
-                let pp = simd
-                    .avx
-                    ._mm256_setr_ps(p.x, p.y, p.z, 1.0, p.x, p.y, p.z, 1.0);
-                rows01[l] = simd.avx._mm256_mul_ps(rows01[l], pp);
-                rows2[l] = simd.avx._mm256_mul_ps(rows2[l], pp);
+                let pp = avx._mm256_insertf128_ps::<1>(avx._mm256_castps128_ps256(p[l]), p[l]);
+                rows01[l] = avx._mm256_mul_ps(rows01[l], pp);
+                rows2[l] = avx._mm256_mul_ps(rows2[l], pp);
             }
             // hadd(a, b) = [a0+a1, a2+a3, b0+b1, b2+b3 | a4+a5, a6+a7, b4+b5, b6+b7]: after
             // three rounds, [x0 x1 x2 x3 | y0 y1 y2 y3] and [z0 z1 z2 z3 | 0 0 0 0].
             let hadd = |a, b| simd.avx._mm256_hadd_ps(a, b);
             let xy = hadd(hadd(rows01[0], rows01[1]), hadd(rows01[2], rows01[3]));
             let z = hadd(hadd(rows2[0], rows2[1]), hadd(rows2[2], rows2[3]));
-            let xy: [f32; 8] = bytemuck::cast(xy);
-            let z: [f32; 8] = bytemuck::cast(z);
-            for (l, o) in out.iter_mut().enumerate() {
-                *o = Vec3::new(xy[l], xy[LANES + l], z[l]);
-            }
+            // The four vertices' 12 floats as three 16-byte stores: [x0 y0 z0 x1], [y1 z1 x2
+            // y2], [z2 x3 y3 z3], transposed in registers (shufps picks two lanes from each
+            // operand: `pick::<k>(a, b) = [a_k0, a_k1, b_k2, b_k3]`).
+            let x = avx._mm256_castps256_ps128(xy);
+            let y = avx._mm256_extractf128_ps::<1>(xy);
+            let z = avx._mm256_castps256_ps128(z);
+            let xy_lo = sse._mm_unpacklo_ps(x, y); // x0 y0 x1 y1
+            let xy_hi = sse._mm_unpackhi_ps(x, y); // x2 y2 x3 y3
+            let z0x1 = sse._mm_shuffle_ps::<{ imm(0, 0, 2, 2) }>(z, xy_lo); // z0 z0 x1 x1
+            let o0 = sse._mm_shuffle_ps::<{ imm(0, 1, 0, 2) }>(xy_lo, z0x1); // x0 y0 z0 x1
+            let y1z1 = sse._mm_shuffle_ps::<{ imm(3, 3, 1, 1) }>(xy_lo, z); // y1 y1 z1 z1
+            let o1 = sse._mm_shuffle_ps::<{ imm(0, 2, 0, 1) }>(y1z1, xy_hi); // y1 z1 x2 y2
+            let z2x3 = sse._mm_shuffle_ps::<{ imm(2, 2, 2, 3) }>(z, xy_hi); // z2 z2 x3 y3
+            let y3z3 = sse._mm_shuffle_ps::<{ imm(3, 3, 3, 3) }>(xy_hi, z); // y3 y3 z3 z3
+            let o2 = sse._mm_shuffle_ps::<{ imm(0, 2, 0, 2) }>(z2x3, y3z3); // z2 x3 y3 z3
+            let flat: &mut [[f32; 4]; 3] = bytemuck::cast_mut(out);
+            flat[0] = bytemuck::cast(o0);
+            flat[1] = bytemuck::cast(o1);
+            flat[2] = bytemuck::cast(o2);
         }
     }
 }
