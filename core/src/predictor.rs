@@ -93,9 +93,9 @@ pub struct Predictor {
     skinning: Skinning,
     solver: TranslationSolver,
     beta: f32,
-    /// `S`, its topology and the blocked `D` for the detail layer, built by the first call that needs it (a
-    /// predictor nobody asks for detail never builds it), then cloned, buffers and all, into a
-    /// context by its first detail frame; the topology is shared.
+    /// `S`, its topology and the blocked `D` for the detail layer, built by the first call
+    /// that needs it (a predictor nobody asks for detail never builds it); the synthesis is
+    /// cloned, buffers and all, into a context by its first detail frame, the topology shared.
     detail: OnceLock<Result<DetailRuntime, DetailError>>,
     /// The bone-level refinement after the regression, when switched on
     /// ([`Predictor::set_refinement`]).
