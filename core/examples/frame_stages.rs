@@ -9,9 +9,9 @@
 //!
 //! The control frames are the test manifest's poses read at the vertices `V1,V2,..` (of the
 //! test meshes: with a model trained by `--base-vertices`, the full-mesh vertices its
-//! `--control-points` named), or at the model's own control vertices when none are given. Stages, each timed over `FRAMES` frames (200; the environment's
-//! `FRAMES` overrides it, e.g. a few for instruction counts under callgrind; median and
-//! minimum):
+//! `--control-points` named), or at the model's own control vertices when none are given.
+//! Stages, each timed over `FRAMES` frames (200; the environment's `FRAMES` overrides it, e.g.
+//! a few for instruction counts under callgrind; median and minimum):
 //!
 //! - `rotations`: the regression (`RotationModel::predict`);
 //! - `transforms`: rotations, the confidence and the eq. 11 translation solve

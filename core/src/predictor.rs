@@ -675,13 +675,15 @@ impl Predictor {
     }
 
     /// The context's detail buffers for `regressor`, checked against the model and filled
-    /// with the regressor's input of the last frame, and the synthesis they clone.
+    /// with the regressor's input of the last frame, the base positions, and the layer's
+    /// per-frame structures.
     fn prepare_detail<'c>(
         &self,
         ctx: &'c mut FrameContext,
         regressor: &DetailRegressor,
-    ) -> Result<(&'c mut DetailFrame, &'c [Vec3]), PredictError> {
-        let template = self.detail_synth()?.ok_or(PredictError::NoDetailLayer)?;
+    ) -> Result<(&'c mut DetailFrame, &'c [Vec3], &DetailRuntime), PredictError> {
+        let runtime = self.detail_runtime()?.ok_or(PredictError::NoDetailLayer)?;
+        let template = &runtime.synth;
         let d_in = self.detail_input_len(ctx, regressor, template.vertex_count())?;
         let frame = Self::detail_frame(
             &mut ctx.detail,
@@ -691,7 +693,7 @@ impl Predictor {
             regressor,
             d_in,
         );
-        Ok((frame, &ctx.positions))
+        Ok((frame, &ctx.positions, runtime))
     }
 
     /// [`Predictor::predict_detail`] with another regressor of the same layer (the evaluation's
@@ -705,14 +707,11 @@ impl Predictor {
         ctx: &'c mut FrameContext,
         regressor: &DetailRegressor,
     ) -> Result<&'c [Vec3], PredictError> {
+        let (frame, base, runtime) = self.prepare_detail(ctx, regressor)?;
         // The model's own regressor in its blocked form (built once), another one as it is.
-        let blocked = self.detail_runtime()?.map(|d| &d.d).filter(|_| {
-            self.model
-                .detail
-                .as_ref()
-                .is_some_and(|l| std::ptr::eq(&l.regressor, regressor))
-        });
-        let (frame, base) = self.prepare_detail(ctx, regressor)?;
+        let own =
+            (self.model.detail.as_ref()).is_some_and(|l| std::ptr::eq(&l.regressor, regressor));
+        let blocked = own.then_some(&runtime.d);
         let xi = &mut frame.xi[..regressor.example_count()];
         regressor.kernel_vector(&frame.x, xi);
         let xi = &*xi;
@@ -741,7 +740,7 @@ impl Predictor {
         ctx: &'c mut FrameContext,
     ) -> Result<&'c [f32], PredictError> {
         let regressor = self.detail_regressor()?;
-        let (frame, _) = self.prepare_detail(ctx, regressor)?;
+        let (frame, _, _) = self.prepare_detail(ctx, regressor)?;
         let n = regressor.example_count();
         regressor.kernel_vector(&frame.x, &mut frame.xi[..n]);
         Ok(&frame.xi[..n])

@@ -161,9 +161,10 @@ impl DetailRegressor {
     }
 
     /// The rows `first .. first + out.len()` of `h = D xi + b` for a kernel vector `xi` into
-    /// `out`, on the calling thread: [`DetailRegressor::apply`] a block at a time (the detail
-    /// synthesis regresses each block of vertices just before it displaces them,
-    /// `DetailSynth::synthesize_regressed`). Allocates nothing.
+    /// `out`, on the calling thread: [`DetailRegressor::apply`] a block at a time, for a detail
+    /// synthesis that regresses each block of vertices just before it displaces them
+    /// (`DetailSynth::synthesize_regressed`) with a regressor other than the model's own (which
+    /// runs from its [`BlockedRows`]). Allocates nothing.
     ///
     /// # Panics
     /// If `xi` is not one value per example or the rows run past the vertices.
@@ -185,7 +186,6 @@ pub const ROW_BLOCK: usize = 8;
 /// once per model by the predictor, never stored.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BlockedRows {
-    rows: usize,
     cols: usize,
     blocks: Vec<[f32; ROW_BLOCK]>,
     b: Vec<f32>,
@@ -195,15 +195,15 @@ impl BlockedRows {
     /// `regressor`'s operator in blocks.
     pub fn new(regressor: &DetailRegressor) -> BlockedRows {
         let op = &regressor.operator;
-        let (rows, cols) = (op.rows, op.cols);
-        let mut blocks = vec![[0.0; ROW_BLOCK]; rows.div_ceil(ROW_BLOCK) * cols];
-        for (r, row) in op.m.chunks_exact(cols.max(1)).enumerate().take(rows) {
-            for (l, &v) in row.iter().enumerate().take(cols) {
+        let cols = op.cols;
+        let mut blocks = vec![[0.0; ROW_BLOCK]; op.rows.div_ceil(ROW_BLOCK) * cols];
+        // `m` is `rows x cols` row-major (a validated operator; empty when `cols` is 0).
+        for (r, row) in op.m.chunks_exact(cols.max(1)).enumerate() {
+            for (l, &v) in row.iter().enumerate() {
                 blocks[(r / ROW_BLOCK) * cols + l][r % ROW_BLOCK] = v;
             }
         }
         BlockedRows {
-            rows,
             cols,
             blocks,
             b: op.b.clone(),
@@ -212,7 +212,7 @@ impl BlockedRows {
 
     /// Number of rows (vertices).
     pub fn rows(&self) -> usize {
-        self.rows
+        self.b.len()
     }
 
     /// Rows `first .. first + out.len()` of `h = D xi + b` into `out` on the calling thread:
@@ -223,7 +223,7 @@ impl BlockedRows {
     /// If `xi` is not one value per column or the rows run past the end.
     pub fn apply_rows(&self, xi: &[f32], first: usize, out: &mut [f32]) {
         assert_eq!(xi.len(), self.cols, "xi length != examples");
-        assert!(first + out.len() <= self.rows, "rows past the end");
+        assert!(first + out.len() <= self.rows(), "rows past the end");
         let lead = (first.next_multiple_of(ROW_BLOCK) - first).min(out.len());
         let (head, rest) = out.split_at_mut(lead);
         for (k, o) in head.iter_mut().enumerate() {

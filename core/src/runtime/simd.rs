@@ -17,6 +17,8 @@
 //!   at once ([`super::lower_factor`]);
 //! - [`sparse_rows4`]: the detail layer's sparse `S · base` on 4-lane positions
 //!   (`runtime::detail`);
+//! - `compiled_twice!`: a pass written in plain Rust, run compiled for AVX2 + FMA where the
+//!   CPU has them (the detail layer's stencils, normal scatter and displacement);
 //!
 //! The packed LBS kernel lives beside its private layout in `skin::packed`.
 
@@ -141,6 +143,41 @@ macro_rules! vectorized {
         }
     };
 }
+
+/// `fn $name` running `$body` (plain Rust, `#[inline(always)]`, glam's vectors and arrays the
+/// compiler vectorises) compiled a second time for AVX2 + FMA where the CPU has them ([`fma`]):
+/// three-operand instructions instead of SSE2's register copies, 8-wide array operations. The
+/// arguments travel to pulp's feature context as a struct whose `call` is `#[inline(always)]`,
+/// as in [`vectorized!`]; elsewhere `$body` runs as it is. The same arithmetic either way (no
+/// fused multiply-adds appear that the source does not write), so the results do not depend on
+/// the CPU. Arguments share one lifetime `'a`.
+macro_rules! compiled_twice {
+    ($(#[$doc:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) => $body:path) => {
+        $(#[$doc])*
+        $vis fn $name<'a>($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = $crate::runtime::simd::fma() {
+                struct Run<'a> {
+                    $($arg: $ty),*
+                }
+
+                impl<'a> pulp::NullaryFnOnce for Run<'a> {
+                    type Output = ();
+
+                    #[inline(always)]
+                    fn call(self) {
+                        $body($(self.$arg),*)
+                    }
+                }
+
+                simd.vectorize(Run { $($arg),* });
+                return;
+            }
+            $body($($arg),*)
+        }
+    };
+}
+pub(crate) use compiled_twice;
 
 #[cfg(target_arch = "x86_64")]
 vectorized!(DotRows {
@@ -454,8 +491,8 @@ pub(crate) fn pad_columns(m: &glam::DMat3) -> [f64; 12] {
 
 /// `out[r] = sum over p in ptr[r]..ptr[r+1] of vals[p] * x[cols[p]]` with FMA on 4-lane rows
 /// (all four lanes summed): per stored entry one 16-byte load, one broadcast and one fused
-/// multiply-add (rows of four entries unrolled), per row one 16-byte store (the sparse `S · base` of the detail layer,
-/// `runtime::detail`).
+/// multiply-add, per row one 16-byte store (the compressed rows of the detail layer's
+/// `S · base`, its Loop vertex points: `runtime::detail`).
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn sparse_rows4(
     simd: Fma,
@@ -489,24 +526,12 @@ fn sparse_rows4_body(
     let mut start = ptr[0] as usize;
     for (o, &end) in out.iter_mut().zip(&ptr[1..]) {
         let end = end as usize;
-        let (c, w) = (&cols[start..end], &vals[start..end]);
-        let acc = if let (Ok(c), Ok(w)) = (<&[u32; 4]>::try_from(c), <&[f32; 4]>::try_from(w)) {
-            // Four entries (Loop's interior edge points, three in four rows): unrolled, in two
-            // chains.
-            let term = |k: usize| (simd.sse._mm_set1_ps(w[k]), x[c[k] as usize].into());
-            let ((w0, x0), (w1, x1), (w2, x2), (w3, x3)) = (term(0), term(1), term(2), term(3));
-            let a = simd.fma._mm_fmadd_ps(w1, x1, simd.sse._mm_mul_ps(w0, x0));
-            let b = simd.fma._mm_fmadd_ps(w3, x3, simd.sse._mm_mul_ps(w2, x2));
-            simd.sse._mm_add_ps(a, b)
-        } else {
-            let mut acc = simd.sse._mm_setzero_ps();
-            for (&c, &w) in c.iter().zip(w) {
-                acc = simd
-                    .fma
-                    ._mm_fmadd_ps(simd.sse._mm_set1_ps(w), x[c as usize].into(), acc);
-            }
-            acc
-        };
+        let mut acc = simd.sse._mm_setzero_ps();
+        for (&c, &w) in cols[start..end].iter().zip(&vals[start..end]) {
+            acc = simd
+                .fma
+                ._mm_fmadd_ps(simd.sse._mm_set1_ps(w), x[c as usize].into(), acc);
+        }
         *o = acc.into();
         start = end;
     }

@@ -138,10 +138,10 @@ pub struct DetailSynth {
     method: NormalsMethod,
     /// The frame's base positions as 4-lane rows, the first level's input.
     base: Vec<Vec3A>,
-    /// The intermediate levels' vertices (`levels - 1` buffers) of the factored product.
-    stages: Vec<Vec<Vec3A>>,
-    /// `S · base` of the current frame: the normals must be those of the undisplaced mesh.
-    high: Vec<Vec3A>,
+    /// Each level's vertices of the factored product, one buffer per
+    /// [`LoopSubdivision::steps`]; the last is `S · base` of the current frame (the normals must
+    /// be those of the undisplaced mesh).
+    levels: Vec<Vec<Vec3A>>,
     normals: Vec<Vec3A>,
 }
 
@@ -156,6 +156,20 @@ enum Heights<'a> {
     },
 }
 
+impl<'a> Heights<'a> {
+    /// All of `h`, regressed first in a pass of its own (over the pool with the `parallel`
+    /// feature) when it is not given.
+    fn into_slice(self) -> &'a [f32] {
+        match self {
+            Heights::Given(h) => h,
+            Heights::Regressed { h, rows } => {
+                fill_rows(h, PARALLEL_CHUNK, rows);
+                h
+            }
+        }
+    }
+}
+
 impl DetailSynth {
     /// The synthesis for a subdivision built by the caller (e.g. the one training used), with
     /// [`NormalsMethod::Auto`].
@@ -165,12 +179,9 @@ impl DetailSynth {
         let groups = loop_groups(subdivision.triangles());
         let steps = subdivision.steps();
         let edges = steps.iter().map(EdgeStencils::new).collect();
-        let stages = steps[..steps.len().saturating_sub(1)]
-            .iter()
-            .map(|s| vec![Vec3A::ZERO; s.rows()])
-            .collect();
+        let levels = steps.iter().map(|s| vec![Vec3A::ZERO; s.rows()]).collect();
         DetailSynth {
-            stages,
+            levels,
             base: Vec::with_capacity(subdivision.base_vertex_count()),
             topology: Arc::new(DetailTopology {
                 subdivision,
@@ -179,7 +190,6 @@ impl DetailSynth {
                 edges,
             }),
             method: NormalsMethod::Auto,
-            high: vec![Vec3A::ZERO; n],
             normals: vec![Vec3A::ZERO; n],
         }
     }
@@ -273,52 +283,44 @@ impl DetailSynth {
     ) -> Result<(), DetailError> {
         check_len("output", self.vertex_count(), out.len())?;
         self.subdivide_steps(base)?;
-        let n = self.vertex_count();
-        let (h, pooled): (&[f32], bool) = match heights {
-            Heights::Given(h) => (h, pooled(n)),
-            Heights::Regressed { h, rows } if pooled(n) || self.gathers() => {
-                // Several threads (or the gather): regress in a parallel pass of its own.
-                fill_rows(h, PARALLEL_CHUNK, rows);
-                (h, pooled(n))
-            }
-            Heights::Regressed { h, rows } => {
-                scatter_groups(&self.high, &self.topology.groups, &mut self.normals);
-                regress_and_displace(rows, &self.high, h, &mut self.normals, out);
-                return Ok(());
-            }
-        };
-        if self.gathers() {
+        let pooled = pooled(self.vertex_count());
+        let gathers = self.gathers();
+        let high = self.levels.last().expect("one buffer per level");
+        if gathers {
+            let h = heights.into_slice();
             return self
                 .topology
                 .fans
-                .normals_and_displace(&self.high, h, &mut self.normals, out);
+                .normals_and_displace(high, h, &mut self.normals, out);
         }
-        scatter_groups(&self.high, &self.topology.groups, &mut self.normals);
-        normalize_and_displace(&self.high, h, &mut self.normals, out, pooled);
+        scatter_groups(high, &self.topology.groups, &mut self.normals);
+        match heights {
+            // One thread: each block regressed just before it is displaced.
+            Heights::Regressed { h, rows } if !pooled => {
+                regress_and_displace(rows, high, h, &mut self.normals, out);
+            }
+            heights => {
+                normalize_and_displace(high, heights.into_slice(), &mut self.normals, out, pooled);
+            }
+        }
         Ok(())
     }
 
-    /// `self.high = S · base` as the one-level products in turn
-    /// ([`LoopSubdivision::steps`]), each from and to 4-lane rows ([`apply_rows_padded`]).
+    /// Each level's vertices from the one before (`base` first): the one-level products in
+    /// turn ([`LoopSubdivision::steps`]), on 4-lane rows (`passes::apply_step`).
     fn subdivide_steps(&mut self, base: &[Vec3]) -> Result<(), DetailError> {
         let topology = &*self.topology;
         let steps = topology.subdivision.steps();
-        let (last, inner) = steps.split_last().expect("at least one level");
-        let last_edges = topology.edges.last().expect("one per level");
         steps[0].check(base, steps[0].rows())?;
         self.base.clear();
         self.base.extend(base.iter().map(|&p| Vec3A::from(p)));
-        for (k, (step, edges)) in inner.iter().zip(&topology.edges).enumerate() {
-            let (done, rest) = self.stages.split_at_mut(k);
+        for (k, (step, edges)) in steps.iter().zip(&topology.edges).enumerate() {
+            let (done, rest) = self.levels.split_at_mut(k);
             let input = done.last().unwrap_or(&self.base);
             fill_rows(&mut rest[0], PARALLEL_CHUNK, |first, o| {
                 apply_step(step, edges, input, first, o)
             });
         }
-        let input = self.stages.last().unwrap_or(&self.base);
-        fill_rows(&mut self.high, PARALLEL_CHUNK, |first, o| {
-            apply_step(last, last_edges, input, first, o)
-        });
         Ok(())
     }
 

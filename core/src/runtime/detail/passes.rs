@@ -1,7 +1,9 @@
 //! The passes of [`super::DetailSynth`]'s frame (issue 23): `S · base` on 4-lane rows (compressed
 //! rows and Loop's edge-point stencils), the grouped normal scatter, and the normalisation with
-//! the displacement, with `h` given or regressed a block at a time. Plain Rust compiled a second
-//! time for AVX2 + FMA where the CPU has it ([`v3`]).
+//! the displacement, with `h` given or regressed a block at a time. Plain Rust, each pass
+//! compiled a second time for AVX2 + FMA where the CPU has it (`runtime::simd`'s
+//! `compiled_twice!`: three-operand instructions instead of SSE2's copies, 8-wide square roots
+//! and divisions).
 
 use glam::{Vec3, Vec3A};
 
@@ -11,6 +13,7 @@ use super::{H_BLOCK, RegressRows};
 use crate::mesh::subdivision::SparseMatrix;
 #[cfg(test)]
 use crate::mesh::topology::accumulate_face_normals;
+use crate::runtime::simd::compiled_twice;
 
 /// The rows `first..` of one level's matrix that are Loop edge points (`3/8 (a + b) + 1/8 (c +
 /// d)` inside, `1/2 (a + b)` on the boundary), as their four vertices `[a, b, c, d]` (`[a, b,
@@ -66,9 +69,13 @@ fn edge_stencil((cols, vals): (&[u32], &[f32])) -> Option<[u32; 4]> {
     }
 }
 
-/// `out[k] = 3/8 (x[a] + x[b]) + 1/8 (x[c] + x[d])` for `quads[k] = [a, b, c, d]`.
+compiled_twice! {
+    /// `out[k] = 3/8 (x[a] + x[b]) + 1/8 (x[c] + x[d])` for `quads[k] = [a, b, c, d]`.
+    fn edge_rows(quads: &'a [[u32; 4]], x: &'a [Vec3A], out: &'a mut [Vec3A]) => edge_rows_body
+}
+
 #[inline(always)]
-fn edge_rows(quads: &[[u32; 4]], x: &[Vec3A], out: &mut [Vec3A]) {
+fn edge_rows_body(quads: &[[u32; 4]], x: &[Vec3A], out: &mut [Vec3A]) {
     for (o, q) in out.iter_mut().zip(quads) {
         let [a, b, c, d] = q.map(|i| x[i as usize]);
         *o = (a + b) * 0.375 + (c + d) * 0.125;
@@ -91,17 +98,7 @@ pub(super) fn apply_step(
     }
     if !stencils.is_empty() {
         let quads = &edges.quads[first + split - edges.first..][..stencils.len()];
-        let x = &x[..s.columns()];
-        #[cfg(target_arch = "x86_64")]
-        if let Some(simd) = crate::runtime::simd::fma() {
-            simd.vectorize(v3::EdgeRows {
-                quads,
-                x,
-                out: stencils,
-            });
-            return;
-        }
-        edge_rows(quads, x, stencils);
+        edge_rows(quads, &x[..s.columns()], stencils);
     }
 }
 
@@ -122,19 +119,18 @@ pub(super) fn loop_groups(triangles: &[[u32; 3]]) -> Vec<[u32; 6]> {
 /// rounding of the plain scatter).
 pub(super) fn scatter_groups(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
     acc.fill(Vec3A::ZERO);
-    #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = crate::runtime::simd::fma() {
-        simd.vectorize(v3::ScatterGroups {
-            positions,
-            groups,
-            acc,
-        });
-        return;
-    }
-    scatter_groups_body(positions, groups, acc);
+    scatter_into(positions, groups, acc);
 }
 
-/// [`scatter_groups`] after the zeroing: the same code for every instruction set.
+compiled_twice! {
+    /// [`scatter_groups`] after the zeroing.
+    fn scatter_into(
+        positions: &'a [Vec3A],
+        groups: &'a [[u32; 6]],
+        acc: &'a mut [Vec3A],
+    ) => scatter_groups_body
+}
+
 #[inline(always)]
 fn scatter_groups_body(positions: &[Vec3A], groups: &[[u32; 6]], acc: &mut [Vec3A]) {
     // One length for both, so one bounds check an index serves the load and the update.
@@ -176,90 +172,28 @@ pub(super) fn normalize_and_displace(
         return;
     }
     let _ = pooled;
-    normalize_and_displace_kernel(high, h, normals, out);
+    normalize_and_displace_here(high, h, normals, out);
 }
 
-/// The detail passes written in plain Rust (glam's 4-lane vectors, arrays the compiler
-/// vectorises) compiled a second time for AVX2 + FMA, chosen at run time: three-operand
-/// instructions instead of SSE2's copies, 8-wide square roots and divisions. Each is a struct
-/// whose `call` is inlined into pulp's feature context (ARCHITECTURE.md, "Per-frame SIMD").
-#[cfg(target_arch = "x86_64")]
-mod v3 {
-    use glam::{Vec3, Vec3A};
-
-    use super::RegressRows;
-
-    /// [`super::edge_rows`].
-    pub(super) struct EdgeRows<'a> {
-        pub(super) quads: &'a [[u32; 4]],
-        pub(super) x: &'a [Vec3A],
-        pub(super) out: &'a mut [Vec3A],
-    }
-
-    impl pulp::NullaryFnOnce for EdgeRows<'_> {
-        type Output = ();
-
-        #[inline(always)]
-        fn call(self) {
-            super::edge_rows(self.quads, self.x, self.out);
-        }
-    }
-
-    /// [`super::scatter_groups_body`].
-    pub(super) struct ScatterGroups<'a> {
-        pub(super) positions: &'a [Vec3A],
-        pub(super) groups: &'a [[u32; 6]],
-        pub(super) acc: &'a mut [Vec3A],
-    }
-
-    impl pulp::NullaryFnOnce for ScatterGroups<'_> {
-        type Output = ();
-
-        #[inline(always)]
-        fn call(self) {
-            super::scatter_groups_body(self.positions, self.groups, self.acc);
-        }
-    }
-
-    /// The fused last pass of [`super::DetailSynth::synthesize_regressed`] on one thread.
-    pub(super) struct RegressAndDisplace<'a> {
-        pub(super) rows: RegressRows<'a>,
-        pub(super) high: &'a [Vec3A],
-        pub(super) h: &'a mut [f32],
-        pub(super) normals: &'a mut [Vec3A],
-        pub(super) out: &'a mut [Vec3],
-    }
-
-    impl pulp::NullaryFnOnce for RegressAndDisplace<'_> {
-        type Output = ();
-
-        #[inline(always)]
-        fn call(self) {
-            super::regress_and_displace_body(self.rows, self.high, self.h, self.normals, self.out);
-        }
-    }
+compiled_twice! {
+    /// The single-threaded last pass with `h` regressed a block of [`H_BLOCK`] at a time.
+    pub(super) fn regress_and_displace(
+        rows: RegressRows<'a>,
+        high: &'a [Vec3A],
+        h: &'a mut [f32],
+        normals: &'a mut [Vec3A],
+        out: &'a mut [Vec3],
+    ) => regress_and_displace_body
 }
 
-/// The single-threaded last pass with `h` regressed a block of [`H_BLOCK`] at a time.
-pub(super) fn regress_and_displace(
-    rows: RegressRows<'_>,
-    high: &[Vec3A],
-    h: &mut [f32],
-    normals: &mut [Vec3A],
-    out: &mut [Vec3],
-) {
-    #[cfg(target_arch = "x86_64")]
-    if let Some(simd) = crate::runtime::simd::fma() {
-        simd.vectorize(v3::RegressAndDisplace {
-            rows,
-            high,
-            h,
-            normals,
-            out,
-        });
-        return;
-    }
-    regress_and_displace_body(rows, high, h, normals, out);
+compiled_twice! {
+    /// [`normalize_and_displace`] on the calling thread.
+    fn normalize_and_displace_here(
+        high: &'a [Vec3A],
+        h: &'a [f32],
+        normals: &'a mut [Vec3A],
+        out: &'a mut [Vec3],
+    ) => normalize_and_displace_kernel
 }
 
 #[inline(always)]
