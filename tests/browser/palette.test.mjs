@@ -994,7 +994,7 @@ async function serverChecks() {
   const positions = roomInfo.control_points.flatMap((c) => c.rest);
   await publisher.evaluate(
     ({ url, positions, token }) => {
-      window.pub = { acks: 0, errors: [], seq: 0 };
+      window.pub = { acks: 0, superseded: 0, errors: [], seq: 0 };
       // The token in the subprotocols (server/src/ws.rs): base64url of its UTF-8 bytes.
       const b64 = btoa(String.fromCharCode(...new TextEncoder().encode(token)))
         .replace(/\+/g, "-")
@@ -1005,7 +1005,11 @@ async function serverChecks() {
       ws.onmessage = (e) => {
         const ack = JSON.parse(e.data);
         window.pub.acks++;
-        if (ack.error) window.pub.errors.push(ack.error.message);
+        // Code 10 (ABORTED): a newer frame of ours reached the room while this one waited
+        // (latest wins, server/src/mailbox.rs); on a busy machine a detail frame can take
+        // longer than the 100 ms between sends. The room is at the same pose either way.
+        if (ack.error && ack.error.code === 10) window.pub.superseded++;
+        else if (ack.error) window.pub.errors.push(ack.error.message);
       };
       ws.onopen = () => {
         window.pub.timer = setInterval(() => {
@@ -1026,11 +1030,18 @@ async function serverChecks() {
     const deadline = Date.now() + 10_000;
     let pub;
     while (Date.now() < deadline) {
-      pub = await publisher.evaluate(() => ({ acks: window.pub.acks, errors: window.pub.errors }));
-      if (pub.acks >= 5) break;
+      pub = await publisher.evaluate(() => ({
+        acks: window.pub.acks,
+        superseded: window.pub.superseded,
+        errors: window.pub.errors,
+      }));
+      if (pub.acks - pub.superseded >= 5 || pub.errors.length > 0) break;
       await sleep(100);
     }
-    assert.ok(pub.acks >= 5 && pub.errors.length === 0, `publishing the fixed pose: ${JSON.stringify(pub)}`);
+    assert.ok(
+      pub.acks - pub.superseded >= 5 && pub.errors.length === 0,
+      `publishing the fixed pose: 5 frames taken and none refused but as superseded: ${JSON.stringify(pub)}`,
+    );
     const imgs = {};
     for (const encoding of ["vertices", "palette"]) {
       const { page, state } = await viewer(`level=detail&encoding=${encoding}`, `${encoding} screenshot page`, 3);
@@ -1061,7 +1072,10 @@ async function serverChecks() {
   });
   const pub = await stopPublishing();
   await publisher.close();
-  notes.push(`the fixed pose: ${pub.seq} control frames published, ${pub.acks} acks, ${pub.errors.length} refused`);
+  notes.push(
+    `the fixed pose: ${pub.seq} control frames published, ${pub.acks} acks, ` +
+      `${pub.superseded} superseded by a newer one, ${pub.errors.length} refused`,
+  );
 
   await check("(i) frames drawn per second at the detail level, both encodings (demo animation)", async () => {
     await sleep(3500); // the demo animation resumes 3 s after the last foreign frame
