@@ -125,11 +125,17 @@ fn dot_rows_body(
 /// not inline once the kernel's body was inlined into it: the body was then compiled without
 /// the features and every intrinsic in it became a call (the detail regressor measured 147
 /// instructions a row so; pulp: "the given function must be inlined").
+///
+/// `Name { fields } => body` is a kernel of intrinsics, called as `body(simd, fields..)`;
+/// `@plain Name { fields } => body` is plain Rust, called as `body(fields..)`
+/// ([`compiled_twice!`]).
 #[cfg(target_arch = "x86_64")]
 macro_rules! vectorized {
-    ($name:ident { $($field:ident: $ty:ty),* $(,)? } => $body:ident) => {
+    ($name:ident { $($field:ident: $ty:ty),* $(,)? } => $body:path) => {
+        vectorized!(@plain $name { simd: Fma, $($field: $ty),* } => $body);
+    };
+    (@plain $name:ident { $($field:ident: $ty:ty),* $(,)? } => $body:path) => {
         struct $name<'a> {
-            simd: Fma,
             $($field: $ty),*
         }
 
@@ -138,38 +144,27 @@ macro_rules! vectorized {
 
             #[inline(always)]
             fn call(self) {
-                $body(self.simd, $(self.$field),*)
+                $body($(self.$field),*)
             }
         }
     };
 }
+#[cfg(target_arch = "x86_64")]
+pub(crate) use vectorized;
 
 /// `fn $name` running `$body` (plain Rust, `#[inline(always)]`, glam's vectors and arrays the
 /// compiler vectorises) compiled a second time for AVX2 + FMA where the CPU has them ([`fma`]):
 /// three-operand instructions instead of SSE2's register copies, 8-wide array operations. The
-/// arguments travel to pulp's feature context as a struct whose `call` is `#[inline(always)]`,
-/// as in [`vectorized!`]; elsewhere `$body` runs as it is. The same arithmetic either way (no
-/// fused multiply-adds appear that the source does not write), so the results do not depend on
-/// the CPU. Arguments share one lifetime `'a`.
+/// arguments travel to pulp's feature context as a [`vectorized!`] struct; elsewhere `$body`
+/// runs as it is. The same arithmetic either way (no fused multiply-adds appear that the source
+/// does not write), so the results do not depend on the CPU. Arguments share one lifetime `'a`.
 macro_rules! compiled_twice {
     ($(#[$doc:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) => $body:path) => {
         $(#[$doc])*
         $vis fn $name<'a>($($arg: $ty),*) {
             #[cfg(target_arch = "x86_64")]
             if let Some(simd) = $crate::runtime::simd::fma() {
-                struct Run<'a> {
-                    $($arg: $ty),*
-                }
-
-                impl<'a> pulp::NullaryFnOnce for Run<'a> {
-                    type Output = ();
-
-                    #[inline(always)]
-                    fn call(self) {
-                        $body($(self.$arg),*)
-                    }
-                }
-
+                $crate::runtime::simd::vectorized!(@plain Run { $($arg: $ty),* } => $body);
                 simd.vectorize(Run { $($arg),* });
                 return;
             }
