@@ -13,6 +13,7 @@ use crease_core::runtime::edge_skin::EdgeSkin;
 use crate::bones::{self, FitOptions, FitReport};
 use crate::detail::layer::{DetailOptions, DetailReport, DetailTrainError};
 use crate::edges;
+use crate::group_rig::GroupRig;
 use crate::regress::{self, RegressInput, RegressOptions};
 use crate::selection::{ControlSelection, SelectGrid, Selection};
 
@@ -54,6 +55,10 @@ pub struct TrainOptions {
     pub select: Option<SelectGrid>,
     /// The detail layer, trained when [`crate::pipeline::train_layers`] gets detailed examples.
     pub detail: DetailOptions,
+    /// For the geometry-local methods: group the bones by the control points of a coarse rig
+    /// of this many bones fitted beside them ([`crate::group_rig`]); `None`, or not fewer than
+    /// the rig's bones, keeps each bone's own nearest points (HZY11 §5.1.1).
+    pub group_bones: Option<usize>,
 }
 
 impl Default for TrainOptions {
@@ -68,6 +73,7 @@ impl Default for TrainOptions {
             beta: 1.0,
             select: None,
             detail: DetailOptions::default(),
+            group_bones: None,
         }
     }
 }
@@ -133,7 +139,20 @@ pub struct TrainReport {
     pub control_selection: Option<ControlSelection>,
     /// The detail layer, when trained (its time is part of `seconds`).
     pub detail: Option<DetailReport>,
+    /// The coarse rig that groups the bones, when asked for (its time is part of `seconds`).
+    pub group_rig: Option<GroupRigReport>,
     /// Total seconds.
+    pub seconds: f64,
+}
+
+/// How the fit of the grouping rig went ([`TrainOptions::group_bones`]).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GroupRigReport {
+    /// Its bones.
+    pub bones: usize,
+    /// Its fit's RMS error (bbox largest side = 1).
+    pub fit_rms: f64,
+    /// Seconds fitting it.
     pub seconds: f64,
 }
 
@@ -164,6 +183,8 @@ pub struct TrainedBase {
     pub edges: Vec<[u32; 2]>,
     /// The edge skin of the translation solver.
     pub edge_skin: EdgeSkin,
+    /// The coarse rig that groups the bones for the geometry-local methods, when asked for.
+    pub group_rig: Option<GroupRig>,
     /// Timings so far.
     pub report: TrainReport,
 }
@@ -179,6 +200,7 @@ impl TrainedBase {
                 control_vertices: &self.control_vertices,
                 controls: &self.example_controls,
                 rotations: &self.rotations,
+                group_rig: self.group_rig.as_ref(),
             },
             options,
         );

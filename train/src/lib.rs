@@ -8,6 +8,8 @@
 //! - [`kcca`]: kernel CCA regression collapsed to one matrix (FKY08 §4), and the RBF baseline.
 //! - [`edges`]: the edge skin of the translation solver: FKY08 eq. 10 weights and the vector
 //!   edge skin fitted on top of them.
+//! - [`group_rig`]: a coarse rig fitted beside a fine one, whose bones' control points group the
+//!   fine bones for the geometry-local methods (issue 23).
 //! - [`regress`]: the rotation regressors of each method (global, local-geometry, local-pose,
 //!   local, RBF baseline) as a runtime `RotationModel`.
 //! - [`detail`]: the detail layer (HZY11 §4, §5.2): displacement extraction by ray casting,
@@ -32,6 +34,7 @@ pub mod detail;
 pub mod edges;
 pub mod eval;
 pub mod geodesic;
+pub mod group_rig;
 pub mod kcca;
 mod linalg;
 pub mod metrics;

@@ -16,12 +16,14 @@ use crease_core::model::{Rig, RigExample, TrainedModel};
 use crease_core::runtime::edge_skin::EdgeSkin;
 
 pub use crate::base::{
-    ControlSpec, EdgeModel, TrainError, TrainInput, TrainOptions, TrainReport, TrainedBase,
+    ControlSpec, EdgeModel, GroupRigReport, TrainError, TrainInput, TrainOptions, TrainReport,
+    TrainedBase,
 };
 use crate::bones::{self, FitInput, IterationStat};
 use crate::controls;
 use crate::detail::layer::{self as detail_layer, DetailFrames};
 use crate::edges;
+use crate::group_rig;
 use crate::regress::{Method, RegressOptions};
 use crate::select;
 
@@ -216,6 +218,25 @@ pub fn train_base(
     };
     let edges_seconds = t.elapsed().as_secs_f64();
 
+    let t = Instant::now();
+    let group_rig = match options.group_bones {
+        Some(count) if count < fit.bone_count => Some(group_rig::fit(
+            input.rest,
+            input.frames,
+            &fit.skin,
+            fit.bone_count,
+            &options.fit,
+            count,
+            &mut |_| {},
+        )?),
+        _ => None,
+    };
+    let group_rig_report = group_rig.as_ref().map(|g| GroupRigReport {
+        bones: g.bone_count,
+        fit_rms: g.fit_rms,
+        seconds: t.elapsed().as_secs_f64(),
+    });
+
     let rig = Rig {
         rest: input.rest.clone(),
         bone_count: fit.bone_count,
@@ -240,6 +261,7 @@ pub fn train_base(
         selection: None,
         control_selection: None,
         detail: None,
+        group_rig: group_rig_report,
         seconds: start.elapsed().as_secs_f64(),
     };
     let mut base = TrainedBase {
@@ -249,6 +271,7 @@ pub fn train_base(
         rotations,
         edges: mesh_edges,
         edge_skin,
+        group_rig,
         report,
     };
     if let ControlSpec::Select(count) = options.controls {

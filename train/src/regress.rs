@@ -18,6 +18,7 @@ use crease_core::runtime::predict::{
 use crease_core::runtime::skin::SkinWeights;
 
 use crate::geodesic;
+use crate::group_rig::GroupRig;
 use crate::kcca::{self, KccaOptions, LinearModel};
 
 /// The predictor variants.
@@ -143,6 +144,9 @@ pub struct RegressInput<'a> {
     pub controls: &'a [Vec<Vec3>],
     /// Per example, each bone's rotation relative to the rest pose.
     pub rotations: &'a [Vec<Quat>],
+    /// For the geometry-local methods: group the bones by this coarse rig's bones' control
+    /// points instead of each bone's own ([`crate::group_rig`]).
+    pub group_rig: Option<&'a GroupRig>,
 }
 
 /// Fits the rotation regressors of `options.method`.
@@ -172,23 +176,38 @@ pub fn build_rotation_model(input: RegressInput<'_>, options: &RegressOptions) -
 }
 
 /// Groups bones by their `k_c` geodesically nearest control points (HZY11 §5.1.1): the
-/// bone's centre vertex is the vertex nearest to the weighted centre of what it moves.
+/// bone's centre vertex is the vertex nearest to the weighted centre of what it moves. With a
+/// [`GroupRig`], the points are those nearest to the centre of the coarse bone each bone
+/// belongs to.
 fn geometry_groups(input: RegressInput<'_>, kc: usize) -> Vec<(Vec<u32>, Vec<u32>)> {
     let dist = geodesic::distances_from(input.rest, input.control_vertices);
-    let centres = geodesic::bone_centre_vertices(input.rest, input.skin, input.bone_count);
+    let (skin, placed) = match input.group_rig {
+        Some(g) => (&g.skin, g.bone_count),
+        None => (input.skin, input.bone_count),
+    };
+    let sets: Vec<Vec<u32>> = geodesic::bone_centre_vertices(input.rest, skin, placed)
+        .into_iter()
+        .map(|centre| {
+            let mut set: Vec<u32> = match centre {
+                Some(v) => geodesic::nearest_sources(&dist, v, kc)
+                    .into_iter()
+                    .map(|c| c as u32)
+                    .collect(),
+                None => (0..input.control_vertices.len().min(kc) as u32).collect(),
+            };
+            set.sort_unstable();
+            set
+        })
+        .collect();
     let mut groups: Vec<(Vec<u32>, Vec<u32>)> = Vec::new();
-    for (b, centre) in centres.iter().enumerate() {
-        let mut set: Vec<u32> = match centre {
-            Some(v) => geodesic::nearest_sources(&dist, *v, kc)
-                .into_iter()
-                .map(|c| c as u32)
-                .collect(),
-            None => (0..input.control_vertices.len().min(kc) as u32).collect(),
+    for b in 0..input.bone_count {
+        let set = match input.group_rig {
+            Some(g) => &sets[g.of_bone[b] as usize],
+            None => &sets[b],
         };
-        set.sort_unstable();
-        match groups.iter_mut().find(|(s, _)| *s == set) {
+        match groups.iter_mut().find(|(s, _)| s == set) {
             Some((_, bones)) => bones.push(b as u32),
-            None => groups.push((set, vec![b as u32])),
+            None => groups.push((set.clone(), vec![b as u32])),
         }
     }
     groups

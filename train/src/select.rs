@@ -154,6 +154,7 @@ fn loo_errors(
                 control_vertices: controls,
                 controls: &kept_controls,
                 rotations: &rotations,
+                group_rig: base.group_rig.as_ref(),
             };
             let target = frames[held];
             let ctl = &example_controls[held];

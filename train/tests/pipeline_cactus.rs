@@ -245,6 +245,7 @@ fn selection_scores_equal_an_independent_leave_one_out() {
                     control_vertices: &base.control_vertices,
                     controls: &controls,
                     rotations: &rotations,
+                    group_rig: None,
                 },
                 &o,
             );
@@ -432,4 +433,118 @@ fn refinement_keeps_the_examples_and_confidence_measures_the_distance_to_them() 
         b.confidence()
     );
     assert!(r < p, "refined {r} vs regression {p}");
+}
+
+/// Issue 23's grouping: with a coarse rig beside the fine one, each fine bone belongs to the
+/// coarse bone sharing most of its weight, and sees that coarse bone's control points.
+#[test]
+fn a_group_rig_gives_each_bone_the_control_points_of_its_coarse_bone() {
+    let Some(set) = cactus() else { return };
+    let frames: Vec<&[Vec3]> = set.frames();
+    let names: Vec<String> = set.names();
+    let input = TrainInput {
+        rest: &set.rest,
+        frames: &frames,
+        names: &names,
+    };
+    let mut o = options(Method::Local);
+    o.fit.bones = 24;
+    o.controls = ControlSpec::Auto(8);
+    o.group_bones = Some(5);
+    let base = pipeline::train_base(input, &o, &mut |_| {}).unwrap();
+    let g = base.group_rig.as_ref().expect("a group rig of 5 bones");
+    assert_eq!((g.bone_count, g.of_bone.len()), (5, base.rig.bone_count));
+    assert_eq!(base.report.group_rig.as_ref().unwrap().bones, 5);
+
+    // The assignment against a dense overlap matrix.
+    let mut dense = vec![[0.0f64; 5]; base.rig.bone_count];
+    for v in 0..set.rest.vertex_count() {
+        let (fb, fw) = base.rig.skin.vertex(v);
+        let (cb, cw) = g.skin.vertex(v);
+        for (&b, &wb) in fb.iter().zip(fw) {
+            for (&c, &wc) in cb.iter().zip(cw) {
+                dense[b as usize][c as usize] += f64::from(wb) * f64::from(wc);
+            }
+        }
+    }
+    for (b, row) in dense.iter().enumerate() {
+        let best = (0..5).fold(0, |m, c| if row[c] > row[m] { c } else { m });
+        if row[best] > 0.0 {
+            assert_eq!(g.of_bone[b] as usize, best, "fine bone {b}: {row:?}");
+        }
+    }
+
+    // Control sets: those the coarse rig's own bones get (a model of the coarse rig alone).
+    let regress = RegressOptions {
+        method: Method::Local,
+        kc: 3,
+        ..RegressOptions::default()
+    };
+    let model = base.model(&regress, 1.0);
+    model.validate().unwrap();
+    let coarse_rotations = vec![vec![crease_core::glam::Quat::IDENTITY; 5]; frames.len()];
+    let coarse = crease_train::regress::build_rotation_model(
+        crease_train::regress::RegressInput {
+            rest: &set.rest,
+            skin: &g.skin,
+            bone_count: 5,
+            control_vertices: &base.control_vertices,
+            controls: &base.example_controls,
+            rotations: &coarse_rotations,
+            group_rig: None,
+        },
+        &regress,
+    );
+    let set_of = |groups: &[crease_core::runtime::predict::ControlGroup], bone: u32| {
+        groups
+            .iter()
+            .find(|grp| grp.bones.contains(&bone))
+            .map(|grp| grp.controls.clone())
+            .unwrap()
+    };
+    assert!(model.rotations.groups.len() <= 5);
+    for b in 0..base.rig.bone_count as u32 {
+        assert_eq!(
+            set_of(&model.rotations.groups, b),
+            set_of(&coarse.groups, g.of_bone[b as usize]),
+            "fine bone {b}"
+        );
+    }
+    // Every bone keeps its own regressor: the training poses' rotations come back as well as
+    // with each bone's own control points.
+    let (mean, worst) = training_rotation_error(&base, &model);
+    let mut own = base.clone();
+    own.group_rig = None;
+    let (own_mean, own_worst) = training_rotation_error(&base, &own.model(&regress, 1.0));
+    eprintln!(
+        "training rotations: grouped mean {mean} worst {worst}, own points mean {own_mean} \
+         worst {own_worst} rad"
+    );
+    // A bone fitted to another bone's rotations would be off by far more (the cactus's bones
+    // turn by up to ~1 rad between poses).
+    assert!(
+        mean < 1.5 * own_mean && worst < 1.5 * own_worst,
+        "training rotations: grouped mean {mean} worst {worst}, own points mean {own_mean} \
+         worst {own_worst} rad"
+    );
+}
+
+/// Mean and worst angle between the rotations `model` predicts from each training example's
+/// control points and the rig's rotations of that example.
+fn training_rotation_error(base: &pipeline::TrainedBase, model: &TrainedModel) -> (f32, f32) {
+    let predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+    let mut ctx = predictor.new_context();
+    let (mut worst, mut sum, mut count) = (0.0f32, 0.0f32, 0usize);
+    for (e, controls) in base.example_controls.iter().enumerate() {
+        predictor
+            .predict_transforms(&mut ctx, controls, None)
+            .unwrap();
+        for (t, want) in ctx.transforms().iter().zip(&base.rotations[e]) {
+            let a = t.rotation.angle_between(*want);
+            worst = worst.max(a);
+            sum += a;
+            count += 1;
+        }
+    }
+    (sum / count as f32, worst)
 }

@@ -15,6 +15,12 @@ pub struct RegressArgs {
     /// Number of proxy bones.
     #[arg(long, default_value_t = FitOptions::default().bones)]
     pub bones: usize,
+    /// Local methods: give each bone the control points of the bone it falls in of a coarse
+    /// rig of N bones, fitted beside the --bones rig, instead of its own k_c nearest. For rigs
+    /// of hundreds of bones trained from a few examples (e.g. --bones 1355 --group-bones 40);
+    /// ignored unless below --bones.
+    #[arg(long, value_name = "N")]
+    pub group_bones: Option<usize>,
     /// Most bones per vertex (K, 1..=8).
     #[arg(long, default_value_t = 8)]
     pub max_influences: usize,
@@ -69,6 +75,9 @@ impl RegressArgs {
         }
         if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
             bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
+        }
+        if self.group_bones == Some(0) {
+            bail!("--group-bones must be at least 1 (or left out)");
         }
         if !(self.kappa.is_finite() && self.kappa >= 0.0) {
             bail!("--kappa must be >= 0, got {}", self.kappa);
@@ -138,6 +147,7 @@ impl RegressArgs {
             beta: self.beta,
             select: self.select.then(SelectGrid::default),
             detail: Default::default(),
+            group_bones: self.group_bones,
         })
     }
 }
