@@ -63,7 +63,8 @@ impl Method {
         Method::ALL.into_iter().find(|m| m.name() == s)
     }
 
-    fn geometry_local(self) -> bool {
+    /// Whether each bone sees only its nearest control points (HZY11 §5.1.1).
+    pub fn geometry_local(self) -> bool {
         matches!(self, Method::LocalGeometry | Method::Local)
     }
 

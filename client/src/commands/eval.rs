@@ -100,8 +100,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     } else {
         args.methods.clone()
     };
+    let mut train = args.regress.train_options(Method::Global, &layers)?;
+    train.group_bones = args
+        .regress
+        .group_bones(methods.iter().any(|m| m.geometry_local()))?;
     let options = EvalOptions {
-        train: args.regress.train_options(Method::Global, &layers)?,
+        train,
         methods,
         beta: args.regress.beta,
         refine: args.refine,

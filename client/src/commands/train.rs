@@ -166,10 +166,14 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "trained in {:.2} s (bones {:.2} s, rms {:.4e}; controls {:.2} s; regressors {:.2} s; edge skin {:.2} s{})",
+            "trained in {:.2} s (bones {:.2} s, rms {:.4e}{}; controls {:.2} s; regressors {:.2} s; edge skin {:.2} s{})",
             report.seconds,
             report.fit.seconds,
             report.fit.rms_normalized,
+            report.group_rig.as_ref().map_or(String::new(), |g| format!(
+                "; grouping rig of {} bones {:.2} s, rms {:.4e}",
+                g.bones, g.seconds, g.fit_rms
+            )),
             report.controls_seconds,
             report.regress_seconds,
             report.edges_seconds,

@@ -16,11 +16,12 @@ pub struct RegressArgs {
     #[arg(long, default_value_t = FitOptions::default().bones)]
     pub bones: usize,
     /// Local methods: give each bone the control points of the bone it falls in of a coarse
-    /// rig of N bones, fitted beside the --bones rig, instead of its own k_c nearest. For rigs
-    /// of hundreds of bones trained from a few examples (e.g. --bones 1355 --group-bones 40);
-    /// ignored unless below --bones.
-    #[arg(long, value_name = "N")]
-    pub group_bones: Option<usize>,
+    /// rig fitted beside the --bones rig, instead of its own k_c nearest (issue 23: with
+    /// hundreds of bones trained from a few examples, per-bone sets make neighbouring bones'
+    /// regressors disagree). `auto`: a rig of 150 bones (the default rig size) when --bones
+    /// exceeds it, else off; `off`; or the coarse rig's bone count N (used when below --bones).
+    #[arg(long, value_name = "auto|off|N", default_value = "auto")]
+    pub group_bones: String,
     /// Most bones per vertex (K, 1..=8).
     #[arg(long, default_value_t = 8)]
     pub max_influences: usize,
@@ -62,7 +63,24 @@ pub struct RegressArgs {
     pub edge_ridge: Option<f64>,
 }
 
+/// The coarse rig size `--group-bones auto` picks: the default rig's.
+pub const AUTO_GROUP_BONES: usize = 150;
+
 impl RegressArgs {
+    /// The coarse rig that groups the bones (`--group-bones`), for a run whose methods include
+    /// a geometry-local one when `geometry_local` (the others do not use it: no rig is fitted).
+    pub fn group_bones(&self, geometry_local: bool) -> anyhow::Result<Option<usize>> {
+        let count = match self.group_bones.as_str() {
+            "off" => None,
+            "auto" => (self.bones > AUTO_GROUP_BONES).then_some(AUTO_GROUP_BONES),
+            n => match n.parse::<usize>() {
+                Ok(n) if n >= 1 => Some(n),
+                _ => bail!("--group-bones {n}: expected auto, off or a bone count >= 1"),
+            },
+        };
+        Ok(count.filter(|&n| geometry_local && n < self.bones))
+    }
+
     /// Training options for `method`.
     pub fn train_options(
         &self,
@@ -75,9 +93,6 @@ impl RegressArgs {
         }
         if !(self.sigma_scale.is_finite() && self.sigma_scale > 0.0) {
             bail!("--sigma-scale must be > 0, got {}", self.sigma_scale);
-        }
-        if self.group_bones == Some(0) {
-            bail!("--group-bones must be at least 1 (or left out)");
         }
         if !(self.kappa.is_finite() && self.kappa >= 0.0) {
             bail!("--kappa must be >= 0, got {}", self.kappa);
@@ -147,7 +162,7 @@ impl RegressArgs {
             beta: self.beta,
             select: self.select.then(SelectGrid::default),
             detail: Default::default(),
-            group_bones: self.group_bones,
+            group_bones: self.group_bones(method.geometry_local())?,
         })
     }
 }
@@ -168,5 +183,41 @@ pub fn kernel_name(k: &KernelChoice) -> String {
         KernelChoice::Gaussian { scale } => format!("gaussian*{scale}"),
         KernelChoice::GaussianLinear { scale, gamma } => format!("gaussian*{scale}+linear:{gamma}"),
         KernelChoice::Polynomial { degree, .. } => format!("poly:{degree}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
+    use super::*;
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        regress: RegressArgs,
+    }
+
+    fn args(a: &[&str]) -> RegressArgs {
+        Cli::parse_from(std::iter::once("crease").chain(a.iter().copied())).regress
+    }
+
+    #[test]
+    fn group_bones_auto_fits_the_default_rig_only_beneath_a_larger_one_for_local_methods() {
+        let grouped = |a: &[&str], local| args(a).group_bones(local).unwrap();
+        assert_eq!(grouped(&["--bones", "1355"], true), Some(AUTO_GROUP_BONES));
+        assert_eq!(grouped(&["--bones", "150"], true), None);
+        assert_eq!(grouped(&["--bones", "1355"], false), None);
+        assert_eq!(grouped(&["--bones", "1355", "--group-bones", "off"], true), None);
+        assert_eq!(grouped(&["--bones", "1355", "--group-bones", "40"], true), Some(40));
+        // Not below the rig: nothing to group by.
+        assert_eq!(grouped(&["--bones", "30", "--group-bones", "40"], true), None);
+        for bad in ["0", "1.5", "many"] {
+            let e = args(&["--bones", "1355", "--group-bones", bad])
+                .group_bones(true)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("--group-bones") && e.contains(bad), "{bad}: {e}");
+        }
     }
 }

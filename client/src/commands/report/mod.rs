@@ -776,6 +776,9 @@ pub fn write_train(
     ));
 
     let mut items = vec![("bone fit".to_owned(), report.fit.seconds)];
+    if let Some(g) = &report.group_rig {
+        items.push((format!("grouping rig ({} bones)", g.bones), g.seconds));
+    }
     if let Some(c) = &report.control_selection {
         items.push(("control-point selection".into(), c.seconds));
     }
