@@ -208,10 +208,19 @@ mod tests {
         assert_eq!(grouped(&["--bones", "1355"], true), Some(AUTO_GROUP_BONES));
         assert_eq!(grouped(&["--bones", "150"], true), None);
         assert_eq!(grouped(&["--bones", "1355"], false), None);
-        assert_eq!(grouped(&["--bones", "1355", "--group-bones", "off"], true), None);
-        assert_eq!(grouped(&["--bones", "1355", "--group-bones", "40"], true), Some(40));
+        assert_eq!(
+            grouped(&["--bones", "1355", "--group-bones", "off"], true),
+            None
+        );
+        assert_eq!(
+            grouped(&["--bones", "1355", "--group-bones", "40"], true),
+            Some(40)
+        );
         // Not below the rig: nothing to group by.
-        assert_eq!(grouped(&["--bones", "30", "--group-bones", "40"], true), None);
+        assert_eq!(
+            grouped(&["--bones", "30", "--group-bones", "40"], true),
+            None
+        );
         for bad in ["0", "1.5", "many"] {
             let e = args(&["--bones", "1355", "--group-bones", bad])
                 .group_bones(true)
