@@ -73,28 +73,8 @@ fn every_method_reproduces_training_poses_and_survives_occlusion() {
                 "{method:?}: flipped byte {at} accepted"
             );
         }
-        let predictor = Predictor::new(Arc::new(model), None).unwrap();
-        let mut ctx = predictor.new_context();
         // Predicting a training pose's own control points reproduces its rotations closely.
-        let mut worst_angle = 0.0f32;
-        let (mut sum_angle, mut count) = (0.0f32, 0usize);
-        for (e, f) in frames.iter().enumerate() {
-            let controls: Vec<Vec3> = base
-                .control_vertices
-                .iter()
-                .map(|&v| f[v as usize])
-                .collect();
-            predictor
-                .predict_transforms(&mut ctx, &controls, None)
-                .unwrap();
-            for (b, t) in ctx.transforms().iter().enumerate() {
-                let a = t.rotation.angle_between(base.rotations[e][b]);
-                worst_angle = worst_angle.max(a);
-                sum_angle += a;
-                count += 1;
-            }
-        }
-        let mean_angle = sum_angle / count as f32;
+        let (mean_angle, worst_angle) = training_rotation_error(&base, &model);
         eprintln!(
             "{method:?}: training rotations mean error {mean_angle:.4} rad, worst {worst_angle:.4} rad"
         );
@@ -102,6 +82,8 @@ fn every_method_reproduces_training_poses_and_survives_occlusion() {
             mean_angle < 0.03 && worst_angle < 0.3,
             "{method:?}: training rotations off: mean {mean_angle}, worst {worst_angle} rad"
         );
+        let predictor = Predictor::new(Arc::new(model), None).unwrap();
+        let mut ctx = predictor.new_context();
         // A frame with occluded (and NaN) markers still yields a finite mesh.
         let f = frames[5];
         let mut controls: Vec<Vec3> = base
