@@ -3,7 +3,8 @@
 //!
 //! 1. proxy bones and weights ([`crate::bones`]);
 //! 2. control points: given, or automatic ([`crate::controls`]);
-//! 3. rotation regressors of the chosen method ([`crate::regress`]);
+//! 3. rotation regressors of the chosen method ([`crate::regress`]), the bones grouped by a
+//!    coarse rig fitted beside the fine one when asked ([`crate::group_rig`]);
 //! 4. the edge skin of the translation solver ([`crate::edges`]): by default the vector edge
 //!    skin (its ridge cross-validated), or FKY08 eq. 10's scalar weights;
 //! 5. with detailed examples ([`train_layers`]), the detail layer
@@ -227,7 +228,8 @@ pub fn train_base(
             fit.bone_count,
             &options.fit,
             count,
-            &mut |_| {},
+            // Its steps report as the fine fit's do, with its own bone count.
+            &mut *progress,
         )?),
         _ => None,
     };
