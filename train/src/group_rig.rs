@@ -1,17 +1,18 @@
-//! Control groups from a coarse rig (issue 23): the geometry-local methods (HZY11 §5.1.1) give
-//! each bone the `k_c` control points geodesically nearest to its centre. With a rig of over a
-//! thousand small bones (HZY11 Table 1) those sets change from one small bone to its
-//! neighbour, and neighbouring bones' regressors, each fitted to 14 examples, disagree. A
-//! coarse rig of whole segments (a few dozen bones) fitted to the same examples gives a steadier
-//! choice: each fine bone takes the control set of the coarse bone that shares most of its
-//! vertices, so every fine bone of a segment sees the same points. Only the grouping changes:
-//! each fine bone keeps its own regressor, trained on its own rotations.
+//! Control groups from a coarse rig (issue 23): the geometry-local methods (HZY11 §5.1.1) give each
+//! bone the `k_c` control points geodesically nearest to its centre. With a rig of over a thousand
+//! small bones (HZY11 Table 1) those sets change from one small bone to its neighbour, and
+//! neighbouring bones' regressors, each fitted to 14 examples, disagree. A coarse rig (tens to a
+//! few hundred bones; `crease train --group-bones auto` takes 150) fitted to the same examples
+//! gives a steadier choice: each fine bone takes the control set of the coarse bone that shares
+//! most of its vertices, so every fine bone of a segment sees the same points. Only the grouping
+//! changes: each fine bone keeps its own regressor, trained on its own rotations.
 //!
-//! Measured on the generated hands (BENCHMARKS.md, "Accuracy beside HZY11 Table 2"): with each
-//! fine bone's own nearest points, 1,355 bones predicted worse than 40 in the palm layout's
-//! leave-one-out; with the 40-bone rig's groups they predict better in every comparison.
-//! Coarser groupings that are not a fitted rig (geometric or motion clusters of the fine bones,
-//! the nearest control point) were tried and did worse; see that section.
+//! Measured on the generated hands (BENCHMARKS.md, "Accuracy beside HZY11 Table 2"): with each fine
+//! bone's own nearest points, 1,355 bones predicted worse than 40 in the palm layout's
+//! leave-one-out; grouped by a 150-bone rig they predict better in every comparison (and by any rig
+//! of 40 to 300 bones in that leave-one-out). Coarser groupings that are not a fitted rig
+//! (geometric or motion clusters of the fine bones, the nearest control point) were tried and did
+//! worse; see that section.
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
