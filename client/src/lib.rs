@@ -12,7 +12,8 @@
 //! - [`commands::watch`], [`commands::stream`], [`commands::room`], [`commands::retarget`]:
 //!   watching and publishing into rooms, managing them, marker recordings to control frames.
 //! - [`commands::take`]: `crease take` — a room's recordings: start, stop, list, download,
-//!   replay, export as glTF.
+//!   replay, export as glTF; [`commands::take_export`]: the export's work (the skinned
+//!   recording, the detail layer re-predicted and baked into morph targets).
 //! - [`commands::decode_stream`]: `crease decode-stream` — a recorded stream decoded by the
 //!   core (the reference decoder other clients are checked against).
 //! - [`commands::bench_net`]: `crease bench-net` — the network load benchmark (its load,

@@ -8,15 +8,49 @@
 //! that starts with `crate::`, `super::` or `self::` (in a `use` or in code, `{...}` groups
 //! expanded) is an edge from the module it is written in to the deepest known module it names.
 //! An edge `a::x -> a::y` is the sibling edge `x -> y` inside `a`; a module using its own
-//! ancestor or descendant is no edge (a child using its parent is the usual Rust layering).
+//! ancestor or descendant is no edge (a child using its parent is the usual Rust layering),
+//! with one exception: the items written in `lib.rs` itself are a node of their own, the
+//! [`ROOT_ITEMS`] (issue 37). A module naming `crate::AppState` has an edge to it, and `lib.rs`
+//! naming a module (`use room::Room;`, `crate::cluster::Cluster`) has an edge from it, so an
+//! `AppState` in `lib.rs` that holds the cluster while the cluster names `crate::AppState` is a
+//! cycle, as it is for a reader. A re-export (`pub use state::AppState;`) is the crate's
+//! façade, not a use: elsewhere `crate::AppState` is an edge to `state`.
+//!
+//! The crates checked are the workspace's members, read from the root `Cargo.toml`.
+
+mod source_scan;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// The crates checked, by folder under the workspace root.
-const CRATES: [&str; 8] = [
-    "core", "hand", "mocap", "train", "proto", "server", "demo", "client",
-];
+use source_scan::{Tok, drop_test_modules, matching_brace, paths_from, tokens};
+
+/// The node that stands for the items written in a crate's `lib.rs` (a name no module can
+/// have).
+const ROOT_ITEMS: &str = "(crate root)";
+
+/// The workspace's member folders, read from the root `Cargo.toml`'s `members = [...]`.
+fn workspace_members(root: &Path) -> Vec<String> {
+    let manifest = root.join("Cargo.toml");
+    let text = std::fs::read_to_string(&manifest)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", manifest.display()));
+    let list = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("members = ["))
+        .unwrap_or_else(|| panic!("{}: no `members = [...]` line", manifest.display()));
+    let members: Vec<String> = list
+        .split('"')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_owned)
+        .collect();
+    assert!(
+        members.len() >= 8,
+        "{}: expected the workspace's members, got {members:?}",
+        manifest.display()
+    );
+    members
+}
 
 /// Cycles found and not yet broken, each with why it is still here. The test fails on any
 /// other cycle, and on one of these once it is gone (so the list only shrinks).
@@ -24,215 +58,6 @@ const KNOWN_CYCLES: [(&str, &str); 0] = [];
 
 /// A module path from the crate root (`[]` is the root).
 type ModPath = Vec<String>;
-
-/// A token of the stripped source: an identifier or keyword, or one punctuation mark (`::` is
-/// one token).
-#[derive(Clone, Debug, PartialEq)]
-enum Tok {
-    Ident(String),
-    Punct(&'static str),
-    Other,
-}
-
-/// Tokens of `src` with comments, strings and char literals dropped.
-fn tokens(src: &str) -> Vec<Tok> {
-    let b = src.as_bytes();
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < b.len() {
-        let c = b[i];
-        if c == b'/' && b.get(i + 1) == Some(&b'/') {
-            while i < b.len() && b[i] != b'\n' {
-                i += 1;
-            }
-        } else if c == b'/' && b.get(i + 1) == Some(&b'*') {
-            // Block comments nest in Rust.
-            let mut depth = 0;
-            while i < b.len() {
-                if b[i] == b'/' && b.get(i + 1) == Some(&b'*') {
-                    depth += 1;
-                    i += 2;
-                } else if b[i] == b'*' && b.get(i + 1) == Some(&b'/') {
-                    depth -= 1;
-                    i += 2;
-                    if depth == 0 {
-                        break;
-                    }
-                } else {
-                    i += 1;
-                }
-            }
-        } else if c == b'"' {
-            i = skip_string(b, i + 1);
-        } else if (c == b'r' || c == b'b')
-            && let Some(end) = raw_or_byte_string(b, i)
-        {
-            i = end;
-        } else if c == b'\'' {
-            // A char literal ('x', '\n', '\u{1F600}') or a lifetime ('a): a lifetime has no
-            // closing quote right after its first character.
-            if b.get(i + 1) == Some(&b'\\') {
-                i += 2;
-                while i < b.len() && b[i] != b'\'' {
-                    i += 1;
-                }
-                i += 1;
-            } else {
-                let ch = src[i + 1..].chars().next().map_or(1, char::len_utf8);
-                if b.get(i + 1 + ch) == Some(&b'\'') {
-                    i += ch + 2;
-                } else {
-                    i += 1;
-                }
-            }
-            out.push(Tok::Other);
-        } else if c.is_ascii_alphabetic() || c == b'_' {
-            let start = i;
-            while i < b.len() && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
-                i += 1;
-            }
-            out.push(Tok::Ident(src[start..i].to_owned()));
-        } else if c == b':' && b.get(i + 1) == Some(&b':') {
-            out.push(Tok::Punct("::"));
-            i += 2;
-        } else {
-            out.push(match c {
-                b'{' => Tok::Punct("{"),
-                b'}' => Tok::Punct("}"),
-                b',' => Tok::Punct(","),
-                b'#' => Tok::Punct("#"),
-                b'[' => Tok::Punct("["),
-                b']' => Tok::Punct("]"),
-                b'(' => Tok::Punct("("),
-                b')' => Tok::Punct(")"),
-                b';' => Tok::Punct(";"),
-                b'*' => Tok::Punct("*"),
-                _ if c.is_ascii_whitespace() => {
-                    i += 1;
-                    continue;
-                }
-                _ => Tok::Other,
-            });
-            i += 1;
-        }
-    }
-    out
-}
-
-/// The index after the closing quote of a string whose body starts at `i`.
-fn skip_string(b: &[u8], mut i: usize) -> usize {
-    while i < b.len() {
-        match b[i] {
-            b'\\' => i += 2,
-            b'"' => return i + 1,
-            _ => i += 1,
-        }
-    }
-    i
-}
-
-/// The end of a raw or byte string starting at `i` (`r"..."`, `r#"..."#`, `b"..."`,
-/// `br#"..."#`), `None` when `i` starts an identifier instead.
-fn raw_or_byte_string(b: &[u8], i: usize) -> Option<usize> {
-    if i > 0 && (b[i - 1].is_ascii_alphanumeric() || b[i - 1] == b'_') {
-        return None;
-    }
-    let mut j = i;
-    if b[j] == b'b' {
-        j += 1;
-        if b.get(j) == Some(&b'"') {
-            return Some(skip_string(b, j + 1));
-        }
-    }
-    if b.get(j) != Some(&b'r') {
-        return None;
-    }
-    j += 1;
-    let hashes = b[j..].iter().take_while(|&&c| c == b'#').count();
-    j += hashes;
-    if b.get(j) != Some(&b'"') {
-        return None;
-    }
-    j += 1;
-    while j < b.len() {
-        if b[j] == b'"'
-            && b[j + 1..]
-                .iter()
-                .take(hashes)
-                .filter(|&&c| c == b'#')
-                .count()
-                == hashes
-        {
-            return Some(j + 1 + hashes);
-        }
-        j += 1;
-    }
-    Some(j)
-}
-
-/// The index after the `}` matching the `{` at `open`.
-fn matching_brace(toks: &[Tok], open: usize) -> usize {
-    let mut depth = 0;
-    for (k, t) in toks.iter().enumerate().skip(open) {
-        match t {
-            Tok::Punct("{") => depth += 1,
-            Tok::Punct("}") => {
-                depth -= 1;
-                if depth == 0 {
-                    return k + 1;
-                }
-            }
-            _ => {}
-        }
-    }
-    toks.len()
-}
-
-/// `toks` without the items marked `#[cfg(test)]` that are `mod` blocks (the unit tests).
-fn drop_test_modules(toks: Vec<Tok>) -> Vec<Tok> {
-    let cfg_test = [
-        Tok::Punct("#"),
-        Tok::Punct("["),
-        Tok::Ident("cfg".into()),
-        Tok::Punct("("),
-        Tok::Ident("test".into()),
-        Tok::Punct(")"),
-        Tok::Punct("]"),
-    ];
-    let mut out = Vec::with_capacity(toks.len());
-    let mut i = 0;
-    while i < toks.len() {
-        if toks[i..].starts_with(&cfg_test) {
-            // Skip further attributes, then `mod name {...}` (or `mod name;`) goes.
-            let mut j = i + cfg_test.len();
-            while toks.get(j) == Some(&Tok::Punct("#")) {
-                j = toks[j..]
-                    .iter()
-                    .position(|t| *t == Tok::Punct("]"))
-                    .map_or(toks.len(), |k| j + k + 1);
-            }
-            if toks.get(j) == Some(&Tok::Ident("pub".into())) {
-                j += 1;
-            }
-            if toks.get(j) == Some(&Tok::Ident("mod".into())) {
-                match toks.get(j + 2) {
-                    Some(Tok::Punct("{")) => {
-                        i = matching_brace(&toks, j + 2);
-                        continue;
-                    }
-                    Some(Tok::Punct(";")) => {
-                        i = j + 3;
-                        continue;
-                    }
-                    _ => {}
-                }
-            }
-        }
-        out.push(toks[i].clone());
-        i += 1;
-    }
-    out
-}
 
 /// One file's module and its stripped tokens.
 struct Source {
@@ -295,55 +120,6 @@ fn read_crate(src: &Path) -> Vec<(ModPath, String)> {
         .collect()
 }
 
-/// Every path in `toks` from `i` on that continues a path prefix: `a::b::c`, groups
-/// `a::{b, c::d}` expanded. Returns the paths (identifiers after the prefix) and the index
-/// after the path.
-fn paths_from(toks: &[Tok], mut i: usize) -> (Vec<Vec<String>>, usize) {
-    let mut path = Vec::new();
-    loop {
-        match toks.get(i) {
-            Some(Tok::Ident(s)) => {
-                path.push(s.clone());
-                i += 1;
-            }
-            Some(Tok::Punct("{")) => {
-                let mut all = Vec::new();
-                i += 1;
-                loop {
-                    match toks.get(i) {
-                        Some(Tok::Punct("}")) | None => {
-                            i += 1;
-                            break;
-                        }
-                        Some(Tok::Punct(",")) => i += 1,
-                        _ => {
-                            let (inner, next) = paths_from(toks, i);
-                            for p in inner {
-                                all.push(path.iter().cloned().chain(p).collect());
-                            }
-                            // Skip what the inner path did not take (`as x`, `*`).
-                            i = next;
-                            while !matches!(
-                                toks.get(i),
-                                Some(Tok::Punct(",") | Tok::Punct("}")) | None
-                            ) {
-                                i += 1;
-                            }
-                        }
-                    }
-                }
-                return (all, i);
-            }
-            _ => return (vec![path], i),
-        }
-        if toks.get(i) == Some(&Tok::Punct("::")) {
-            i += 1;
-        } else {
-            return (vec![path], i);
-        }
-    }
-}
-
 /// The module edges `(from, to)` of one crate's sources (to: the deepest known module a path
 /// names).
 fn edges(sources: &[(ModPath, String)]) -> BTreeSet<(ModPath, ModPath)> {
@@ -357,6 +133,8 @@ fn edges(sources: &[(ModPath, String)]) -> BTreeSet<(ModPath, ModPath)> {
     // Known modules: the files, and inline `mod x {` blocks (found with their nesting below).
     let mut known: BTreeSet<ModPath> = parsed.iter().map(|s| s.module.clone()).collect();
     let mut raw: Vec<(ModPath, ModPath)> = Vec::new();
+    // `pub use` in lib.rs: the name it re-exports at the root -> the path it stands for.
+    let mut reexports: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for s in &parsed {
         // The module each token is in: the file's, deeper inside inline `mod x { ... }`.
         let mut stack: Vec<(ModPath, usize)> = vec![(s.module.clone(), s.toks.len())];
@@ -375,6 +153,40 @@ fn edges(sources: &[(ModPath, String)]) -> BTreeSet<(ModPath, ModPath)> {
                 known.insert(inner.clone());
                 stack.push((inner, matching_brace(&s.toks, i + 2)));
                 i += 3;
+                continue;
+            }
+            // A re-export in `lib.rs` (`pub use state::AppState;`) is the crate's façade, not
+            // a use by the root's items: `crate::AppState` elsewhere names `state`.
+            if here.is_empty()
+                && s.toks[i] == Tok::Ident("use".into())
+                && i > 0
+                && matches!(&s.toks[i - 1], Tok::Ident(k) if k == "pub")
+                    | (s.toks[i - 1] == Tok::Punct(")"))
+            {
+                let (paths, next) = paths_from(&s.toks, i + 1);
+                for mut p in paths {
+                    if p.first().is_some_and(|f| f == "crate" || f == "self") {
+                        p.remove(0);
+                    }
+                    if let Some(name) = p.last() {
+                        reexports.insert(name.clone(), p.clone());
+                    }
+                }
+                i = next.max(i + 1);
+                continue;
+            }
+            // In `lib.rs` a bare path may start at a module of the root (`use room::Room;`).
+            if here.is_empty()
+                && let Tok::Ident(name) = &s.toks[i]
+                && (i == 0 || s.toks[i - 1] != Tok::Punct("::"))
+                && s.toks.get(i + 1) == Some(&Tok::Punct("::"))
+                && known.contains(&vec![name.clone()])
+            {
+                let (paths, next) = paths_from(&s.toks, i);
+                for p in paths {
+                    raw.push((Vec::new(), p));
+                }
+                i = next.max(i + 1);
                 continue;
             }
             let start = match &s.toks[i] {
@@ -414,14 +226,38 @@ fn edges(sources: &[(ModPath, String)]) -> BTreeSet<(ModPath, ModPath)> {
             i = next.max(i + 1);
         }
     }
+    let root_items = vec![ROOT_ITEMS.to_owned()];
     raw.into_iter()
         .map(|(from, mut to)| {
+            // A name the root re-exports stands for its path; a re-exported crate that is
+            // not ours is no edge.
+            if let Some(path) = to.first().and_then(|n| reexports.get(n)) {
+                if !path
+                    .first()
+                    .is_some_and(|m| known.contains(&vec![m.clone()]))
+                {
+                    return (from.clone(), from);
+                }
+                to.splice(..1, path.iter().cloned());
+            }
             // The deepest module the path names (the rest are items in it).
+            let named_an_item = !to.is_empty() && !known.contains(&to);
             while !to.is_empty() && !known.contains(&to) {
                 to.pop();
             }
+            // An item of `lib.rs` (not a module) is the root-items node; so is the code of
+            // `lib.rs` that names a module.
+            if to.is_empty() && named_an_item {
+                to = root_items.clone();
+            }
+            let from = if from.is_empty() {
+                root_items.clone()
+            } else {
+                from
+            };
             (from, to)
         })
+        .filter(|(from, to)| from != to)
         .collect()
 }
 
@@ -497,8 +333,8 @@ fn cycles(edges: &BTreeSet<(ModPath, ModPath)>) -> Vec<String> {
 fn no_import_cycles_in_any_workspace_crate() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut found = Vec::new();
-    for name in CRATES {
-        let src = root.join(name).join("src");
+    for name in workspace_members(&root) {
+        let src = root.join(&name).join("src");
         let sources = read_crate(&src);
         assert!(!sources.is_empty(), "{}: no sources", src.display());
         for cycle in cycles(&edges(&sources)) {
@@ -604,6 +440,77 @@ fn parents_children_tests_comments_and_strings_are_no_cycle() {
             .any(|(from, to)| from.first().is_some_and(|f| f == "a")
                 && to.first().is_some_and(|t| t == "b"))
     );
+}
+
+#[test]
+fn a_loop_through_the_items_of_lib_rs_is_a_cycle() {
+    // AppState written in lib.rs holds the cluster, and the cluster names crate::AppState.
+    let sources = fake(&[
+        (
+            "",
+            "pub mod cluster; pub mod room; use room::Room; \
+             pub struct AppState { cluster: cluster::Cluster, rooms: Vec<Room> }",
+        ),
+        ("cluster", "use crate::AppState; pub struct Cluster;"),
+        // room names lib.rs's items too, but lib.rs naming room closes its loop as well.
+        ("room", "pub struct Room { limits: crate::Limits }"),
+    ]);
+    let e = edges(&sources);
+    assert!(e.contains(&(vec![ROOT_ITEMS.into()], vec!["cluster".into()])));
+    assert!(e.contains(&(vec!["cluster".into()], vec![ROOT_ITEMS.into()])));
+    let mut found = cycles(&e);
+    found.sort();
+    assert_eq!(
+        found,
+        [
+            format!("{ROOT_ITEMS} -> cluster -> {ROOT_ITEMS}"),
+            format!("room -> {ROOT_ITEMS} -> room"),
+        ]
+    );
+
+    // The same crate with AppState in a module of its own that the cluster does not name,
+    // lib.rs only declaring and re-exporting: no cycle.
+    let sources = fake(&[
+        (
+            "",
+            "pub mod cluster; pub mod state; pub use state::AppState;",
+        ),
+        (
+            "state",
+            "use crate::cluster::Cluster; pub struct AppState(Cluster);",
+        ),
+        ("cluster", "pub struct Cluster;"),
+    ]);
+    let e = edges(&sources);
+    assert!(!e.iter().any(|(from, _)| from[0] == ROOT_ITEMS));
+    assert!(cycles(&e).is_empty(), "{:?}", cycles(&e));
+
+    // ... but a module naming the re-export through the root names `state`, and closes the
+    // loop state -> cluster -> state.
+    let sources = fake(&[
+        (
+            "",
+            "pub mod cluster; pub mod state; pub use state::AppState;",
+        ),
+        (
+            "state",
+            "use crate::cluster::Cluster; pub struct AppState(Cluster);",
+        ),
+        (
+            "cluster",
+            "pub struct Cluster; fn f(s: &crate::AppState) {}",
+        ),
+    ]);
+    assert_eq!(cycles(&edges(&sources)), ["cluster -> state -> cluster"]);
+    // A re-exported crate that is not ours is no edge.
+    let sources = fake(&[
+        (
+            "",
+            "pub mod mesh; pub use glam; pub struct Model(mesh::Mesh);",
+        ),
+        ("mesh", "pub struct Mesh(crate::glam::Vec3);"),
+    ]);
+    assert!(cycles(&edges(&sources)).is_empty());
 }
 
 #[test]

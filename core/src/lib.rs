@@ -1,5 +1,5 @@
 //! crease-core: what runs per frame. No async, no network, nothing from the rest of the
-//! workspace (ARCHITECTURE.md's dependency rules, checked by `tests/dependency_rules.rs`).
+//! workspace (ARCHITECTURE.md's dependency rules, checked by `client/tests/house_rules.rs`).
 //!
 //! Layout:
 //! - [`mesh`]: [`mesh::Mesh`], readers/writers (OBJ, PLY, glTF/GLB), normals, edges, adjacency,

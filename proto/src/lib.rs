@@ -19,7 +19,7 @@
 //! - [`json`]: the JSON the WebSocket and `/api/rooms` speak: control frames in, acks out,
 //!   room documents, one serde mapping each.
 //! - [`take`]: take files (issue 22; `take.proto`): writing a room's recorded frames, reading
-//!   them back up to the last whole frame, and exporting them as glTF.
+//!   them back up to the last whole frame, and unpacking their frames into core types.
 //! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
 //!   integers), error acks, and the batch error status that names its frame in a field.
 

@@ -7,15 +7,16 @@
 //!   room allocates nothing per frame; the writer appends each buffer with one write.
 //! - Reading: [`scan`] walks a file record by record and stops at the first record that is
 //!   short or fails its CRC (a crash while writing it), [`read_take`] keeps every frame.
-//! - Using: [`frame_transforms`] / [`frame_controls`] check and unpack a frame's arrays,
-//!   [`keyframe_times`] gives the frames' times, [`skinned_glb`] and [`detail_glb`] export a
-//!   take as glTF (`crease take export`, the viewer's download).
+//! - Using: [`frame_transforms`] / [`frame_controls`] / [`all_transforms`] check and unpack
+//!   frames' arrays, [`keyframe_times`] gives the frames' times, [`check_model`] and
+//!   [`take_skinning`] what a model must be and how the room skinned. Exporting a take as
+//!   glTF is its users' (the server's download, `crease take export`), through
+//!   `core::model::gltf_export`; the contract runs no predictor.
 
 use std::io::{self, Read, Write};
 
 use crease_core::glam::{Quat, Vec3};
-use crease_core::model::{ModelError, TrainedModel, gltf_export};
-use crease_core::predictor::Predictor;
+use crease_core::model::TrainedModel;
 use crease_core::runtime::skin::{RigidTransform, Skinning};
 use prost::Message as _;
 
@@ -60,9 +61,6 @@ pub enum TakeError {
     /// The take cannot be exported with this model.
     #[error("export: {0}")]
     Export(String),
-    /// The glTF writer refused.
-    #[error("export: {0}")]
-    Model(#[from] ModelError),
 }
 
 /// Frames `message` into `out` (cleared first) as one record: length, CRC, payload.
@@ -361,89 +359,20 @@ pub fn take_skinning(take: &Take, model: &TrainedModel) -> Skinning {
         .unwrap_or(model.skinning)
 }
 
-/// The take as a skinned glTF animation (`core::model::gltf_export`): the model's rest mesh
-/// and skin, one joint per bone, one keyframe per frame at [`keyframe_times`] holding the
-/// recorded bone transforms, so a glTF viewer's skinning reproduces the room's base meshes.
+/// Every frame's bone transforms, frame after frame (`frames × bones`, as
+/// `core::model::gltf_export::skinned_recording_to_glb` takes them), each frame checked
+/// against the header.
 ///
 /// # Errors
-/// [`TakeError::Export`] for a take without frames; a frame's shape; the writer's.
-pub fn skinned_glb(take: &Take, model: &TrainedModel) -> Result<Vec<u8>, TakeError> {
-    if take.frames.is_empty() {
-        return Err(TakeError::Export("the take has no frames".into()));
-    }
-    if take_skinning(take, model) == Skinning::Dqs {
-        return Err(TakeError::Export(
-            "the room skinned with dual quaternions and glTF skins linearly: the skinned \
-             export would not be the room's meshes (export --level detail, or record an LBS \
-             room)"
-                .into(),
-        ));
-    }
-    let mut all = Vec::with_capacity(take.frames.len() * model.rig.bone_count);
+/// [`TakeError::FrameShape`].
+pub fn all_transforms(take: &Take) -> Result<Vec<RigidTransform>, TakeError> {
+    let mut all = Vec::with_capacity(take.frames.len() * take.header().bones as usize);
     let mut one = Vec::new();
     for i in 0..take.frames.len() {
         frame_transforms(take, i, &mut one)?;
         all.extend_from_slice(&one);
     }
-    let times: Vec<f32> = keyframe_times(take).iter().map(|&t| t as f32).collect();
-    Ok(gltf_export::skinned_animation_to_glb(
-        &model.rig, "take", &times, &all,
-    )?)
-}
-
-/// The take's detail layer as a morph-target animation (`core::model::gltf_export`'s baked
-/// vertex animation): every `every`-th frame's detail mesh (HZY11 eq. 4 on the recorded
-/// frame's base mesh), at the take's mean frame rate; the first exported frame is the base
-/// shape.
-///
-/// # Errors
-/// [`TakeError::Export`] for a model without a detail layer or a take without frames; a frame's
-/// shape; the predictor's and the writer's.
-pub fn detail_glb(
-    take: &Take,
-    model: std::sync::Arc<TrainedModel>,
-    every: usize,
-) -> Result<Vec<u8>, TakeError> {
-    let every = every.max(1);
-    let skinning = take_skinning(take, &model);
-    let mut predictor =
-        Predictor::new(model, None).map_err(|e| TakeError::Export(format!("predictor: {e}")))?;
-    predictor.set_skinning(skinning);
-    let triangles = predictor
-        .detail_triangles()
-        .ok_or_else(|| TakeError::Export("the model has no detail layer".into()))?
-        .to_vec();
-    let picked: Vec<usize> = (0..take.frames.len()).step_by(every).collect();
-    let (Some(&first), Some(&last)) = (picked.first(), picked.last()) else {
-        return Err(TakeError::Export("the take has no frames".into()));
-    };
-    let times = keyframe_times(take);
-    let span = times[last] - times[first];
-    let fps = if picked.len() > 1 && span > 0.0 {
-        ((picked.len() - 1) as f64 / span) as f32
-    } else {
-        1.0
-    };
-    let vertices = predictor.detail_vertex_count().unwrap_or(0);
-    gltf_export::check_animation_size(vertices, triangles.len(), picked.len())?;
-    let mut ctx = predictor.new_context();
-    let (mut controls, mut transforms) = (Vec::new(), Vec::new());
-    let mut meshes: Vec<Vec3> = Vec::with_capacity(vertices * picked.len());
-    for &i in &picked {
-        frame_controls(take, i, &mut controls)?;
-        frame_transforms(take, i, &mut transforms)?;
-        let predict =
-            |e: crease_core::predictor::PredictError| TakeError::Export(format!("frame {i}: {e}"));
-        predictor
-            .load_frame(&mut ctx, &controls, &transforms)
-            .map_err(predict)?;
-        predictor.skin(&mut ctx).map_err(predict)?;
-        meshes.extend_from_slice(predictor.predict_detail(&mut ctx).map_err(predict)?);
-    }
-    let rest = meshes[..vertices].to_vec();
-    Ok(gltf_export::animation_to_glb(
-        &triangles, &rest, &meshes, fps,
-    )?)
+    Ok(all)
 }
 
 #[cfg(test)]

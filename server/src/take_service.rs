@@ -5,6 +5,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crease_core::model::gltf_export;
 use crease_proto::json::{ReplayRoom, TakeFrames};
 use crease_proto::{take, v1};
 
@@ -212,8 +213,8 @@ fn take_and_model(
     Ok((take, model))
 }
 
-/// Take `id` as a skinned glTF animation ([`take::skinned_glb`]) with the server's copy of its
-/// model.
+/// Take `id` as a skinned glTF animation ([`gltf_export::skinned_recording_to_glb`]) with the
+/// server's copy of its model.
 ///
 /// # Errors
 /// [`TakeError::NoTake`], the model missing or changed, the export's.
@@ -221,8 +222,16 @@ pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpErr
     let state = Arc::clone(state);
     blocking(move || {
         let (take, model) = take_and_model(&state, &id)?;
-        take::skinned_glb(&take, &model.model)
-            .map_err(|e| TakeOpError::Model(format!("take {id:?}: {e}")))
+        let export = |e: &dyn std::fmt::Display| TakeOpError::Model(format!("take {id:?}: {e}"));
+        let transforms = take::all_transforms(&take).map_err(|e| export(&e))?;
+        gltf_export::skinned_recording_to_glb(
+            &model.model.rig,
+            take::take_skinning(&take, &model.model),
+            "take",
+            &take::keyframe_times(&take),
+            &transforms,
+        )
+        .map_err(|e| export(&format!("export: {e}")))
     })
     .await
 }

@@ -22,6 +22,8 @@
 //!   training set; control points improved the same way.
 //! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
 //! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
+//! - `linalg`: small dense kernels the per-vertex and per-edge fits share (no allocation).
+//! - `par`: the two loop shapes training parallelises (rayon under `parallel`, else plain).
 //!
 //! The training modules point one way: [`eval`] -> [`pipeline`] -> [`select`] -> [`base`] ->
 //! [`selection`], with [`metrics`] below [`select`] and [`eval`] (`client/tests/module_cycles.rs`

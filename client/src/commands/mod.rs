@@ -17,6 +17,7 @@ pub mod room;
 pub mod stream;
 pub mod synth;
 pub mod take;
+pub mod take_export;
 pub mod train;
 pub mod training_args;
 pub mod watch;

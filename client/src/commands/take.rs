@@ -15,6 +15,7 @@ use tokio_stream::StreamExt as _;
 
 use super::common::{ServerArgs, authorized};
 use super::room::AdminArgs;
+use super::take_export;
 
 /// Options of `crease take`.
 #[derive(Clone, Debug, clap::Args)]
@@ -475,8 +476,8 @@ async fn export(args: &ExportArgs) -> anyhow::Result<()> {
         .with_context(|| format!("--model {}", args.model.display()))?;
     let started = std::time::Instant::now();
     let glb = match args.level.as_str() {
-        "detail" => take::detail_glb(&take, Arc::new(model), args.every as usize)?,
-        _ => take::skinned_glb(&take, &model)?,
+        "detail" => take_export::detail_glb(&take, Arc::new(model), args.every as usize)?,
+        _ => take_export::skinned_glb(&take, &model)?,
     };
     crease_core::model::file::write_atomic(&args.out, &glb)
         .with_context(|| format!("--out {}", args.out.display()))?;

@@ -1,6 +1,7 @@
 //! Animated glTF 2.0 binaries (`.glb`) any viewer (three.js, Blender) can play: a [`Rig`] as a
 //! skinned mesh ([`export_rig_glb`]; with any sequence of bone transforms as its keyframes,
-//! [`skinned_animation_to_glb`], what `crease take export` writes), and a sequence of
+//! [`skinned_animation_to_glb`], and a take's, [`skinned_recording_to_glb`], what
+//! `crease take export` and the viewer's take download write), and a sequence of
 //! synthesized meshes baked into morph targets ([`export_animation_glb`], what
 //! `crease synth --gltf` writes).
 //!
@@ -59,7 +60,7 @@ use json::validation::{Checked, USize64};
 use super::ModelError;
 use super::file::write_atomic;
 use super::rig::Rig;
-use crate::runtime::skin::RigidTransform;
+use crate::runtime::skin::{RigidTransform, Skinning};
 
 /// Seconds between consecutive example keyframes: slow enough to see each pose in a viewer.
 pub const SECONDS_PER_EXAMPLE: f32 = 1.0;
@@ -148,6 +149,37 @@ pub fn skinned_animation_to_glb(
         ));
     }
     skinned_glb(rig, name, times, transforms)
+}
+
+/// A recording's predicted bone transforms (what a room's take holds) as a skinned glTF
+/// animation: [`skinned_animation_to_glb`] with keyframe `f` at `times[f]` seconds, after
+/// checking that the recording can be one. glTF skins linearly, so frames the room skinned
+/// with dual quaternions ([`Skinning::Dqs`]) are refused: the file would not show the room's
+/// meshes.
+///
+/// # Errors
+/// [`ModelError::Export`] for no frames or dual-quaternion skinning; what
+/// [`skinned_animation_to_glb`] refuses.
+pub fn skinned_recording_to_glb(
+    rig: &Rig,
+    skinning: Skinning,
+    name: &str,
+    times: &[f64],
+    transforms: &[RigidTransform],
+) -> Result<Vec<u8>, ModelError> {
+    if times.is_empty() {
+        return Err(ModelError::Export("the take has no frames".into()));
+    }
+    if skinning == Skinning::Dqs {
+        return Err(ModelError::Export(
+            "the room skinned with dual quaternions and glTF skins linearly: the skinned \
+             export would not be the room's meshes (export --level detail, or record an LBS \
+             room)"
+                .into(),
+        ));
+    }
+    let times: Vec<f32> = times.iter().map(|&t| t as f32).collect();
+    skinned_animation_to_glb(rig, name, &times, transforms)
 }
 
 /// The skinned GLB of `rig` with animation `name` (none when `times` is empty); `transforms`
