@@ -35,10 +35,11 @@ const BACKED_UP_BYTES = 65536;
 
 /**
  * The room's socket. `token()` reads the publish token; `streams` = {vertices, palette} (their
- * header(t, bytes), frame(f, bytes, buffer) and closed()); `overlay` for the banner.
+ * header(t, bytes), true when it began a stream, frame(f, bytes) and closed()); `onHeader()`
+ * runs after a stream began; `overlay` for the banner.
  * Returns {connect, reconnect, ready, backedUp, send}.
  */
-export function createConnection(state, { token, streams, overlay }) {
+export function createConnection(state, { token, streams, onHeader, overlay }) {
   const c = state.crease;
   const sock = state.socket;
 
@@ -51,9 +52,11 @@ export function createConnection(state, { token, streams, overlay }) {
     } catch (err) {
       return overlay.fail(`message: ${err.message}`);
     }
-    if (msg.topology) streams.vertices.header(msg.topology, bytes);
-    else if (msg.paletteTopology) streams.palette.header(msg.paletteTopology, bytes);
-    else if (msg.frame && state.stream === "palette") streams.palette.frame(msg.frame, bytes);
+    if (msg.topology) {
+      if (streams.vertices.header(msg.topology, bytes)) onHeader();
+    } else if (msg.paletteTopology) {
+      if (streams.palette.header(msg.paletteTopology, bytes)) onHeader();
+    } else if (msg.frame && state.stream === "palette") streams.palette.frame(msg.frame, bytes);
     else if (msg.frame && state.stream === "vertices") streams.vertices.frame(msg.frame, bytes);
   }
 

@@ -28,12 +28,13 @@ export function chooseEncoding(state, renderer) {
   }
 }
 
-/** The palette stream's handlers: `handles.build()` after a header, `overlay` for errors and counts. */
-export function createPaletteStream(state, { view, overlay, handles }) {
+/** The palette stream's handlers; `overlay` for errors and counts. */
+export function createPaletteStream(state, { view, overlay }) {
   const c = state.crease;
   const p = state.palette;
 
-  /** A palette stream's header: everything but the bones. A second one (a new socket) rebuilds. */
+  /** A palette stream's header: everything but the bones. A second one (a new socket)
+   * rebuilds. True when it began a stream. */
   function header(t, bytes) {
     if (!p.synth) p.synth = new PaletteSynth(view.renderer);
     const synth = p.synth;
@@ -44,7 +45,7 @@ export function createPaletteStream(state, { view, overlay, handles }) {
       overlay.fail(err.message);
       state.stream = null;
       if (state.mesh.mesh) state.mesh.mesh.visible = false;
-      return;
+      return false;
     }
     state.stream = "palette";
     c.headers += 1;
@@ -62,7 +63,7 @@ export function createPaletteStream(state, { view, overlay, handles }) {
     mesh.visible = false; // until the first frame's passes ran
     state.mesh.streamIndex = null; // model vertex order
     c.palette = { header: bytes, frame: null, frames: null, seq: null, readback: () => synth.readback() };
-    handles.build();
+    return true;
   }
 
   /** A palette frame: decoded now (keyframe or delta), drawn at the next redraw. */

@@ -8,11 +8,12 @@
 // WebSocket's subprotocols (wire.js socketProtocols), never in a URL.
 
 /**
- * Wires the panel's controls; `params` is the page's query (URLSearchParams), `onToken()` runs
+ * Wires the panel's controls (`state.params`: the page's query), `onToken()` runs
  * when the token changes (the connection reconnects: the token is read at connection).
  * Returns {token(): the publish token, loadRoom()}.
  */
-export function createPanel(state, { params, elements, onToken }) {
+export function createPanel(state, { elements, onToken }) {
+  const params = state.params;
   const { token: tokenInput, detail, room: roomSelect } = elements;
   const key = `crease-token-${state.roomId}`;
 

@@ -13,10 +13,15 @@ function hidden(object, name, value) {
 }
 
 /**
- * The state of one page: `roomId`, `level` ("base" or "detail"), `encodingParam` ("vertices",
- * "palette" or "auto": what the address asked for), `takeId` (a replay page's take, or null).
+ * The state of one page from its query (`params`, URLSearchParams): `?room=` (default demo),
+ * `?level=detail|base`, `?encoding=vertices|palette|auto` (default auto), `?take=` (a replay
+ * page's take).
  */
-export function createState({ roomId, level, encodingParam, takeId }) {
+export function createState(params) {
+  const roomId = params.get("room") || "demo";
+  const level = params.get("level") === "detail" ? "detail" : "base";
+  const encodingParam = ["vertices", "palette"].includes(params.get("encoding")) ? params.get("encoding") : "auto";
+  const takeId = params.get("take");
   const now = performance.now();
   const crease = {
     connected: false,
@@ -60,9 +65,10 @@ export function createState({ roomId, level, encodingParam, takeId }) {
 
   return {
     crease,
+    params, // the page's query (URLSearchParams; panel.js takes the token out of it)
     roomId,
     level,
-    encodingParam,
+    encodingParam, // what the address asked for: "vertices", "palette" or "auto"
     room: null, // GET /api/rooms/{id}: control points, bounds, capture, skinning (panel.js)
     // What the current socket streams, from its first message: "vertices", "palette" or null.
     stream: null,
@@ -76,7 +82,7 @@ export function createState({ roomId, level, encodingParam, takeId }) {
     // Vertex streams (vertex-stream.js): the decode worker, the stream's generation (a new
     // header or socket starts one: older results are dropped), positions buffers to lend the
     // worker, and whether the geometry holds positions not yet uploaded.
-    vertices: { worker: null, generation: 0, spares: [], inFlight: 0, dirty: false },
+    vertices: { worker: null, generation: 0, spares: [], dirty: false },
     // Palette streams (palette-stream.js): PaletteSynth, its material, the frame waiting for
     // the GPU passes, and the frame messages from the last keyframe on.
     palette: { synth: null, material: null, pending: null, chain: null },

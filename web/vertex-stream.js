@@ -15,8 +15,8 @@ import { frameCamera, showMesh } from "./scene.js";
 /** Positions buffers kept to lend the worker (more in flight allocate; extras are dropped). */
 const MAX_SPARES = 3;
 
-/** The vertex stream's handlers: `handles.build()` after a header, `overlay` for errors and counts. */
-export function createVertexStream(state, { view, overlay, handles }) {
+/** The vertex stream's handlers; `overlay` for errors and counts. */
+export function createVertexStream(state, { view, overlay }) {
   const c = state.crease;
   const v = state.vertices;
 
@@ -36,7 +36,7 @@ export function createVertexStream(state, { view, overlay, handles }) {
     if (positions.length === geometry.getAttribute("position").array.length) v.spares.push(positions);
   }
 
-  /** A Topology: a new stream (every socket sends one first). */
+  /** A Topology: a new stream (every socket sends one first); true when it began one. */
   function header(t) {
     let index;
     try {
@@ -44,7 +44,7 @@ export function createVertexStream(state, { view, overlay, handles }) {
     } catch (err) {
       overlay.fail(`topology: ${err.message}`);
       state.stream = null;
-      return;
+      return false;
     }
     state.stream = "vertices";
     c.headers += 1;
@@ -72,7 +72,7 @@ export function createVertexStream(state, { view, overlay, handles }) {
       t.vertexOrder.forEach((model, i) => (streamIndex[model] = i));
       state.mesh.streamIndex = streamIndex;
     }
-    handles.build();
+    return true;
   }
 
   /** A new stream generation: results of frames sent before are dropped; the worker forgets its lanes. */
@@ -87,7 +87,6 @@ export function createVertexStream(state, { view, overlay, handles }) {
     const positions = v.spares.pop() || null;
     const transfer = data.buffer === bytes.buffer ? [bytes.buffer] : [];
     if (positions) transfer.push(positions.buffer);
-    v.inFlight += 1;
     worker().postMessage(
       {
         type: "frame",
@@ -106,7 +105,6 @@ export function createVertexStream(state, { view, overlay, handles }) {
 
   /** The worker's answer for one frame. */
   function decoded(m) {
-    v.inFlight -= 1;
     if (m.generation !== v.generation || !state.mesh.geometry) return recycle(m.positions); // an older stream's
     if (m.type === "error") {
       recycle(m.positions);

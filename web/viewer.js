@@ -30,32 +30,26 @@ import { listTakes, startPlayer } from "./takes.js";
 import { createVertexStream } from "./vertex-stream.js";
 import { createXr } from "./xr-view.js";
 
-const params = new URLSearchParams(location.search);
-const state = createState({
-  roomId: params.get("room") || "demo",
-  level: params.get("level") === "detail" ? "detail" : "base",
-  encodingParam: ["vertices", "palette"].includes(params.get("encoding")) ? params.get("encoding") : "auto",
-  takeId: params.get("take"),
-});
+const state = createState(new URLSearchParams(location.search));
 const crease = state.crease;
 window.crease = crease;
 
 const $ = (id) => document.getElementById(id);
 const overlay = createOverlay(state, { banner: $("banner"), stats: $("stats") });
 const panel = createPanel(state, {
-  params,
   elements: { token: $("token"), detail: $("detail"), room: $("room") },
   onToken: () => connection.reconnect(), // the token goes out when a socket opens
 });
 const view = createScene($("view"));
 chooseEncoding(state, view.renderer);
 
-// The socket hands each message to the stream of its kind; the streams are made once, here.
-const streams = {};
-const connection = createConnection(state, { token: panel.token, streams, overlay });
+// The socket hands each message to the stream of its kind; a new stream rebuilds the handles.
+const streams = {
+  vertices: createVertexStream(state, { view, overlay }),
+  palette: createPaletteStream(state, { view, overlay }),
+};
+const connection = createConnection(state, { token: panel.token, streams, onHeader: () => handles.build(), overlay });
 const handles = createHandles(state, { view, connection, overlay, token: panel.token });
-streams.vertices = createVertexStream(state, { view, overlay, handles });
-streams.palette = createPaletteStream(state, { view, overlay, handles });
 const xr = createXr(state, {
   view,
   connection,
