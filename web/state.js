@@ -80,9 +80,9 @@ export function createState(params) {
     // opened, and the next control frame's seq (drags and XR frames share it).
     socket: { ws: null, backoff: 500, openedAt: 0, seq: 0 },
     // Vertex streams (vertex-stream.js): the decode worker, the stream's generation (a new
-    // header or socket starts one: older results are dropped), positions buffers to lend the
-    // worker, and whether the geometry holds positions not yet uploaded.
-    vertices: { worker: null, generation: 0, spares: [], dirty: false },
+    // header or socket starts one: older results are dropped), positions and normals buffers
+    // to lend the worker, and whether the geometry holds arrays not yet uploaded.
+    vertices: { worker: null, generation: 0, spares: { positions: [], normals: [] }, dirty: false },
     // Palette streams (palette-stream.js): PaletteSynth, its material, the frame waiting for
     // the GPU passes, and the frame messages from the last keyframe on.
     palette: { synth: null, material: null, pending: null, chain: null },

@@ -1,18 +1,19 @@
 // Vertex streams (issue 37): a Topology (decoded here: meshopt's index codec, once per
 // socket), then codec frames of every vertex, decoded off the main thread by
-// decode-worker.js. The socket message's buffer goes to the worker (transferred, no copy) with
-// a positions buffer to reuse; the decoded positions come back (transferred) and become the
-// geometry's position array at once (the array is swapped, not copied: the one it replaces is
-// lent to the worker for a later frame), so window.crease.frameSeq and the positions the
-// handles read always belong together. The upload and the CPU normals wait for the next
-// redraw (update()): however many frames came in between, the newest is drawn once (latest
-// wins), as palette frames are. Frames are decoded and shown in the order they came.
+// decode-worker.js, which also computes their normals (three.js's computeVertexNormals, to
+// the bit: normals.js). The socket message's buffer goes to the worker (transferred, no copy)
+// with positions and normals buffers to reuse; the decoded ones come back (transferred) and
+// become the geometry's arrays at once (swapped, not copied: the ones they replace are lent
+// to the worker for a later frame), so window.crease.frameSeq and the positions the handles
+// read always belong together. The upload waits for the next redraw (update()): however many
+// frames came in between, the newest is drawn once (latest wins), as palette frames are.
+// Frames are decoded and shown in the order they came.
 
 import * as THREE from "three";
 import { decodeIndices } from "./codec.js";
 import { frameCamera, showMesh } from "./scene.js";
 
-/** Positions buffers kept to lend the worker (more in flight allocate; extras are dropped). */
+/** Buffers of each kind kept to lend the worker (more in flight allocate; extras are dropped). */
 const MAX_SPARES = 3;
 
 /** The vertex stream's handlers; `overlay` for errors and counts. */
@@ -29,11 +30,11 @@ export function createVertexStream(state, { view, overlay }) {
     return v.worker;
   }
 
-  /** Keeps `positions` to lend the worker again when it fits the current stream. */
-  function recycle(positions) {
-    const geometry = state.mesh.geometry;
-    if (!positions || !geometry || v.spares.length >= MAX_SPARES) return;
-    if (positions.length === geometry.getAttribute("position").array.length) v.spares.push(positions);
+  /** Keeps `positions` and `normals` to lend the worker again when they fit the current stream. */
+  function recycle(positions, normals) {
+    const n = 3 * c.vertexCount;
+    if (positions && positions.length === n && v.spares.positions.length < MAX_SPARES) v.spares.positions.push(positions);
+    if (normals && normals.length === n && v.spares.normals.length < MAX_SPARES) v.spares.normals.push(normals);
   }
 
   /** A Topology: a new stream (every socket sends one first); true when it began one. */
@@ -56,14 +57,15 @@ export function createVertexStream(state, { view, overlay }) {
     c.palette = null;
     c.model = t.model;
     c.vertexCount = t.vertexCount;
-    restart();
+    restart(index);
     const geo = new THREE.BufferGeometry();
     geo.setAttribute("position", new THREE.BufferAttribute(new Float32Array(3 * t.vertexCount), 3));
+    geo.setAttribute("normal", new THREE.BufferAttribute(new Float32Array(3 * t.vertexCount), 3));
     geo.setIndex(new THREE.BufferAttribute(index, 1));
     const mesh = showMesh(state, view, geo, view.material);
     mesh.frustumCulled = true;
     mesh.visible = true;
-    v.spares = v.spares.filter((p) => p.length === 3 * t.vertexCount);
+    for (const kind of ["positions", "normals"]) v.spares[kind] = v.spares[kind].filter((a) => a.length === 3 * t.vertexCount);
     v.dirty = false;
     // Control points index model vertices; the stream may be in its own order (base level).
     state.mesh.streamIndex = null;
@@ -75,18 +77,22 @@ export function createVertexStream(state, { view, overlay }) {
     return true;
   }
 
-  /** A new stream generation: results of frames sent before are dropped; the worker forgets its lanes. */
-  function restart() {
+  /** A new stream generation: results of frames sent before are dropped; the worker forgets
+   * its lanes, and takes the new stream's triangles (`index`, copied: the geometry keeps it). */
+  function restart(index) {
     v.generation += 1;
-    if (v.worker) v.worker.postMessage({ type: "reset" });
+    if (index) worker().postMessage({ type: "topology", index });
+    else if (v.worker) v.worker.postMessage({ type: "reset" });
   }
 
   /** A codec frame: to the worker, with the socket message's buffer (`bytes`, transferred). */
   function frame(f, bytes) {
     const data = f.data || new Uint8Array(0);
-    const positions = v.spares.pop() || null;
+    const positions = v.spares.positions.pop() || null;
+    const normals = v.spares.normals.pop() || null;
     const transfer = data.buffer === bytes.buffer ? [bytes.buffer] : [];
     if (positions) transfer.push(positions.buffer);
+    if (normals) transfer.push(normals.buffer);
     worker().postMessage(
       {
         type: "frame",
@@ -98,6 +104,7 @@ export function createVertexStream(state, { view, overlay }) {
         offset: data.byteOffset,
         length: data.length,
         positions,
+        normals,
       },
       transfer,
     );
@@ -105,31 +112,33 @@ export function createVertexStream(state, { view, overlay }) {
 
   /** The worker's answer for one frame. */
   function decoded(m) {
-    if (m.generation !== v.generation || !state.mesh.geometry) return recycle(m.positions); // an older stream's
+    if (m.generation !== v.generation || !state.mesh.geometry) return recycle(m.positions, m.normals); // an older stream's
     if (m.type === "error") {
-      recycle(m.positions);
+      recycle(m.positions, m.normals);
       overlay.fail(`frame ${m.seq}: ${m.message}`);
       return;
     }
-    const attr = state.mesh.geometry.getAttribute("position");
-    if (m.positions.length !== attr.array.length) {
-      overlay.fail(`frame ${m.seq}: ${m.positions.length / 3} vertices, the topology has ${attr.array.length / 3}`);
+    const position = state.mesh.geometry.getAttribute("position");
+    const normal = state.mesh.geometry.getAttribute("normal");
+    if (m.positions.length !== position.array.length) {
+      overlay.fail(`frame ${m.seq}: ${m.positions.length / 3} vertices, the topology has ${position.array.length / 3}`);
       return;
     }
-    const old = attr.array;
-    attr.array = m.positions; // the same size: three.js updates the GPU buffer in place
-    recycle(old);
+    // The same sizes: three.js updates the GPU buffers in place at the upload.
+    recycle(position.array, normal.array);
+    position.array = m.positions;
+    normal.array = m.normals;
     v.dirty = true;
     overlay.meshFrame(m.seq, m.captureTimeUs, m.serverLatencyUs, m.length);
   }
 
-  /** At a redraw: uploads the newest positions and computes their normals; true when it did. */
+  /** At a redraw: uploads the newest positions and normals; true when it did. */
   function update() {
     if (!v.dirty) return false;
     v.dirty = false;
     const geometry = state.mesh.geometry;
     geometry.getAttribute("position").needsUpdate = true;
-    geometry.computeVertexNormals();
+    geometry.getAttribute("normal").needsUpdate = true;
     geometry.computeBoundingSphere();
     if (!state.mesh.framed) frameCamera(state, view);
     state.mesh.fresh = true;
