@@ -4,7 +4,11 @@
 // delta's lanes add to the previous frame's lanes mod 2^16. Positions decode bit-exactly as
 // Math.fround(min + q * step), which is what the Rust decoder computes in f32.
 
-import { MeshoptDecoder } from "meshoptimizer/decoder";
+// A relative path to the served package file (crease-server serves web/node_modules at
+// /node_modules/), not the bare "meshoptimizer/decoder" of the page's import map: the decode
+// worker (decode-worker.js) imports this module too, and module workers do not see import
+// maps in every browser. Node resolves the same file (web/node_modules, after `npm ci`).
+import { MeshoptDecoder } from "./node_modules/meshoptimizer/meshopt_decoder.mjs";
 
 export const HEADER_LEN = 52;
 const MAGIC = [0x43, 0x52, 0x53, 0x46]; // "CRSF"

@@ -1,0 +1,100 @@
+// The viewer's one state object (issue 37). Everything that changes while the page runs lives
+// in the object createState() makes, which the entry (viewer.js) passes to every module: the
+// modules hold no mutable state of their own (constants, imports, pure functions and
+// factories closing over this object, the page's elements and each other only).
+//
+// `state.crease` is the public part, `window.crease` (web/README.md lists its fields): what
+// the browser tests and curious users read. Its functions and the palette capture are not
+// enumerable, so `JSON.stringify(window.crease)` stays small. The rest is the viewer's own.
+
+/** Defines a non-enumerable, writable property (assignment later keeps it hidden). */
+function hidden(object, name, value) {
+  Object.defineProperty(object, name, { value, enumerable: false, configurable: true, writable: true });
+}
+
+/**
+ * The state of one page from its query (`params`, URLSearchParams): `?room=` (default demo),
+ * `?level=detail|base`, `?encoding=vertices|palette|auto` (default auto), `?take=` (a replay
+ * page's take).
+ */
+export function createState(params) {
+  const roomId = params.get("room") || "demo";
+  const level = params.get("level") === "detail" ? "detail" : "base";
+  const encodingParam = ["vertices", "palette"].includes(params.get("encoding")) ? params.get("encoding") : "auto";
+  const takeId = params.get("take");
+  const now = performance.now();
+  const crease = {
+    connected: false,
+    frames: 0,
+    bytes: 0,
+    vertexCount: 0,
+    model: "",
+    level,
+    room: roomId,
+    error: null,
+    published: 0,
+    acks: 0,
+    handles: [],
+    encoding: null, // "palette" or "vertices": what the viewer asks for and draws
+    paletteReason: null, // why
+    headers: 0, // stream headers received (one per socket)
+    headerMs: null, // the last palette header: ms from opening its socket to the header read
+    headerBytes: null, // ... and its size
+    sockets: 0, // sockets opened
+    rendered: 0, // requestAnimationFrame redraws that showed a new frame
+    renderFps: 0, // of those, per second (over the last second)
+    frameSeq: null, // the seq of the last mesh frame received (and decoded)
+    residual: null, // the last ack's control residual, model units
+    residualCapture: null, // ... and in the capture's units (retargeting rooms)
+    confidence: null, // the last ack's distance from the training examples (1: their spread)
+    // WebXR hands: whether the browser offers an immersive session, why not, whether tracking,
+    // the hand, frames published and dropped (socket backed up), the last one's seq, and the
+    // capture-to-mesh latency (ms, mean over the last half second: an XR frame's time to its
+    // mesh frame's arrival).
+    xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, published: 0, dropped: 0, seq: null, latencyMs: null },
+    // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
+    // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
+    take: { list: [], id: takeId, loaded: false },
+  };
+  // In palette mode {header, frame: the raw MeshFrame messages of the header and the frame
+  // displayed, frames: those from the last keyframe to it, seq, readback()}; else null.
+  hidden(crease, "palette", null);
+  // Set by the modules that own them (viewer.js wires them): reconnect() (connection.js),
+  // publish(flat) (handles.js), controlPositions() (handles.js), xrMarkers() (xr-view.js).
+  for (const name of ["reconnect", "publish", "controlPositions", "xrMarkers"]) hidden(crease, name, () => null);
+
+  return {
+    crease,
+    params, // the page's query (URLSearchParams; panel.js takes the token out of it)
+    roomId,
+    level,
+    encodingParam, // what the address asked for: "vertices", "palette" or "auto"
+    room: null, // GET /api/rooms/{id}: control points, bounds, capture, skinning (panel.js)
+    // What the current socket streams, from its first message: "vertices", "palette" or null.
+    stream: null,
+    // The mesh on screen (scene.js): its geometry, whether the camera framed it, whether a new
+    // frame came since the last redraw, and model vertex -> streamed vertex (base level
+    // vertex streams), or null.
+    mesh: { mesh: null, geometry: null, framed: false, fresh: false, streamIndex: null },
+    // The WebSocket (connection.js): the socket, the next reconnect's wait, when it was
+    // opened, and the next control frame's seq (drags and XR frames share it).
+    socket: { ws: null, backoff: 500, openedAt: 0, seq: 0 },
+    // Vertex streams (vertex-stream.js): the decode worker, the stream's generation (a new
+    // header or socket starts one: older results are dropped), positions and normals buffers
+    // to lend the worker, and whether the geometry holds arrays not yet uploaded.
+    vertices: { worker: null, generation: 0, spares: { positions: [], normals: [] }, dirty: false },
+    // Palette streams (palette-stream.js): PaletteSynth, its material, the frame waiting for
+    // the GPU passes, and the frame messages from the last keyframe on.
+    palette: { synth: null, material: null, pending: null, chain: null },
+    // Control-point handles (handles.js): their meshes and the drag in progress.
+    handles: { meshes: [], drag: null },
+    // WebXR (xr-view.js): the HandTracker while a session runs, whether the stage was placed.
+    xr: { tracker: null, placed: false },
+    // Rates for the overlay (overlay.js): mesh frames (1 s windows), XR latency (0.5 s), redraws.
+    rates: {
+      frames: { t: now, frames: 0, bytes: 0, latency: 0, fps: 0, bpf: 0, lat: 0 },
+      xr: { t: now, frames: 0, latency: 0 },
+      render: { t: now, rendered: 0 },
+    },
+  };
+}
