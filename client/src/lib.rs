@@ -16,19 +16,23 @@
 //!   recording, the detail layer re-predicted and baked into morph targets).
 //! - [`commands::decode_stream`]: `crease decode-stream` — a recorded stream decoded by the
 //!   core (the reference decoder other clients are checked against).
-//! - [`commands::bench_net`]: `crease bench-net` — the network load benchmark (its load,
-//!   server and report in submodules).
+//! - [`commands::bridge`]: `crease bridge vmc|natnet` — the options of the capture bridges;
+//!   the protocols and the bridges are `crease_bridge`'s.
+//! - `crease bench-net`: the network load benchmark and the soak, `crease_bench`'s options
+//!   and run (also the `crease-bench` binary).
 //!
 //! Shared by the commands (these use no command module):
-//! - [`commands::common`]: example loading, control-point specs, progress display, the one
-//!   gRPC `connect` (plain or TLS), request helpers, the one `percentile`.
+//! - [`commands::common`]: example loading, control-point specs, progress display, the server
+//!   flags, `crease_remote`'s connect and request helpers re-exported.
 //! - [`commands::training_args`]: the training flags of `train` and `eval`, method and kernel
 //!   names.
 //! - [`commands::layers`]: base and detailed example sets and the detail layer's flags.
-//! - [`commands::control_file`]: control-frame files (CSV/JSON) read by `synth`, `stream` and
-//!   `bench-net`, written by `retarget`.
-//! - [`commands::mesh_stream`]: the one mesh-stream reader: subscribe, topology, decoding with
-//!   the codec's `FrameDecoder`, positions in model order.
+//! - [`commands::report`]: the HTML reports of `train --report` and `eval --report` (pages,
+//!   plots, renders, the poses they show).
+//!
+//! From `crease_remote` (a client of a server, shared with the bridges and `crease-bench`):
+//! connecting, the one publish loop every publishing command runs through, the mesh-stream
+//! reader, control-frame files.
 //!
 //! No module cycles: `tests/module_cycles.rs` fails on any, in every workspace crate.
 
@@ -83,7 +87,7 @@ pub enum Command {
     DecodeStream(commands::decode_stream::DecodeStreamArgs),
     /// Network load benchmark (issue 6): rooms, publishers and subscribers on loopback;
     /// latency, server CPU and bytes per vertex per frame.
-    BenchNet(commands::bench_net::BenchNetArgs),
+    BenchNet(crease_bench::BenchNetArgs),
 }
 
 /// Runs a parsed command line.
@@ -106,7 +110,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bridge(args) => commands::bridge::run(&args),
         Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),
-        Command::BenchNet(args) => commands::bench_net::run(&args),
+        Command::BenchNet(args) => crease_bench::run(&args),
     }
 }
 

@@ -12,8 +12,8 @@ use std::net::Ipv4Addr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use crease_cli::commands::bridge::natnet::wire::{self, Version};
-use crease_cli::commands::bridge::natnet::{Converter, MarkerMap};
+use crease_bridge::natnet::wire::{self, Version};
+use crease_bridge::natnet::{Converter, MarkerSources};
 use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
 use crease_proto::v1;
@@ -306,7 +306,8 @@ async fn crease_bridge_natnet_replayed_fixtures_drive_a_retargeting_rooms_mesh()
         // runs) over the replayed fixtures, registered here by crease-mocap as the room does.
         let descriptions =
             wire::decode_descriptions(&fixture(&format!("modeldef-{t}.bin")), v).unwrap();
-        let mut converter = Converter::new(MarkerMap::resolve(&declared(), &descriptions).unwrap());
+        let mut converter =
+            Converter::new(MarkerSources::resolve(&declared(), &descriptions).unwrap());
         let mocap_map =
             crease_mocap::map::MarkerMap::parse(Path::new("natnet.toml"), &map).unwrap();
         let recording = crease_mocap::Recording::new(declared(), 0.0, "m", Vec::new(), Vec::new());

@@ -13,9 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use crease_cli::commands::bridge::vmc::frames::{Bridge, LoopOptions, Stats, receive_loop};
-use crease_cli::commands::bridge::vmc::osc::decode;
-use crease_cli::commands::bridge::vmc::skeleton::{Hand, TipLengths};
+use crease_bridge::vmc::frames::{Bridge, LoopOptions, Stats, receive_loop};
+use crease_bridge::vmc::osc::decode;
+use crease_bridge::vmc::skeleton::{Hand, TipLengths};
 use crease_proto::{v1, valid_bit};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 

@@ -15,10 +15,10 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use common::{CONTROLS, bent, crease, run_ok, train_model, tube};
-use crease_cli::commands::mesh_stream::StreamReader;
 use crease_core::glam::{Mat4, Quat, Vec3, Vec4};
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
+use crease_remote::mesh_stream::StreamReader;
 use gltf::animation::util::ReadOutputs;
 use tokio_stream::StreamExt as _;
 

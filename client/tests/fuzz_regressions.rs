@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use crease_cli::commands::decode_stream::read_capture;
-use crease_cli::commands::mesh_stream::StreamReader;
 use crease_proto::v1;
+use crease_remote::mesh_stream::StreamReader;
 
 fn findings(target: &str) -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))

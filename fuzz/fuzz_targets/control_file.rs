@@ -1,7 +1,7 @@
 //! Control-frame files (CSV and JSON, `crease synth`/`stream`/`bench-net` inputs): the first
 //! byte picks the format and the control-point count.
 #![no_main]
-use crease_cli::commands::control_file::{parse_csv, parse_json};
+use crease_remote::control_file::{parse_csv, parse_json};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

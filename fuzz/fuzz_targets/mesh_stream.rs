@@ -4,7 +4,7 @@
 //! (codec frames of vertices, or palette lanes synthesised into a mesh).
 #![no_main]
 use crease_cli::commands::decode_stream::read_capture;
-use crease_cli::commands::mesh_stream::StreamReader;
+use crease_remote::mesh_stream::StreamReader;
 use crease_proto::v1;
 use libfuzzer_sys::fuzz_target;
 

@@ -1,7 +1,7 @@
 //! NatNet datagrams (the `crease bridge natnet` decoder): the first byte picks the stream's
 //! version (3.0, 3.1, 4.0, 4.1, 2.10), the rest is the datagram.
 #![no_main]
-use crease_cli::commands::bridge::natnet::wire::{Version, decode};
+use crease_bridge::natnet::wire::{Version, decode};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -2,9 +2,9 @@
 //! right hand as the UDP loop does. The input is several datagrams, each prefixed by a
 //! little-endian `u16` length.
 #![no_main]
-use crease_cli::commands::bridge::vmc::frames::Bridge;
-use crease_cli::commands::bridge::vmc::osc::decode;
-use crease_cli::commands::bridge::vmc::skeleton::{Hand, TipLengths};
+use crease_bridge::vmc::frames::Bridge;
+use crease_bridge::vmc::osc::decode;
+use crease_bridge::vmc::skeleton::{Hand, TipLengths};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

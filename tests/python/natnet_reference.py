@@ -1,6 +1,6 @@
 """Decodes the NatNet fixtures (tests/fixtures/natnet/*.bin) with NaturalPoint's own sample
 decoder (PyPI natnetsdk 4.1.1, NatNetClient.py) and prints what it read as JSON, for
-client/tests/bridge_natnet.rs to compare with crease's decoder.
+bridge/tests/natnet.rs to compare with crease's decoder.
 
 Usage: python natnet_reference.py FIXTURE_DIR > reference.json
 

@@ -352,6 +352,46 @@ impl<'a> PreparedDetail<'a> {
     }
 }
 
+/// The training set of leave-one-out fold `held`: every example but that one, in order (the
+/// rest pose, frame 0, is never held out). [`evaluate_loo`] trains each fold on it, and so
+/// does anything that retrains a fold to show it (the CLI's report).
+#[derive(Clone, Debug)]
+pub struct LooFold<'a> {
+    /// The held-out example's index in the training set.
+    pub held: usize,
+    /// The other examples' frames.
+    pub frames: Vec<&'a [Vec3]>,
+    /// Their names.
+    pub names: Vec<String>,
+}
+
+impl<'a> LooFold<'a> {
+    /// Fold `held` of `train`.
+    pub fn new(train: TrainInput<'a>, held: usize) -> Self {
+        let n = train.frames.len();
+        Self {
+            held,
+            frames: (0..n)
+                .filter(|&i| i != held)
+                .map(|i| train.frames[i])
+                .collect(),
+            names: (0..n)
+                .filter(|&i| i != held)
+                .map(|i| train.names[i].clone())
+                .collect(),
+        }
+    }
+
+    /// The fold's training input on `rest`.
+    pub fn input<'b>(&'b self, rest: &'b Mesh) -> TrainInput<'b> {
+        TrainInput {
+            rest,
+            frames: &self.frames,
+            names: &self.names,
+        }
+    }
+}
+
 /// Leave-one-out over the training examples but the rest pose (frame 0): each fold trains on
 /// the others, bones included, and evaluates the held-out one. `on_fold(i, n)` reports progress.
 pub fn evaluate_loo(
@@ -378,27 +418,16 @@ pub fn evaluate_loo_layers(
     };
     for held in 1..n {
         on_fold(held, n - 1);
-        let frames: Vec<&[Vec3]> = (0..n)
-            .filter(|&i| i != held)
-            .map(|i| train.frames[i])
-            .collect();
-        let names: Vec<String> = (0..n)
-            .filter(|&i| i != held)
-            .map(|i| train.names[i].clone())
-            .collect();
-        let input = TrainInput {
-            rest: train.rest,
-            frames: &frames,
-            names: &names,
-        };
-        let base = pipeline::train_base(input, &options.train, &mut |_| {})?;
+        let fold = LooFold::new(train, held);
+        let frames = &fold.frames;
+        let base = pipeline::train_base(fold.input(train.rest), &options.train, &mut |_| {})?;
         let fold = match &prepared {
             Some(p) => Some(p.fold(&base, Some(held), &p.train_truth[held..=held])?),
             None => None,
         };
         evaluate_frames(
             &base,
-            &frames,
+            frames,
             &[train.frames[held]],
             options,
             fold,

@@ -1,6 +1,6 @@
 //! Pieces shared by the subcommands: loading example sets, parsing control-point specs,
-//! progress display, connecting to a server, the requests' small pieces (rooms, tokens, clocks)
-//! and percentiles.
+//! progress display, the server flags, and (from `crease_remote`) connecting to a server, the
+//! requests' small pieces (rooms, tokens, clocks) and percentiles.
 
 use std::io::IsTerminal;
 use std::path::Path;
@@ -160,52 +160,7 @@ impl Progress {
     }
 }
 
-/// Largest response message the network commands accept (a 16-bit keyframe of a 151K-vertex
-/// detail mesh is ~1.2 MB; batches stream one frame per message).
-pub const MAX_RESPONSE_BYTES: usize = 256 << 20;
-
-/// How long to wait for a connection before calling the server unreachable.
-const CONNECT_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
-
-/// A gRPC client of the crease server at `server` (`http://` or `https://`). Over https the
-/// server's certificate is checked against `ca` (a PEM file, for self-signed or private CAs)
-/// or else the Mozilla roots (webpki-roots).
-///
-/// # Errors
-/// A URL that does not parse, an unreadable `ca`, or a server that cannot be reached, each
-/// naming what it was.
-pub async fn connect(
-    server: &str,
-    ca: Option<&Path>,
-) -> anyhow::Result<crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>> {
-    use tonic::transport::{Certificate, ClientTlsConfig, Endpoint};
-    let mut endpoint = Endpoint::from_shared(server.to_owned())
-        .with_context(|| {
-            format!("--server {server:?} is not a URL (expected e.g. http://127.0.0.1:50051)")
-        })?
-        .connect_timeout(CONNECT_TIMEOUT);
-    if server.starts_with("https://") {
-        let tls = match ca {
-            Some(path) => {
-                let pem = std::fs::read(path)
-                    .with_context(|| format!("reading --ca {}", path.display()))?;
-                ClientTlsConfig::new().ca_certificate(Certificate::from_pem(pem))
-            }
-            None => ClientTlsConfig::new().with_webpki_roots(),
-        };
-        endpoint = endpoint
-            .tls_config(tls)
-            .with_context(|| format!("TLS settings for {server}"))?;
-    } else if ca.is_some() {
-        bail!("--ca applies to https:// servers, got {server}");
-    }
-    let channel = endpoint
-        .connect()
-        .await
-        .with_context(|| format!("cannot reach the crease server at {server}"))?;
-    Ok(crease_proto::v1::crease_client::CreaseClient::new(channel)
-        .max_decoding_message_size(MAX_RESPONSE_BYTES))
-}
+pub use crease_remote::{MAX_RESPONSE_BYTES, authorized, connect, get_room, percentile, unix_us};
 
 /// Where the network commands find the server.
 #[derive(Clone, Debug, clap::Args)]
@@ -227,55 +182,6 @@ impl ServerArgs {
     {
         connect(&self.server, self.ca.as_deref()).await
     }
-}
-
-/// The server's description of `room` (its model, settings and counters).
-///
-/// # Errors
-/// The server's refusal (no such room), naming the room.
-pub async fn get_room(
-    client: &mut crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>,
-    room: &str,
-) -> anyhow::Result<crease_proto::v1::RoomInfo> {
-    client
-        .get_room(crease_proto::v1::GetRoomRequest {
-            room: room.to_owned(),
-        })
-        .await
-        .map(tonic::Response::into_inner)
-        .map_err(|s| anyhow::anyhow!("room {room:?}: {}", s.message()))
-}
-
-/// `msg` with `authorization: Bearer <token>` metadata (admin and publish tokens).
-///
-/// # Errors
-/// A token that is not a valid header value.
-pub fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
-    let mut req = tonic::Request::new(msg);
-    req.metadata_mut().insert(
-        "authorization",
-        format!("Bearer {token}")
-            .parse()
-            .context("the token is not a valid header value")?,
-    );
-    Ok(req)
-}
-
-/// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
-pub fn unix_us() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as i64)
-}
-
-/// Percentile `p` (0..=100) of sorted values by nearest rank: the smallest value with at least
-/// `p`% of the sample at or below it; the default value when empty.
-pub fn percentile<T: Copy + Default>(sorted: &[T], p: f64) -> T {
-    if sorted.is_empty() {
-        return T::default();
-    }
-    let k = (p / 100.0 * sorted.len() as f64).ceil() as usize;
-    sorted[k.clamp(1, sorted.len()) - 1]
 }
 
 /// `ITERATIONS,STRENGTH` of a `--refine` option (issue 20's bone-level refinement, e.g.
@@ -323,23 +229,5 @@ pub fn print_skinning(skinning: i32) -> String {
         Ok(Skinning::Dqs) => "dqs".to_owned(),
         Ok(Skinning::Unspecified) => "the model's default".to_owned(),
         Err(_) => format!("unknown ({skinning})"),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn percentiles_by_nearest_rank() {
-        let v: Vec<u32> = (1..=100).collect();
-        assert_eq!(percentile(&v, 50.0), 50);
-        assert_eq!(percentile(&v, 99.0), 99);
-        assert_eq!(percentile(&v, 100.0), 100);
-        assert_eq!(percentile(&v, 0.0), 1);
-        assert_eq!(percentile(&[7i64], 99.0), 7);
-        assert_eq!(percentile::<u64>(&[], 50.0), 0);
-        // Four values: the median is the second (half of them at or below it).
-        assert_eq!(percentile(&[1, 2, 3, 4], 50.0), 2);
     }
 }

@@ -15,7 +15,7 @@ use crease_core::glam::Vec3;
 use crease_proto::v1;
 use prost::Message as _;
 
-use super::mesh_stream::StreamReader;
+use crease_remote::mesh_stream::StreamReader;
 
 /// Options of `crease decode-stream`.
 #[derive(Clone, Debug, clap::Args)]

@@ -1,15 +1,12 @@
 //! One module per subcommand, plus the pieces they share.
 
-pub mod bench_net;
 pub mod bridge;
 pub mod common;
-pub mod control_file;
 pub mod decode_stream;
 pub mod eval;
 pub mod fit;
 pub mod handgen;
 pub mod layers;
-pub mod mesh_stream;
 pub mod remote_synth;
 pub mod report;
 pub mod retarget;

@@ -21,9 +21,9 @@ use crease_proto::v1::mesh_frame::Body;
 use crease_proto::{StreamTopology, control_frame, v1};
 use tokio_stream::{Stream, StreamExt};
 
-use super::control_file::{ControlFrame, read_control_frames};
-use super::mesh_stream::MeshReader;
 use super::synth::{SynthArgs, frame_path};
+use crease_remote::control_file::{ControlFrame, read_control_frames};
+use crease_remote::mesh_stream::MeshReader;
 
 /// Most bytes of control frames per request: 1 MiB below the 4 MiB message limit that
 /// crease-server enforces by default (`Limits::message_bytes`, gRPC's usual default), leaving

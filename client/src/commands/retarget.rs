@@ -12,7 +12,7 @@ use crease_mocap::map::MarkerMap;
 use crease_mocap::{Recording, Retarget, RetargetStats};
 use crease_proto::v1;
 
-use super::control_file::{ControlFrame, write_csv};
+use crease_remote::control_file::{ControlFrame, write_csv};
 
 /// A recording and its marker map (shared by `stream` and `retarget`).
 #[derive(Clone, Debug, clap::Args)]

@@ -7,7 +7,7 @@
 //! frames produce, checking each is finite; `--strip` renders the hand every `--strip-every`
 //! seconds of the recording into one PNG.
 
-use std::collections::VecDeque;
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -20,10 +20,11 @@ use crease_proto::errors::ErrorCode;
 use crease_proto::{control_frame, v1};
 use serde::Serialize;
 
-use super::common::{authorized, get_room, percentile, unix_us};
-use super::control_file::read_control_frames;
-use super::mesh_stream::{self, MeshReader, Subscription};
 use super::retarget::{ModelControls, RecordingArgs, Retargeted, parse_rate};
+use crease_remote::control_file::read_control_frames;
+use crease_remote::mesh_stream::{self, MeshReader, Subscription};
+use crease_remote::publish::{PublishOptions, SentLog, Sink, publish};
+use crease_remote::{get_room, percentile, unix_us};
 
 /// Options of `crease stream`.
 #[derive(Clone, Debug, clap::Args)]
@@ -197,15 +198,14 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     };
 
     let period = Duration::from_secs_f64(1.0 / (rate * args.speed));
-    let (tx, rx) = tokio::sync::mpsc::channel(8);
-    let sent_at = Arc::new(std::sync::Mutex::new(VecDeque::<(u64, Instant)>::new()));
+    let sent_at = Arc::new(SentLog::<Instant>::default());
     let room_id = args.room.clone();
     let start = Instant::now();
     // The sender counts invalid points as it goes (`--loop` never ends, so not up front).
-    let sender = {
+    let source = {
         let frames = Arc::clone(&frames);
         let sent_at = Arc::clone(&sent_at);
-        tokio::spawn(async move {
+        move |mut sink: Sink| async move {
             let (mut invalid_points, mut invalid_frames) = (0u64, 0u64);
             let mut ticker = tokio::time::interval(period);
             ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
@@ -220,24 +220,14 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 let invalid = f.valid.iter().filter(|v| !**v).count() as u64;
                 invalid_points += invalid;
                 invalid_frames += u64::from(invalid > 0);
-                sent_at
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .push_back((seq, Instant::now()));
-                if tx.send(frame).await.is_err() {
+                sent_at.record(seq, Instant::now(), None);
+                if sink.send(frame).await.is_err() {
                     break;
                 }
             }
             (invalid_points, invalid_frames)
-        })
+        }
     };
-    let req = authorized(tokio_stream::wrappers::ReceiverStream::new(rx), &args.token)
-        .context("--token")?;
-    let mut acks = client
-        .publish(req)
-        .await
-        .context("publishing")?
-        .into_inner();
     let mut report = Report {
         rate_hz: rate,
         scale: prepared.scale,
@@ -248,19 +238,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let mut round_trips = Vec::new();
     let mut residual_sq = 0.0f64;
     let mut capture_sq = 0.0f64;
-    while let Some(ack) = acks.message().await? {
-        let sent = {
-            let mut q = sent_at.lock().unwrap_or_else(|e| e.into_inner());
-            let mut found = None;
-            while let Some((seq, at)) = q.pop_front() {
-                if seq == ack.seq {
-                    found = Some(at);
-                    break;
-                }
-            }
-            found
-        };
-        if let Some(at) = sent {
+    let mut on_ack = |ack: v1::PublishAck| {
+        if let Some(at) = sent_at.take(ack.seq) {
             round_trips.push(at.elapsed().as_micros() as u64);
         }
         match ack.error {
@@ -288,11 +267,21 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 capture_sq += f64::from(ack.control_residual_capture).powi(2);
             }
         }
+        ControlFlow::Continue(())
+    };
+    let options = PublishOptions {
+        queue: 8,
+        drain: None,
+    };
+    let published = publish(&mut client, &args.token, options, source, &mut on_ack)
+        .await
+        .map_err(|e| e.into_anyhow("--token", "publishing", "the sender stopped"))?;
+    if let Some(status) = published.status {
+        return Err(status.into());
     }
     report.seconds = start.elapsed().as_secs_f64();
     report.frames_sent = report.acknowledged + report.refused + report.superseded;
-    (report.invalid_in_frames, report.frames_with_invalid) =
-        sender.await.context("the sender stopped")?;
+    (report.invalid_in_frames, report.frames_with_invalid) = published.output;
     latencies.sort_unstable();
     round_trips.sort_unstable();
     report.server_latency_us_p50 = percentile(&latencies, 50.0);

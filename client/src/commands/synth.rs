@@ -11,7 +11,7 @@ use crease_core::mesh::Mesh;
 use crease_core::model::{TrainedModel, gltf_export};
 use crease_core::predictor::{Predictor, Refinement};
 
-use super::control_file::read_control_frames;
+use crease_remote::control_file::read_control_frames;
 
 /// Default most control frames per request (`--chunk-frames`): bounds one request's server
 /// work and what a failed request throws away; ~160 KB of request for a 5-point model.

@@ -2,6 +2,7 @@
 //! `start` and `stop` need the server's admin token; reading is open. A TAKE argument is a take
 //! file on disk (`crease take get`'s, or the server's takes folder) or a take id on the server.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
@@ -16,6 +17,7 @@ use tokio_stream::StreamExt as _;
 use super::common::{ServerArgs, authorized};
 use super::room::AdminArgs;
 use super::take_export;
+use crease_remote::publish::{PublishError, PublishOptions, Sink, publish};
 
 /// Options of `crease take`.
 #[derive(Clone, Debug, clap::Args)]
@@ -382,16 +384,6 @@ async fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         ),
     };
     let times = take::keyframe_times(&take);
-    let (tx, rx) = tokio::sync::mpsc::channel::<v1::ControlFrame>(16);
-    let acks = client
-        .publish(authorized(
-            tokio_stream::wrappers::ReceiverStream::new(rx),
-            &token,
-        )?)
-        .await
-        .map_err(status)
-        .with_context(|| format!("publishing into room {:?}", args.room))?
-        .into_inner();
     let frames: Vec<v1::ControlFrame> = take
         .frames
         .iter()
@@ -404,34 +396,33 @@ async fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let started = tokio::time::Instant::now();
     let lockstep = args.speed == Speed::Lockstep;
     let (ack_tx, mut ack_rx) = tokio::sync::mpsc::unbounded_channel::<()>();
-    let sender = {
-        let speed = args.speed;
-        tokio::spawn(async move {
-            for (i, frame) in frames.into_iter().enumerate() {
-                match speed {
-                    Speed::Times(x) => {
-                        let at = started + Duration::from_secs_f64(times[i] / x);
-                        tokio::time::sleep_until(at).await;
+    let speed = args.speed;
+    let source = move |mut sink: Sink| async move {
+        for (i, frame) in frames.into_iter().enumerate() {
+            match speed {
+                Speed::Times(x) => {
+                    let at = started + Duration::from_secs_f64(times[i] / x);
+                    tokio::select! {
+                        () = tokio::time::sleep_until(at) => {}
+                        () = sink.ended() => return,
                     }
-                    Speed::Lockstep if i > 0 => {
-                        if ack_rx.recv().await.is_none() {
-                            return;
-                        }
+                }
+                Speed::Lockstep if i > 0 => {
+                    tokio::select! {
+                        got = ack_rx.recv() => if got.is_none() { return },
+                        () = sink.ended() => return,
                     }
-                    Speed::Lockstep => {}
                 }
-                if tx.send(frame).await.is_err() {
-                    return;
-                }
+                Speed::Lockstep => {}
             }
-        })
+            if sink.send(frame).await.is_err() {
+                return;
+            }
+        }
     };
     let (mut predicted, mut superseded, mut refused) = (0u64, 0u64, 0u64);
-    let mut acks = acks;
     let mut first_refusal = None;
-    while predicted + superseded + refused < n as u64 {
-        let Some(ack) = acks.next().await else { break };
-        let ack = ack.map_err(status).context("the publish stream")?;
+    let mut on_ack = |ack: v1::PublishAck| {
         match ack.error {
             Some(e) if ErrorCode::from_wire(e.code) == Some(ErrorCode::Aborted) => superseded += 1,
             Some(e) => {
@@ -443,8 +434,28 @@ async fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         if lockstep {
             let _ = ack_tx.send(());
         }
+        // Every frame answered: the replay is done.
+        if predicted + superseded + refused < n as u64 {
+            ControlFlow::Continue(())
+        } else {
+            ControlFlow::Break(())
+        }
+    };
+    let options = PublishOptions {
+        queue: 16,
+        drain: None,
+    };
+    let published = publish(&mut client, &token, options, source, &mut on_ack)
+        .await
+        .map_err(|e| match e {
+            PublishError::Open(s) => {
+                status(s).context(format!("publishing into room {:?}", args.room))
+            }
+            e => e.into_anyhow("--token", "publishing", "the replay's sender"),
+        })?;
+    if let Some(s) = published.status {
+        return Err(status(s).context("the publish stream"));
     }
-    sender.abort();
     eprintln!(
         "replayed {n} frames of take {} into room {:?} in {:.2} s: {predicted} predicted, {superseded} superseded, {refused} refused",
         take.header().take,

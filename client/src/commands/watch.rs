@@ -10,7 +10,7 @@ use crease_proto::v1;
 
 use super::common::percentile;
 use super::decode_stream::write_capture_message;
-use super::mesh_stream;
+use crease_remote::mesh_stream;
 
 /// Options of `crease watch`.
 #[derive(Clone, Debug, clap::Args)]

@@ -24,7 +24,7 @@ use anyhow::Context;
 use crease_core::glam::{Quat, Vec3};
 use crease_core::model::TrainedModel;
 use crease_core::predictor::Predictor;
-use crease_train::eval::{self, EvalOptions, EvalTable, HeldOut};
+use crease_train::eval::{self, EvalOptions, EvalTable, HeldOut, LooFold};
 use crease_train::pipeline::{TrainInput, TrainReport};
 use crease_train::regress::{Method, RegressOptions};
 use crease_train::select;
@@ -444,20 +444,10 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                         &format!("fold {held}"),
                         &format!("report: retraining leave-one-out fold {held}/{}", n - 1),
                     );
-                    let frames: Vec<&[Vec3]> = (0..n)
-                        .filter(|&i| i != held)
-                        .map(|i| r.train.frames[i])
-                        .collect();
-                    let names: Vec<String> = (0..n)
-                        .filter(|&i| i != held)
-                        .map(|i| r.train.names[i].clone())
-                        .collect();
-                    let input = TrainInput {
-                        rest,
-                        frames: &frames,
-                        names: &names,
-                    };
-                    let fitted = poses::fit(input, options, method, stats.selected.get(k))?;
+                    // The fold `crease eval --loo` trained (crease_train::eval's).
+                    let fold = LooFold::new(r.train, held);
+                    let fitted =
+                        poses::fit(fold.input(rest), options, method, stats.selected.get(k))?;
                     let frame = r.train.frames[held];
                     let oracle = poses::oracle_rotations(&fitted.base, frame);
                     let controls = fitted.base.control_vertices.clone();
@@ -469,7 +459,7 @@ pub fn write_eval(dir: &Path, r: &EvalReport<'_>, progress: &Progress) -> anyhow
                         &oracle,
                     )?);
                     if first.is_none() {
-                        first = Some((fitted.base, frames.clone(), method));
+                        first = Some((fitted.base, fold.frames.clone(), method));
                     }
                 }
                 let file = format!("{protocol}-bones.svg");

@@ -22,6 +22,7 @@
 //! compared), or a server that still holds more file descriptors or tasks than before the
 //! clients came, 30 s after they all left (a session that outlives its client).
 
+use std::ops::ControlFlow;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
@@ -37,10 +38,11 @@ use rand::Rng as _;
 use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 
-use super::super::common::{authorized, connect, unix_us};
-use super::super::mesh_stream::{StreamReader, subscribe_encoded};
 use super::BenchNetArgs;
 use super::server::{Target, random_token, spawn_server_with};
+use crease_remote::mesh_stream::{StreamReader, subscribe_encoded};
+use crease_remote::publish::{PublishError, PublishOptions, Sink, publish};
+use crease_remote::{authorized, connect, unix_us};
 
 mod probe;
 
@@ -481,98 +483,104 @@ async fn publisher(
     while !stop.load(Ordering::Relaxed) {
         let session = Duration::from_secs_f64(rand::rng().random_range(10.0..40.0));
         let until = Instant::now() + session;
-        let client = match connect(&url, None).await {
+        let mut client = match connect(&url, None).await {
             Ok(c) => c,
             Err(_) => {
                 tokio::time::sleep(Duration::from_millis(200)).await;
                 continue;
             }
         };
-        let (tx, rx) = tokio::sync::mpsc::channel::<v1::ControlFrame>(8);
-        let Ok(req) = authorized(tokio_stream::wrappers::ReceiverStream::new(rx), &token) else {
-            bail!("the room's token is not a valid header value");
-        };
         // Which seqs were sent malformed: the acks say whether each was refused.
         let malformed = Arc::new(std::sync::Mutex::new(std::collections::HashSet::new()));
-        let reader = {
+        let source = {
             let (counters, malformed) = (Arc::clone(&counters), Arc::clone(&malformed));
-            let mut client = client.clone();
-            tokio::spawn(async move {
-                let Ok(response) = client.publish(req).await else {
-                    return;
-                };
-                let mut acks = response.into_inner();
-                while let Ok(Some(ack)) = acks.message().await {
-                    let was_bad = malformed
+            let (room, rest, stop, last_sent) = (
+                room.clone(),
+                Arc::clone(&rest),
+                Arc::clone(&stop),
+                Arc::clone(&last_sent),
+            );
+            move |mut sink: Sink| async move {
+                let mut ticker = tokio::time::interval(period);
+                ticker.set_missed_tick_behavior(MissedTickBehavior::Skip);
+                while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+                    ticker.tick().await;
+                    seq += 1;
+                    let mut positions = control_at(&rest, r, seq, radius);
+                    let bad = seq.is_multiple_of(MALFORMED_EVERY);
+                    if bad {
+                        if seq.is_multiple_of(2 * MALFORMED_EVERY) {
+                            positions.pop(); // a wrong count
+                        } else {
+                            positions[0] = f32::NAN; // a NaN in a valid point
+                        }
+                        malformed
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .insert(seq);
+                        counters.malformed_sent.fetch_add(1, Ordering::Relaxed);
+                    }
+                    let frame = v1::ControlFrame {
+                        room: room.clone(),
+                        seq,
+                        capture_time_us: unix_us(),
+                        positions,
+                        ..Default::default()
+                    };
+                    if sink.send(frame).await.is_err() {
+                        break;
+                    }
+                    counters.sent.fetch_add(1, Ordering::Relaxed);
+                    last_sent[r].store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
+                }
+                seq
+            }
+        };
+        let mut on_ack = |ack: v1::PublishAck| {
+            let was_bad = malformed
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .remove(&ack.seq);
+            // ABORTED: a newer frame of the room won while this one waited (latest
+            // wins, the server's `mailbox`); neither accepted nor refused.
+            if ack
+                .error
+                .as_ref()
+                .is_some_and(|e| ErrorCode::from_wire(e.code) == Some(ErrorCode::Aborted))
+            {
+                counters.superseded.fetch_add(1, Ordering::Relaxed);
+                return ControlFlow::Continue(());
+            }
+            match (was_bad, ack.error.is_some()) {
+                (true, true) => counters.malformed_refused.fetch_add(1, Ordering::Relaxed),
+                (true, false) => counters.malformed_accepted.fetch_add(1, Ordering::Relaxed),
+                (false, true) => {
+                    let why = ack.error.as_ref().map_or("", |e| e.message.as_str());
+                    let why = why.split(':').next().unwrap_or(why).to_owned();
+                    *counters
+                        .refusals
                         .lock()
                         .unwrap_or_else(|e| e.into_inner())
-                        .remove(&ack.seq);
-                    // ABORTED: a newer frame of the room won while this one waited (latest
-                    // wins, the server's `mailbox`); neither accepted nor refused.
-                    if ack
-                        .error
-                        .as_ref()
-                        .is_some_and(|e| ErrorCode::from_wire(e.code) == Some(ErrorCode::Aborted))
-                    {
-                        counters.superseded.fetch_add(1, Ordering::Relaxed);
-                        continue;
-                    }
-                    match (was_bad, ack.error.is_some()) {
-                        (true, true) => counters.malformed_refused.fetch_add(1, Ordering::Relaxed),
-                        (true, false) => {
-                            counters.malformed_accepted.fetch_add(1, Ordering::Relaxed)
-                        }
-                        (false, true) => {
-                            let why = ack.error.as_ref().map_or("", |e| e.message.as_str());
-                            let why = why.split(':').next().unwrap_or(why).to_owned();
-                            *counters
-                                .refusals
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .entry(why)
-                                .or_default() += 1;
-                            counters.good_refused.fetch_add(1, Ordering::Relaxed)
-                        }
-                        (false, false) => 0,
-                    };
+                        .entry(why)
+                        .or_default() += 1;
+                    counters.good_refused.fetch_add(1, Ordering::Relaxed)
                 }
-            })
-        };
-        let mut ticker = tokio::time::interval(period);
-        ticker.set_missed_tick_behavior(MissedTickBehavior::Skip);
-        while Instant::now() < until && !stop.load(Ordering::Relaxed) {
-            ticker.tick().await;
-            seq += 1;
-            let mut positions = control_at(&rest, r, seq, radius);
-            let bad = seq.is_multiple_of(MALFORMED_EVERY);
-            if bad {
-                if seq.is_multiple_of(2 * MALFORMED_EVERY) {
-                    positions.pop(); // a wrong count
-                } else {
-                    positions[0] = f32::NAN; // a NaN in a valid point
-                }
-                malformed
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .insert(seq);
-                counters.malformed_sent.fetch_add(1, Ordering::Relaxed);
-            }
-            let frame = v1::ControlFrame {
-                room: room.clone(),
-                seq,
-                capture_time_us: unix_us(),
-                positions,
-                ..Default::default()
+                (false, false) => 0,
             };
-            if tx.send(frame).await.is_err() {
-                break;
-            }
-            counters.sent.fetch_add(1, Ordering::Relaxed);
-            last_sent[r].store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
+            ControlFlow::Continue(())
+        };
+        let options = PublishOptions {
+            queue: 8,
+            // The acks of what was sent, then a new connection.
+            drain: Some(Duration::from_secs(5)),
+        };
+        // A stream that fails or is refused ends the session (the next one reconnects); the
+        // soak counts what the acks said.
+        match publish(&mut client, &token, options, source, &mut on_ack).await {
+            Ok(published) => seq = published.output,
+            Err(PublishError::Token(_)) => bail!("the room's token is not a valid header value"),
+            Err(_) => {}
         }
-        drop(tx);
-        // The acks of what was sent, then a new connection.
-        let _ = tokio::time::timeout(Duration::from_secs(5), reader).await;
         drop(client);
         counters.reconnects.fetch_add(1, Ordering::Relaxed);
     }

@@ -13,8 +13,8 @@ use anyhow::{Context, bail};
 use crease_proto::v1;
 use tokio::time::Instant;
 
-use super::super::common::connect;
 use super::BenchNetArgs;
+use crease_remote::connect;
 
 /// How long the spawned server may take to load its model and listen: the horse loads in
 /// about a second; a debug build on a busy machine takes much longer.

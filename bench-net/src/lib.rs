@@ -1,4 +1,6 @@
-//! `crease bench-net`: the network load benchmark of issue 6. Publishers send control frames
+//! crease-bench: the network load benchmark of issue 6 and the soak of issue 21, run as
+//! `crease-bench` (this crate's binary) or `crease bench-net` (the same options, a call into
+//! [`run`]). Publishers send control frames
 //! into rooms at a fixed rate over gRPC, subscribers (one connection each, like separate
 //! viewers) read the encoded meshes, and the report gives the server's latency from control
 //! frame received to mesh frame handed to each subscriber's stream (`Frame.server_latency_us`),
@@ -13,10 +15,16 @@
 //! Control frames are the model's control vertices on each mesh of a sequence (the horse
 //! gallop by default), looped, or a control file (`--controls`, as `crease synth` reads it).
 //!
-//! Layout: `load` (publishers, subscribers, one scenario's run), `server` (the spawned or
-//! running server under test, CPU from `/proc`), `report` (the figures and the table; its
-//! types re-exported here); this module has the options, the control frames and the run over
-//! the scenarios.
+//! Every publisher (the benchmark's and the soak's) runs through the tree's one publish loop,
+//! `crease_remote::publish`; subscriptions are `crease_remote::mesh_stream`'s.
+//!
+//! Layout (private modules):
+//! - `load`: publishers, subscribers, one scenario's run;
+//! - `server`: the spawned or running server under test, CPU from `/proc`;
+//! - `report`: the figures and the table (its types re-exported here);
+//! - `soak`: `--soak MINUTES`, the server held under churn and faults (and its `/proc` probe).
+//!
+//! This module has the options, the control frames and the run over the scenarios.
 
 mod load;
 mod report;
@@ -31,7 +39,7 @@ use crease_core::mesh::ExampleSet;
 use crease_core::model::TrainedModel;
 use crease_proto::{control_frame, v1};
 
-use super::control_file::read_control_frames;
+use crease_remote::control_file::read_control_frames;
 pub use report::{
     BenchReport, Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread,
 };

@@ -3,7 +3,7 @@
 //! a loopback NatNet server replaying the fixtures (and junk) to the bridge.
 //!
 //! Fixtures (tests/fixtures/natnet/) are written by this file's encoder calls: run
-//! `NATNET_WRITE_FIXTURES=1 cargo test -p crease-cli --test bridge_natnet` to rewrite them, then
+//! `NATNET_WRITE_FIXTURES=1 cargo test -p crease-bridge --test natnet` to rewrite them, then
 //! `target/natnet-venv/bin/python tests/python/natnet_reference.py tests/fixtures/natnet >
 //! tests/fixtures/natnet/reference.json` to refresh the reference.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
@@ -12,12 +12,12 @@ use std::net::{Ipv4Addr, SocketAddr};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use crease_cli::commands::bridge::natnet::wire::{
+use crease_bridge::natnet::wire::{
     self, Analog, DataDescriptions, FrameOfData, LabeledMarker, MarkerSet, MarkerSetDesc,
     RigidBody, RigidBodyDesc, RigidBodyMarkerDesc, ServerInfo, Skeleton, Timing, Version,
 };
-use crease_cli::commands::bridge::natnet::{
-    Bridge, Converter, MarkerMap, Outcome, Source, SourceOptions, encode, pump,
+use crease_bridge::natnet::{
+    Bridge, Converter, MarkerSources, Outcome, Source, SourceOptions, encode, pump,
 };
 use serde_json::Value;
 
@@ -523,7 +523,7 @@ fn declared() -> Vec<String> {
 #[test]
 fn markers_map_by_name_with_occlusion_and_missing() {
     for v in VERSIONS {
-        let map = MarkerMap::resolve(&declared(), &descriptions(v)).unwrap();
+        let map = MarkerSources::resolve(&declared(), &descriptions(v)).unwrap();
         let mut c = Converter::new(map);
         for k in 0..FRAMES {
             let m = c.markers(&frame(k, v));
@@ -548,20 +548,20 @@ fn markers_map_by_name_with_occlusion_and_missing() {
         }
     }
     let dd = descriptions(Version::new(4, 1));
-    let e = MarkerMap::resolve(&["hand:nail".to_owned()], &dd)
+    let e = MarkerSources::resolve(&["hand:nail".to_owned()], &dd)
         .unwrap_err()
         .to_string();
     assert!(
         e.contains("\"hand:nail\"") && e.contains("hand:thumb_tip"),
         "{e}"
     );
-    let e = MarkerMap::resolve(&["elbow".to_owned()], &dd)
+    let e = MarkerSources::resolve(&["elbow".to_owned()], &dd)
         .unwrap_err()
         .to_string();
     assert!(e.contains("\"elbow\""), "{e}");
     let mut twice = dd.clone();
     twice.marker_sets[1].markers.push("thumb_tip".into());
-    let e = MarkerMap::resolve(&["thumb_tip".to_owned()], &twice)
+    let e = MarkerSources::resolve(&["thumb_tip".to_owned()], &twice)
         .unwrap_err()
         .to_string();
     assert!(
@@ -573,7 +573,7 @@ fn markers_map_by_name_with_occlusion_and_missing() {
 #[test]
 fn bridge_frames_carry_markers_valid_and_count_junk() {
     let v = Version::new(4, 1);
-    let map = MarkerMap::resolve(&declared(), &descriptions(v)).unwrap();
+    let map = MarkerSources::resolve(&declared(), &descriptions(v)).unwrap();
     let mut b = Bridge::new(v, Some(&server_info(v)), "room", map);
     let mut seqs = Vec::new();
     for k in 0..FRAMES {
@@ -692,17 +692,18 @@ async fn loopback_natnet_server_to_control_frames() {
         assert_eq!(source.info.natnet, v);
         assert_eq!(source.descriptions.marker_sets.len(), 3);
         data_tx.send(source.data_addr().unwrap()).unwrap();
-        let map = MarkerMap::resolve(&declared(), &source.descriptions).unwrap();
+        let map = MarkerSources::resolve(&declared(), &source.descriptions).unwrap();
         let mut bridge = Bridge::new(v, Some(&source.info), "r", map);
         let (tx, mut rx) = tokio::sync::mpsc::channel(256);
+        let mut sink = tx.into();
         tokio::time::timeout(
             Duration::from_secs(20),
-            pump(&mut source, &mut bridge, &tx, Some(frames)),
+            pump(&mut source, &mut bridge, &mut sink, Some(frames), None),
         )
         .await
         .expect("every frame arrives")
         .unwrap();
-        drop(tx);
+        drop(sink);
         let mut got = Vec::new();
         while let Some(f) = rx.recv().await {
             got.push(f);

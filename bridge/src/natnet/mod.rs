@@ -1,4 +1,4 @@
-//! `crease bridge natnet` (issue 19): connects to an OptiTrack NatNet server (Motive), reads
+//! The NatNet bridge (`crease bridge natnet`, issue 19): connects to an OptiTrack NatNet server (Motive), reads
 //! its labelled markers and publishes them into a retargeting room as marker frames
 //! (`ControlFrame.markers` / `markers_valid`, in the room's declared marker order).
 //!
@@ -20,8 +20,9 @@
 pub mod encode;
 pub mod wire;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::ops::ControlFlow;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -32,56 +33,24 @@ use tokio::net::UdpSocket;
 
 use self::wire::{DataDescriptions, FrameOfData, NAT_MODELDEF, NAT_SERVERINFO};
 use self::wire::{ServerInfo, Version};
-use super::super::common::{ServerArgs, authorized, get_room, percentile, unix_us};
+use crease_proto::v1::crease_client::CreaseClient;
+use crease_remote::publish::{PublishError, PublishOptions, SentLog, Sink, publish};
+use crease_remote::{get_room, percentile, unix_us};
+use tonic::transport::Channel;
 
-/// Options of `crease bridge natnet`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct NatnetArgs {
-    /// The crease server (gRPC) to publish into.
-    #[command(flatten)]
-    pub server: ServerArgs,
-    /// The NatNet server's command address, `HOST[:PORT]` (port 1510 by default).
-    #[arg(long, value_name = "ADDR")]
-    pub natnet: String,
-    /// The local interface to use (IPv4 address). Default: any.
-    #[arg(long, value_name = "ADDR")]
-    pub local: Option<Ipv4Addr>,
-    /// Receive frames from this multicast group (e.g. 239.255.42.99) instead of unicast.
-    #[arg(long, value_name = "GROUP")]
-    pub multicast: Option<Ipv4Addr>,
-    /// The data port (frames of data); 0 = any free port (unicast only).
-    #[arg(long, default_value_t = 1511)]
-    pub data_port: u16,
-    /// The room to publish into (a retargeting room: `crease room open --map ... --markers ...`).
-    #[arg(long)]
+/// What a NatNet bridge publishes, where, and how it reaches the NatNet server.
+#[derive(Clone, Debug)]
+pub struct NatnetOptions {
+    /// The retargeting room to publish into.
     pub room: String,
-    /// The room's publish token. Also read from CREASE_TOKEN.
-    #[arg(long, env = "CREASE_TOKEN", hide_env_values = true)]
+    /// The room's publish token.
     pub token: String,
-    /// Seconds to wait for the NatNet server's answers to NAT_CONNECT and the model request.
-    #[arg(long, default_value_t = 10.0)]
-    pub connect_timeout: f64,
-    /// Seconds between summary lines.
-    #[arg(long, default_value_t = 5.0)]
-    pub summary_every: f64,
+    /// How to reach the NatNet server.
+    pub source: SourceOptions,
+    /// Time between summary lines.
+    pub summary_every: Duration,
     /// Stop after publishing this many frames (default: run until interrupted).
-    #[arg(long)]
     pub frames: Option<u64>,
-}
-
-/// Runs `crease bridge natnet`.
-pub fn run(args: &NatnetArgs) -> anyhow::Result<()> {
-    if !(args.summary_every.is_finite() && args.summary_every > 0.0) {
-        bail!("--summary-every must be a positive number of seconds");
-    }
-    if !(args.connect_timeout.is_finite() && args.connect_timeout > 0.0) {
-        bail!("--connect-timeout must be a positive number of seconds");
-    }
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the network runtime")?;
-    runtime.block_on(bridge(args))
 }
 
 /// Where a room marker is read in a frame.
@@ -98,7 +67,7 @@ struct MarkerSource {
 
 /// The room's declared markers resolved against the NatNet server's data descriptions.
 #[derive(Clone, Debug)]
-pub struct MarkerMap {
+pub struct MarkerSources {
     sources: Vec<MarkerSource>,
 }
 
@@ -109,7 +78,7 @@ fn label_id(body: i32, index: usize) -> i32 {
     (body << 16) | ((index as i32 + 1) & 0xffff)
 }
 
-impl MarkerMap {
+impl MarkerSources {
     /// Resolves every declared name (see the module's doc for the forms).
     ///
     /// # Errors
@@ -244,13 +213,13 @@ pub struct Markers {
 /// Turns decoded frames into marker frames, holding each marker's last valid position.
 #[derive(Clone, Debug)]
 pub struct Converter {
-    map: MarkerMap,
+    map: MarkerSources,
     last: Vec<[f32; 3]>,
 }
 
 impl Converter {
     /// A converter for `map`.
-    pub fn new(map: MarkerMap) -> Self {
+    pub fn new(map: MarkerSources) -> Self {
         let n = map.sources.len();
         Self {
             map,
@@ -337,7 +306,12 @@ pub struct Bridge {
 
 impl Bridge {
     /// A bridge for frames of NatNet `version` into `room`.
-    pub fn new(version: Version, info: Option<&ServerInfo>, room: &str, map: MarkerMap) -> Self {
+    pub fn new(
+        version: Version,
+        info: Option<&ServerInfo>,
+        room: &str,
+        map: MarkerSources,
+    ) -> Self {
         Self {
             version,
             clock_frequency: info.and_then(|i| i.clock_frequency).filter(|f| *f > 0),
@@ -595,16 +569,18 @@ impl Source {
     }
 }
 
-/// Receives datagrams from `source` into `bridge` and sends each frame on `tx`, until `frames`
-/// are sent (if given) or `tx` closes.
+/// Receives datagrams from `source` into `bridge` and sends each frame into `sink` (recording
+/// its capture time in `sent_at`, if given), until `frames` are sent (if given) or the stream
+/// ends.
 ///
 /// # Errors
 /// A socket error.
 pub async fn pump(
     source: &mut Source,
     bridge: &mut Bridge,
-    tx: &tokio::sync::mpsc::Sender<v1::ControlFrame>,
+    sink: &mut Sink,
     frames: Option<u64>,
+    sent_at: Option<&SentLog<i64>>,
 ) -> anyhow::Result<()> {
     let mut sent = 0u64;
     while frames.is_none_or(|n| sent < n) {
@@ -613,7 +589,10 @@ pub async fn pump(
             .await
             .context("receiving from the NatNet server")?;
         if let Outcome::Frame(f, _) = bridge.datagram(&d, unix_us()) {
-            if tx.send(*f).await.is_err() {
+            if let Some(log) = sent_at {
+                log.record(f.seq, f.capture_time_us, None);
+            }
+            if sink.send(*f).await.is_err() {
                 break;
             }
             bridge.counters().published += 1;
@@ -624,7 +603,10 @@ pub async fn pump(
 }
 
 /// The command address: `HOST[:PORT]`, port 1510 by default.
-fn command_addr(s: &str) -> anyhow::Result<SocketAddr> {
+///
+/// # Errors
+/// Not a host and port, or no IPv4 address for the host.
+pub fn command_addr(s: &str) -> anyhow::Result<SocketAddr> {
     use std::net::ToSocketAddrs;
     let with_port = if s.parse::<SocketAddr>().is_ok()
         || s.rsplit_once(':')
@@ -660,9 +642,16 @@ fn summary(c: &mut Counters, last_error: Option<&str>) -> String {
     line
 }
 
-async fn bridge(args: &NatnetArgs) -> anyhow::Result<()> {
-    let mut client = args.server.connect().await?;
-    let room = get_room(&mut client, &args.room).await?;
+/// Runs the bridge: resolves the room's declared markers against the NatNet server's
+/// descriptions, then publishes its frames into the room through the publish loop until
+/// `frames` are sent or interrupted (Ctrl-C), with summary lines on stderr and the last one on
+/// stdout.
+///
+/// # Errors
+/// A room that does not retarget, the NatNet handshake's errors, unknown or ambiguous marker
+/// names, a refused Publish stream, or a socket error.
+pub async fn run(client: &mut CreaseClient<Channel>, opts: NatnetOptions) -> anyhow::Result<()> {
+    let room = get_room(client, &opts.room).await?;
     let declared = room
         .retarget
         .as_ref()
@@ -670,22 +659,15 @@ async fn bridge(args: &NatnetArgs) -> anyhow::Result<()> {
         .with_context(|| {
             format!(
                 "room {:?} is not a retargeting room (no RoomInfo.retarget): open it with a marker map",
-                args.room
+                opts.room
             )
         })?;
-    let opts = SourceOptions {
-        command: command_addr(&args.natnet)?,
-        local: args.local.unwrap_or(Ipv4Addr::UNSPECIFIED),
-        multicast: args.multicast,
-        data_port: args.data_port,
-        timeout: Duration::from_secs_f64(args.connect_timeout),
-    };
-    let mut source = Source::connect(&opts).await?;
-    let map = MarkerMap::resolve(&declared, &source.descriptions)
-        .with_context(|| format!("room {:?}", args.room))?;
+    let mut source = Source::connect(&opts.source).await?;
+    let map = MarkerSources::resolve(&declared, &source.descriptions)
+        .with_context(|| format!("room {:?}", opts.room))?;
     eprintln!(
         "natnet: {} ({}) streams NatNet {}; {} room markers mapped{}",
-        opts.command,
+        opts.source.command,
         source.info.name,
         source.info.natnet,
         declared.len(),
@@ -696,100 +678,74 @@ async fn bridge(args: &NatnetArgs) -> anyhow::Result<()> {
                 " (descriptions read up to one of type {t})"
             ))
     );
-    let mut bridge = Bridge::new(source.info.natnet, Some(&source.info), &args.room, map);
+    let mut bridge = Bridge::new(source.info.natnet, Some(&source.info), &opts.room, map);
     let counters = Arc::clone(&bridge.counters);
-    let (tx, rx) = tokio::sync::mpsc::channel::<v1::ControlFrame>(64);
-    let sent_at = Arc::new(Mutex::new(VecDeque::<(u64, i64)>::new()));
-    let (tx2, rx2) = tokio::sync::mpsc::channel::<v1::ControlFrame>(64);
-    // Frames pass through a recorder of seq -> capture time (for the latency at the ack).
-    let recorder = {
-        let sent_at = Arc::clone(&sent_at);
-        let mut rx = rx;
-        tokio::spawn(async move {
-            while let Some(f) = rx.recv().await {
-                sent_at
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .push_back((f.seq, f.capture_time_us));
-                if tx2.send(f).await.is_err() {
-                    break;
-                }
-            }
-        })
-    };
-    let req = authorized(
-        tokio_stream::wrappers::ReceiverStream::new(rx2),
-        &args.token,
-    )
-    .context("--token")?;
-    let mut acks = client
-        .publish(req)
-        .await
-        .with_context(|| format!("publishing into room {:?}", args.room))?
-        .into_inner();
-    let acker = {
-        let counters = Arc::clone(&counters);
-        let sent_at = Arc::clone(&sent_at);
-        tokio::spawn(async move {
-            let mut shown = 0;
-            while let Ok(Some(ack)) = acks.message().await {
-                let capture = {
-                    let mut q = sent_at.lock().unwrap_or_else(|e| e.into_inner());
-                    let mut found = None;
-                    while let Some((seq, t)) = q.pop_front() {
-                        if seq == ack.seq {
-                            found = Some(t);
-                            break;
+    // seq -> capture time, for the latency at the ack.
+    let sent_at = Arc::new(SentLog::<i64>::default());
+    let (every, frames) = (opts.summary_every, opts.frames);
+    let pumping = {
+        let (counters, sent_at) = (Arc::clone(&counters), Arc::clone(&sent_at));
+        move |mut sink: Sink| async move {
+            let mut ticker = tokio::time::interval(every);
+            ticker.tick().await;
+            let pumped = {
+                let run = pump(&mut source, &mut bridge, &mut sink, frames, Some(&sent_at));
+                tokio::pin!(run);
+                loop {
+                    tokio::select! {
+                        r = &mut run => break r,
+                        _ = ticker.tick() => {
+                            let line = summary(&mut counters.lock().unwrap_or_else(|e| e.into_inner()), None);
+                            eprintln!("{line}");
                         }
-                    }
-                    found
-                };
-                let mut c = counters.lock().unwrap_or_else(|e| e.into_inner());
-                match ack.error {
-                    Some(e) => {
-                        c.refused += 1;
-                        if shown < 10 {
-                            shown += 1;
-                            eprintln!(
-                                "frame {}: refused (code {}): {}",
-                                ack.seq, e.code, e.message
-                            );
-                        }
-                    }
-                    None => {
-                        c.acked += 1;
-                        if let Some(t) = capture {
-                            c.latency_us.push(unix_us() - t);
-                        }
+                        _ = tokio::signal::ctrl_c() => break Ok(()),
                     }
                 }
-            }
-        })
-    };
-    let every = Duration::from_secs_f64(args.summary_every);
-    let mut ticker = tokio::time::interval(every);
-    ticker.tick().await;
-    let pumped = {
-        let run = pump(&mut source, &mut bridge, &tx, args.frames);
-        tokio::pin!(run);
-        loop {
-            tokio::select! {
-                r = &mut run => break r,
-                _ = ticker.tick() => {
-                    let line = summary(&mut counters.lock().unwrap_or_else(|e| e.into_inner()), None);
-                    eprintln!("{line}");
-                }
-                _ = tokio::signal::ctrl_c() => break Ok(()),
-            }
+            };
+            (pumped, bridge.last_error().map(str::to_owned))
         }
     };
-    drop(tx);
-    let _ = recorder.await;
-    // The last acks, briefly.
-    let _ = tokio::time::timeout(Duration::from_secs(2), acker).await;
+    let mut shown = 0;
+    let mut on_ack = |ack: v1::PublishAck| {
+        let capture = sent_at.take(ack.seq);
+        let mut c = counters.lock().unwrap_or_else(|e| e.into_inner());
+        match ack.error {
+            Some(e) => {
+                c.refused += 1;
+                if shown < 10 {
+                    shown += 1;
+                    eprintln!(
+                        "frame {}: refused (code {}): {}",
+                        ack.seq, e.code, e.message
+                    );
+                }
+            }
+            None => {
+                c.acked += 1;
+                if let Some(t) = capture {
+                    c.latency_us.push(unix_us() - t);
+                }
+            }
+        }
+        ControlFlow::Continue(())
+    };
+    let options = PublishOptions {
+        queue: 64,
+        // The last acks, briefly.
+        drain: Some(Duration::from_secs(2)),
+    };
+    let published = publish(client, &opts.token, options, pumping, &mut on_ack)
+        .await
+        .map_err(|e| match e {
+            PublishError::Open(s) => {
+                anyhow::Error::new(s).context(format!("publishing into room {:?}", opts.room))
+            }
+            e => e.into_anyhow("--token", "publishing", "the bridge"),
+        })?;
+    let (pumped, last_error) = published.output;
     let line = summary(
         &mut counters.lock().unwrap_or_else(|e| e.into_inner()),
-        bridge.last_error(),
+        last_error.as_deref(),
     );
     println!("{line}");
     pumped

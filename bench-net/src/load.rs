@@ -3,6 +3,7 @@
 //! the first of each room decoding) the mesh frames, and what they saw summarised into a
 //! [`ScenarioReport`].
 
+use std::ops::ControlFlow;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,11 +15,12 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::Channel;
 
-use super::super::common::{authorized, connect, unix_us};
-use super::super::mesh_stream::{self, StreamReader, Subscription};
 use super::report::{Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread};
 use super::server::{Target, clock_ticks, cpu_seconds, random_token};
 use super::{BenchNetArgs, Scenario};
+use crease_remote::mesh_stream::{self, StreamReader, Subscription};
+use crease_remote::publish::{PublishOptions, Sink, publish};
+use crease_remote::{authorized, connect, unix_us};
 
 /// Control frames queued per publisher before it waits: a few periods, so a slow ack stream
 /// shows up as late sends instead of a growing queue.
@@ -59,8 +61,7 @@ async fn publisher(
     window: Window,
 ) -> anyhow::Result<PublisherStats> {
     let mut client = connect(&url, None).await?;
-    let (tx, rx) = tokio::sync::mpsc::channel(PUBLISH_QUEUE);
-    let sender = tokio::spawn(async move {
+    let source = move |mut sink: Sink| async move {
         let mut ticker = tokio::time::interval_at(first_tick, period);
         // A late tick is dropped, not made up by a burst that would distort the latency.
         ticker.set_missed_tick_behavior(MissedTickBehavior::Skip);
@@ -73,22 +74,15 @@ async fn publisher(
             frame.room.clone_from(&room);
             frame.seq = seq;
             frame.capture_time_us = unix_us();
-            if tx.send(frame).await.is_err() {
+            if sink.send(frame).await.is_err() {
                 break;
             }
             sent_in_window += u64::from(window.contains(Instant::now()));
         }
         sent_in_window
-    });
-    let req = authorized(tokio_stream::wrappers::ReceiverStream::new(rx), &token)?;
-    let mut acks = client
-        .publish(req)
-        .await
-        .context("publishing")?
-        .into_inner();
+    };
     let mut stats = PublisherStats::default();
-    // The ack stream ends when the sender stops and the server has answered every frame.
-    while let Some(ack) = acks.message().await.context("reading acks")? {
+    let mut on_ack = |ack: v1::PublishAck| {
         match ack.error {
             Some(e) => {
                 stats.refused += 1;
@@ -101,8 +95,20 @@ async fn publisher(
             }
             None => {}
         }
+        ControlFlow::Continue(())
+    };
+    let options = PublishOptions {
+        queue: PUBLISH_QUEUE,
+        drain: None,
+    };
+    // The ack stream ends when the source stops and the server has answered every frame.
+    let published = publish(&mut client, &token, options, source, &mut on_ack)
+        .await
+        .map_err(|e| e.into_anyhow("the room's token", "publishing", "the publisher task"))?;
+    if let Some(status) = published.status {
+        return Err(anyhow::Error::new(status).context("reading acks"));
     }
-    stats.sent_in_window = sender.await.context("the publisher task")?;
+    stats.sent_in_window = published.output;
     Ok(stats)
 }
 

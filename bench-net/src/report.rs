@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use super::super::common::percentile;
+use crease_remote::percentile;
 
 /// Percentiles of a latency sample, microseconds (nearest rank).
 #[derive(Clone, Copy, Debug, Default, Serialize)]

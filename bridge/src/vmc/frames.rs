@@ -1,6 +1,6 @@
 //! From datagrams to control frames: the bridge's state (latest bone poses, root, trackers),
 //! when a frame is complete, what each of the room's declared markers reads, and the UDP
-//! receive loop that feeds a channel (the Publish stream, or a test).
+//! receive loop that feeds a [`Sink`] (the publish loop's, or a test's channel).
 //!
 //! **Frames.** A bundle is one VMC frame (senders send one bundle per rendered frame): every
 //! bundle that carries a bone of the bridged hand (the hand or a finger) yields one control
@@ -10,13 +10,14 @@
 //! their distal bone; the chain above the hand may be older) or a tracker (`/VMC/Ext/Tra/Pos`,
 //! named by its serial). `capture_time_us` is the wall clock when the datagram arrived.
 
-use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::bail;
 use crease_proto::{encode_valid_mask, v1};
+use crease_remote::publish::{SentLog, Sink, TrySendError};
 
 use super::osc::{Datagram, Vmc, decode};
 use super::skeleton::{Hand, Joints, Pose, Skeleton, TipLengths, is_humanoid_name};
@@ -274,7 +275,7 @@ pub struct Stats {
     /// The first malformed datagrams' reasons (a few, for the log).
     pub reasons: Mutex<Vec<String>>,
     /// Frames sent, by seq, with when their datagram arrived (for source-to-ack latency).
-    pub sent_at: Mutex<VecDeque<(u64, Instant)>>,
+    pub sent_at: SentLog<Instant>,
     /// Source-to-ack latencies since the last summary, microseconds.
     pub latency_period: Mutex<Vec<u64>>,
     /// All source-to-ack latencies (the first million), microseconds.
@@ -313,22 +314,7 @@ impl Stats {
                 r.1 += 1;
             }
         }
-        let at = {
-            let mut q = lock(&self.sent_at);
-            let mut found = None;
-            while let Some((s, at)) = q.pop_front() {
-                if s == seq {
-                    found = Some(at);
-                    break;
-                }
-                if s > seq {
-                    q.push_front((s, at));
-                    break;
-                }
-            }
-            found
-        };
-        if let Some(at) = at {
+        if let Some(at) = self.sent_at.take(seq) {
             let us = at.elapsed().as_micros() as u64;
             lock(&self.latency_period).push(us);
             let mut all = lock(&self.latency_all);
@@ -352,8 +338,8 @@ impl Stats {
         } else {
             format!(
                 "p50 {:.1} ms p99 {:.1} ms",
-                crate::commands::common::percentile(&l, 50.0) as f64 / 1e3,
-                crate::commands::common::percentile(&l, 99.0) as f64 / 1e3
+                crease_remote::percentile(&l, 50.0) as f64 / 1e3,
+                crease_remote::percentile(&l, 99.0) as f64 / 1e3
             )
         };
         let (sq, n) = *lock(&self.residual);
@@ -404,10 +390,11 @@ pub struct LoopOptions {
 pub async fn receive_loop(
     socket: tokio::net::UdpSocket,
     mut bridge: Bridge,
-    out: tokio::sync::mpsc::Sender<v1::ControlFrame>,
+    out: impl Into<Sink>,
     stats: &Stats,
     opts: &LoopOptions,
 ) -> anyhow::Result<Bridge> {
+    let out: Sink = out.into();
     let mut buf = vec![0u8; 65536];
     let start = Instant::now();
     let mut first: Option<Instant> = None;
@@ -423,7 +410,7 @@ pub async fn receive_loop(
             r = socket.recv(&mut buf) => {
                 let n = r.map_err(|e| anyhow::anyhow!("receiving on {}: {e}", opts.listen))?;
                 let now = Instant::now();
-                let capture = crate::commands::common::unix_us();
+                let capture = crease_remote::unix_us();
                 first.get_or_insert(now);
                 last_datagram = now;
                 stats.datagrams.fetch_add(1, Ordering::Relaxed);
@@ -449,26 +436,20 @@ pub async fn receive_loop(
                 warned = false;
                 stats.frames.fetch_add(1, Ordering::Relaxed);
                 let seq = frame.seq;
-                {
-                    let mut q = lock(&stats.sent_at);
-                    q.push_back((seq, now));
-                    if q.len() > SENT_MEMORY {
-                        q.pop_front();
-                    }
-                }
+                stats.sent_at.record(seq, now, Some(SENT_MEMORY));
                 match out.try_send(frame) {
                     Ok(()) => {
                         stats.published.fetch_add(1, Ordering::Relaxed);
                     }
-                    Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => {
+                    Err(TrySendError::Full) => {
                         stats.behind.fetch_add(1, Ordering::Relaxed);
                     }
-                    Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => return Ok(bridge),
+                    Err(TrySendError::Ended) => return Ok(bridge),
                 }
             }
             _ = tick.tick() => {
                 let now = Instant::now();
-                if out.is_closed() {
+                if out.is_ended() {
                     return Ok(bridge);
                 }
                 if let (Some(idle), Some(_)) = (opts.idle_exit, first)

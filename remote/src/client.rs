@@ -1,0 +1,91 @@
+//! Reaching a server: the one gRPC [`connect`] (plain or TLS), a room's description, bearer
+//! tokens on requests, and the wire's capture clock.
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use tonic::transport::Channel;
+
+/// Largest response message the network commands accept (a 16-bit keyframe of a 151K-vertex
+/// detail mesh is ~1.2 MB; batches stream one frame per message).
+pub const MAX_RESPONSE_BYTES: usize = 256 << 20;
+
+/// How long to wait for a connection before calling the server unreachable.
+const CONNECT_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// A gRPC client of the crease server at `server` (`http://` or `https://`). Over https the
+/// server's certificate is checked against `ca` (a PEM file, for self-signed or private CAs)
+/// or else the Mozilla roots (webpki-roots).
+///
+/// # Errors
+/// A URL that does not parse, an unreadable `ca`, or a server that cannot be reached, each
+/// naming what it was.
+pub async fn connect(server: &str, ca: Option<&Path>) -> anyhow::Result<CreaseClient<Channel>> {
+    use tonic::transport::{Certificate, ClientTlsConfig, Endpoint};
+    let mut endpoint = Endpoint::from_shared(server.to_owned())
+        .with_context(|| {
+            format!("--server {server:?} is not a URL (expected e.g. http://127.0.0.1:50051)")
+        })?
+        .connect_timeout(CONNECT_TIMEOUT);
+    if server.starts_with("https://") {
+        let tls = match ca {
+            Some(path) => {
+                let pem = std::fs::read(path)
+                    .with_context(|| format!("reading --ca {}", path.display()))?;
+                ClientTlsConfig::new().ca_certificate(Certificate::from_pem(pem))
+            }
+            None => ClientTlsConfig::new().with_webpki_roots(),
+        };
+        endpoint = endpoint
+            .tls_config(tls)
+            .with_context(|| format!("TLS settings for {server}"))?;
+    } else if ca.is_some() {
+        bail!("--ca applies to https:// servers, got {server}");
+    }
+    let channel = endpoint
+        .connect()
+        .await
+        .with_context(|| format!("cannot reach the crease server at {server}"))?;
+    Ok(CreaseClient::new(channel).max_decoding_message_size(MAX_RESPONSE_BYTES))
+}
+
+/// The server's description of `room` (its model, settings and counters).
+///
+/// # Errors
+/// The server's refusal (no such room), naming the room.
+pub async fn get_room(
+    client: &mut CreaseClient<Channel>,
+    room: &str,
+) -> anyhow::Result<v1::RoomInfo> {
+    client
+        .get_room(v1::GetRoomRequest {
+            room: room.to_owned(),
+        })
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("room {room:?}: {}", s.message()))
+}
+
+/// `msg` with `authorization: Bearer <token>` metadata (admin and publish tokens).
+///
+/// # Errors
+/// A token that is not a valid header value.
+pub fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
+    let mut req = tonic::Request::new(msg);
+    req.metadata_mut().insert(
+        "authorization",
+        format!("Bearer {token}")
+            .parse()
+            .context("the token is not a valid header value")?,
+    );
+    Ok(req)
+}
+
+/// Wall clock, microseconds since the Unix epoch (the wire's capture clock).
+pub fn unix_us() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
