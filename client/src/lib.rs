@@ -18,8 +18,6 @@
 //!   core (the reference decoder other clients are checked against).
 //! - [`commands::bridge`]: `crease bridge vmc|natnet` — the options of the capture bridges;
 //!   the protocols and the bridges are `crease_bridge`'s.
-//! - `crease bench-net`: the network load benchmark and the soak, `crease_bench`'s options
-//!   and run (also the `crease-bench` binary).
 //!
 //! Shared by the commands (these use no command module):
 //! - [`commands::common`]: example loading, control-point specs, progress display, the server
@@ -32,7 +30,8 @@
 //!
 //! From `crease_remote` (a client of a server, shared with the bridges and `crease-bench`):
 //! connecting, the one publish loop every publishing command runs through, the mesh-stream
-//! reader, control-frame files.
+//! reader, control-frame files. `crease bench-net` is `crease_bench`'s options and run (the
+//! network load benchmark and the soak; also the `crease-bench` binary).
 //!
 //! No module cycles: `tests/module_cycles.rs` fails on any, in every workspace crate.
 
