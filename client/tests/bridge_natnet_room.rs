@@ -219,7 +219,8 @@ async fn crease_bridge_natnet_replayed_fixtures_drive_a_retargeting_rooms_mesh()
         .map(|c| model.rig.rest.positions[c.vertex as usize])
         .collect();
     let vertices: Vec<usize> = model.controls.iter().map(|c| c.vertex as usize).collect();
-    let addr = common::serve_tube(model, Some("admin")).await;
+    let served = common::serve_tube(model, Some("admin")).await;
+    let addr = served.grpc;
     let map = map_toml(&controls);
 
     for v in [Version::new(3, 1), Version::new(4, 1)] {

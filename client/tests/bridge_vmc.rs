@@ -543,7 +543,8 @@ async fn crease_bridge_vmc_publishes_every_bundle_into_a_retargeting_room() {
     let tmp = tempfile::tempdir().unwrap();
     let model = crease_core::model::TrainedModel::load(common::train_model(tmp.path())).unwrap();
     let controls: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
-    let addr = common::serve_tube(model, Some("admin")).await;
+    let served = common::serve_tube(model, Some("admin")).await;
+    let addr = served.grpc;
     // The tube's five control points driven by five hand markers; the tracker is declared too
     // (extra markers are allowed).
     let drivers = [

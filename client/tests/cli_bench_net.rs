@@ -135,9 +135,10 @@ fn bench_net_against_a_server_in_this_process() {
     let model_path = train_model(tmp.path());
     let controls = write_controls(tmp.path());
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let addr = runtime.block_on(async {
+    let served = runtime.block_on(async {
         serve_tube(TrainedModel::load(&model_path).unwrap(), Some("admin")).await
     });
+    let addr = served.grpc;
     let out = crease()
         .args(["bench-net", "--model"])
         .arg(&model_path)

@@ -8,7 +8,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{crease, open_room, run_ok, serve_model, shared_data};
+use common::{Served, crease, open_room, run_ok, serve_model, shared_data};
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
@@ -185,6 +185,8 @@ fn all_finger_markers_missing_still_yields_finite_meshes() {
 }
 
 struct Room {
+    /// The server, stopped when the room is dropped.
+    _served: Served,
     runtime: tokio::runtime::Runtime,
     server: String,
     token: String,
@@ -195,12 +197,13 @@ struct Room {
 fn mocap_room(model: &Path) -> Room {
     let model = TrainedModel::load(model).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let (addr, token) = runtime.block_on(async {
+    let (served, token) = runtime.block_on(async {
         let limits = crease_server::Limits {
             publish_hz: 2000.0,
             ..crease_server::Limits::default()
         };
-        let addr = serve_model("glove-hand", model, Some("admin"), limits).await;
+        let served = serve_model("glove-hand", &model, Some("admin"), limits).await;
+        let addr = served.grpc;
         let open = v1::OpenRoomRequest {
             room: "mocap".into(),
             model: "glove-hand".into(),
@@ -213,11 +216,12 @@ fn mocap_room(model: &Path) -> Room {
             ..Default::default()
         };
         let token = open_room(addr, "admin", open).await;
-        (addr, token)
+        (served, token)
     });
     Room {
+        server: format!("http://{}", served.grpc),
+        _served: served,
         runtime,
-        server: format!("http://{addr}"),
         token,
     }
 }
@@ -515,13 +519,13 @@ fn room_commands_open_inspect_and_close() {
     let tmp = tempfile::tempdir().unwrap();
     let model = TrainedModel::load(common::train_model(tmp.path())).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let addr = runtime.block_on(serve_model(
+    let served = runtime.block_on(serve_model(
         "tube",
-        model,
+        &model,
         Some("adm"),
         crease_server::Limits::default(),
     ));
-    let server = format!("http://{addr}");
+    let server = format!("http://{}", served.grpc);
     let room = |args: &[&str]| {
         let mut c = crease();
         c.arg("room").args(args).args(["--server", &server]);

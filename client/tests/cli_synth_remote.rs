@@ -153,8 +153,9 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let model_path = train_model(dir);
     let model = TrainedModel::load(&model_path).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let (addr, qbox) = runtime.block_on(async {
-        let addr = serve_tube(model, None).await;
+    let (addr, qbox, _served) = runtime.block_on(async {
+        let served = serve_tube(model, None).await;
+        let addr = served.grpc;
         // The quantisation box of the server's batches, as any client sees it.
         let mut client = CreaseClient::connect(format!("http://{addr}"))
             .await
@@ -172,7 +173,7 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
         else {
             panic!("the batch starts with its topology");
         };
-        (addr, t)
+        (addr, t, served)
     });
     let url = format!("http://{addr}");
     let q = qbox.quantization.unwrap();
@@ -305,9 +306,10 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let blended = blended_weights(&model_path);
     let blended_path = dir.join("blended.crease");
     blended.save(&blended_path).unwrap();
-    let (blended_url, blended_bound) = runtime.block_on(async {
-        let addr = serve_tube(blended, None).await;
-        (format!("http://{addr}"), batch_bound(addr).await)
+    let (blended_url, blended_bound, _blended_served) = runtime.block_on(async {
+        let served = serve_tube(blended, None).await;
+        let addr = served.grpc;
+        (format!("http://{addr}"), batch_bound(addr).await, served)
     });
     let blended_arg = blended_path.to_str().unwrap();
     let run_into = |model: &str, server: Option<&str>, skinning: &str, out_dir: &Path| {

@@ -19,8 +19,9 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
     let vertices = model.rig.rest.vertex_count();
     let rest_mesh = model.rig.rest.clone();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let (addr, token) = runtime.block_on(async {
-        let addr = serve_tube(model, Some("admin")).await;
+    let (addr, token, _served) = runtime.block_on(async {
+        let served = serve_tube(model, Some("admin")).await;
+        let addr = served.grpc;
         let open = v1::OpenRoomRequest {
             room: "r1".into(),
             model: "tube".into(),
@@ -28,7 +29,7 @@ fn watch_decodes_frames_prints_a_summary_and_dumps_meshes() {
             filter: None,
             ..Default::default()
         };
-        (addr, open_room(addr, "admin", open).await)
+        (addr, open_room(addr, "admin", open).await, served)
     });
     // A publisher: a frame every 20 ms until the test ends.
     let rest = tube();

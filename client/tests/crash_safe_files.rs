@@ -26,34 +26,27 @@ use crease_core::model::TrainedModel;
 /// OBJ files, and its manifest.
 fn tube_examples(dir: &Path) -> PathBuf {
     const RINGS: usize = 200;
-    const AROUND: usize = 24;
     let set = dir.join("tube");
     std::fs::create_dir_all(&set).unwrap();
+    // The shared tube, ring `r` at z = `r`; OBJ indices count from 1.
+    let tube = crease_testkit::mesh::tube(RINGS, 24, (RINGS - 1) as f32);
     let mut faces = String::new();
-    for r in 0..RINGS - 1 {
-        for a in 0..AROUND {
-            let i0 = r * AROUND + a + 1;
-            let i1 = r * AROUND + (a + 1) % AROUND + 1;
-            let (j0, j1) = (i0 + AROUND, i1 + AROUND);
-            faces.push_str(&format!("f {i0} {i1} {j1}\nf {i0} {j1} {j0}\n"));
-        }
+    for [a, b, c] in &tube.triangles {
+        faces.push_str(&format!("f {} {} {}\n", a + 1, b + 1, c + 1));
     }
     let pivot = RINGS as f32 / 2.0;
     let mut names = Vec::new();
     for k in 0..6 {
         let angle = 0.2 * k as f32;
         let mut text = String::new();
-        for r in 0..RINGS {
-            for a in 0..AROUND {
-                let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
-                let (x, mut y, mut z) = (phi.cos(), phi.sin(), r as f32);
-                if z > pivot {
-                    let (dy, dz) = (y, z - pivot);
-                    y = dy * angle.cos() - dz * angle.sin();
-                    z = pivot + dy * angle.sin() + dz * angle.cos();
-                }
-                text.push_str(&format!("v {x} {y} {z}\n"));
+        for p in &tube.positions {
+            let (x, mut y, mut z) = (p.x, p.y, p.z);
+            if z > pivot {
+                let (dy, dz) = (y, z - pivot);
+                y = dy * angle.cos() - dz * angle.sin();
+                z = pivot + dy * angle.sin() + dz * angle.cos();
             }
+            text.push_str(&format!("v {x} {y} {z}\n"));
         }
         text.push_str(&faces);
         let name = format!("pose{k}.obj");

@@ -12,6 +12,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use crease_core::glam::{DVec3, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError, subdivided_vertex_count};
+use crease_core::mesh::test_meshes::grid;
 use crease_core::runtime::detail::{DetailSynth, VertexFans};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -86,26 +87,14 @@ fn octahedron() -> Mesh {
     }
 }
 
-/// An `n x n` grid of quads, vertex `(i, j)` at index `j (n + 1) + i`, each quad split along
-/// `(i, j)-(i+1, j+1)` into `[(i,j), (i+1,j), (i+1,j+1)]` and `[(i,j), (i+1,j+1), (i,j+1)]`.
-/// Heights are random (seeded) so every weight shows.
-fn grid(n: u32, seed: u64) -> Mesh {
+/// An `n x n` grid of quads (core's shared `grid`: vertex `(i, j)` at index `j (n + 1) + i`,
+/// each quad split along `(i, j)-(i+1, j+1)`) at `(i, j)` with random (seeded) heights, so every
+/// weight shows.
+fn rough_grid(n: u32, seed: u64) -> Mesh {
     let mut rng = StdRng::seed_from_u64(seed);
-    let mut m = Mesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            m.positions
-                .push(Vec3::new(i as f32, j as f32, rng.random_range(-0.5..0.5)));
-        }
-    }
-    let id = |i: u32, j: u32| j * (n + 1) + i;
-    for j in 0..n {
-        for i in 0..n {
-            m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    m
+    grid(n + 1, n + 1, |i, j| {
+        Vec3::new(i as f32, j as f32, rng.random_range(-0.5..0.5))
+    })
 }
 
 /// A UV sphere of radius `r`: two poles, `rings - 1` latitude rings of `segments` vertices,
@@ -192,7 +181,7 @@ fn octahedron_matches_loop_rules_by_hand() {
 #[test]
 fn open_grid_matches_loop_rules_with_boundary_by_hand() {
     let n = 3u32;
-    let m = grid(n, 3);
+    let m = rough_grid(n, 3);
     let id = |i: u32, j: u32| (j * (n + 1) + i) as usize;
     let p = |i: u32, j: u32| m.positions[id(i, j)].as_dvec3();
     let on_side = |i: u32, j: u32| i == 0 || j == 0 || i == n || j == n;
@@ -279,7 +268,7 @@ fn rows_are_non_negative_and_sum_to_one() {
     let meshes = [
         tetrahedron(),
         octahedron(),
-        grid(4, 1),
+        rough_grid(4, 1),
         uv_sphere(1.0, 6, 9),
     ];
     for (k, m) in meshes.iter().enumerate() {
@@ -307,7 +296,7 @@ fn rows_are_non_negative_and_sum_to_one() {
 fn planar_mesh_stays_planar() {
     // A grid with jittered x, y on the plane z = 0.3 x - 0.2 y + 1: rows summing to one keep
     // every affine constraint.
-    let mut m = grid(6, 5);
+    let mut m = rough_grid(6, 5);
     let mut rng = StdRng::seed_from_u64(9);
     for p in &mut m.positions {
         p.x += rng.random_range(-0.3..0.3);
@@ -332,7 +321,7 @@ fn vertex_count_formula_matches_the_built_subdivision() {
     for m in [
         octahedron(),
         tetrahedron(),
-        grid(4, 3),
+        rough_grid(4, 3),
         uv_sphere(1.0, 6, 9),
     ] {
         assert_eq!(subdivided_vertex_count(&m, 0), m.vertex_count());
@@ -351,7 +340,7 @@ fn vertex_count_formula_matches_the_built_subdivision() {
 #[test]
 fn two_levels_equal_one_level_applied_twice() {
     let mut rng = StdRng::seed_from_u64(11);
-    for m in [octahedron(), grid(5, 2), uv_sphere(1.0, 7, 8)] {
+    for m in [octahedron(), rough_grid(5, 2), uv_sphere(1.0, 7, 8)] {
         let positions: Vec<Vec3> = (0..m.vertex_count())
             .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()))
             .collect();
@@ -377,7 +366,7 @@ fn counts_and_euler_characteristic() {
         (tetrahedron(), 2),
         (octahedron(), 2),
         (uv_sphere(1.0, 5, 7), 2),
-        (grid(4, 1), 1),
+        (rough_grid(4, 1), 1),
     ] {
         assert_eq!(euler(m.vertex_count(), &m.triangles), chi);
         let (v, e, f) = (

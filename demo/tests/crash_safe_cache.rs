@@ -13,51 +13,27 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use crease_core::glam::{Quat, Vec3};
+use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_demo::hand_model::{CACHE_FILE, save_cache};
+use crease_testkit::mesh::{bend, tube};
 use crease_train::bones::FitOptions;
 use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 
-/// A tube of `rings` rings of 24 vertices along z, bent by `angle` beyond its middle.
-fn tube(rings: usize, angle: f32) -> Mesh {
-    const AROUND: usize = 24;
-    let pivot = Vec3::new(0.0, 0.0, rings as f32 / 2.0);
-    let q = Quat::from_rotation_x(angle);
-    let mut positions = Vec::new();
-    for r in 0..rings {
-        for a in 0..AROUND {
-            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
-            let p = Vec3::new(phi.cos(), phi.sin(), r as f32);
-            positions.push(if p.z > pivot.z {
-                pivot + q * (p - pivot)
-            } else {
-                p
-            });
-        }
-    }
-    let mut triangles = Vec::new();
-    for r in 0..rings - 1 {
-        for a in 0..AROUND {
-            let i0 = (r * AROUND + a) as u32;
-            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
-            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
-            triangles.push([i0, i1, j1]);
-            triangles.push([i0, j1, j0]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
+/// A tube of `rings` rings of 24 vertices along z (ring `r` at z = `r`), bent by `angle`
+/// beyond its middle.
+fn bent_tube(rings: usize, angle: f32) -> Mesh {
+    let mut mesh = tube(rings, 24, (rings - 1) as f32);
+    mesh.positions = bend(&mesh, rings as f32 / 2.0, angle);
+    mesh
 }
 
 fn train(bones: usize) -> TrainedModel {
     const RINGS: usize = 120;
-    let rest = tube(RINGS, 0.0);
+    let rest = bent_tube(RINGS, 0.0);
     let frames: Vec<Vec<Vec3>> = (0..6)
-        .map(|k| tube(RINGS, 0.2 * k as f32).positions)
+        .map(|k| bent_tube(RINGS, 0.2 * k as f32).positions)
         .collect();
     let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
     let names: Vec<String> = (0..frames.len()).map(|k| format!("f{k}")).collect();

@@ -21,7 +21,7 @@ use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 const ADMIN: &str = "admin-secret";
 
 async fn check(name: &str, model: &TrainedModel, frames: Vec<v1::ControlFrame>) -> PaletteReport {
-    let running = common::serve_model(name, model, ADMIN).await;
+    let running = common::serve_model(name, model, Some(ADMIN), common::unthrottled()).await;
     let url = format!("http://{}", running.grpc);
     let r = compare_encodings(&url, ADMIN, name, model, frames).await;
     let levels = if model.detail.is_some() { 2 } else { 1 };

@@ -28,8 +28,8 @@ const ADMIN: &str = "admin-secret";
 const ONE: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 1));
 const TWO: IpAddr = IpAddr::V4(Ipv4Addr::new(127, 0, 0, 2));
 
-async fn serve(model: &TrainedModel, limits: Limits) -> crease_server::Running {
-    serve_with_limits("tube", model, ADMIN, limits).await
+async fn serve(model: &TrainedModel, limits: Limits) -> Served {
+    serve_model("tube", model, Some(ADMIN), limits).await
 }
 
 /// Opens room `r` and returns its publish token.

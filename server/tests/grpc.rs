@@ -22,8 +22,8 @@ mod common;
 use common::*;
 
 /// A server on free loopback ports hosting `model` as `tube`, with the admin token and `limits`.
-async fn serve_tube(model: &TrainedModel, limits: Limits) -> crease_server::Running {
-    serve_with_limits("tube", model, ADMIN, limits).await
+async fn serve_tube(model: &TrainedModel, limits: Limits) -> Served {
+    serve_model("tube", model, Some(ADMIN), limits).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -940,7 +940,7 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
 async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
     use futures_util::StreamExt as _;
     let model = Arc::new(model());
-    let running = serve_model("tube", &model, ADMIN).await;
+    let running = serve_model("tube", &model, Some(ADMIN), unthrottled()).await;
     let url = format!("http://{}", running.grpc);
     let mut client = CreaseClient::connect(url.clone()).await.unwrap();
     let open = v1::OpenRoomRequest {

@@ -52,7 +52,7 @@ fn model_ref() -> TrainedModel {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn palette_streams_match_vertex_streams_at_both_levels() {
     let model = tube_with_posed_detail();
-    let running = common::serve_model("tube", &model, ADMIN).await;
+    let running = common::serve_model("tube", &model, Some(ADMIN), common::unthrottled()).await;
     let frames = (1..=12u64)
         .map(|seq| control_frame(&model, "palette-check", seq, 0.1 * seq as f32))
         .collect();
@@ -79,7 +79,7 @@ async fn websocket_palette_headers_are_the_grpc_headers_encoded() {
     use tokio_tungstenite::tungstenite::Message;
 
     let model = tube_with_posed_detail();
-    let running = common::serve_model("tube", &model, ADMIN).await;
+    let running = common::serve_model("tube", &model, Some(ADMIN), common::unthrottled()).await;
     let mut client =
         crease_proto::v1::crease_client::CreaseClient::connect(format!("http://{}", running.grpc))
             .await

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{authed, bent, model, serve_model};
+use common::{authed, bent, model, serve_model, unthrottled};
 use crease_core::glam::{Quat, Vec3};
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
@@ -40,7 +40,7 @@ async fn publish(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_retargeting_room_registers_raw_markers_and_names_bad_input() {
     let model = model();
-    let running = serve_model("tube", &model, ADMIN).await;
+    let running = serve_model("tube", &model, Some(ADMIN), unthrottled()).await;
     let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
         .await
         .unwrap();

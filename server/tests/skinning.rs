@@ -23,30 +23,17 @@ const ADMIN: &str = "admin-secret";
 
 /// The tube model as `tube` (LBS, the default) and as `tube-dqs` (the same model with DQS as
 /// its default), with no publish rate limit.
-async fn serve_both(model: &TrainedModel) -> crease_server::Running {
-    let registry = crease_server::registry::ModelRegistry::default();
-    registry.insert("tube", model.clone());
-    registry.insert(
-        "tube-dqs",
-        TrainedModel {
-            skinning: Skinning::Dqs,
-            ..model.clone()
-        },
-    );
-    let state = crease_server::AppState::new(
-        registry,
-        crease_server::Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(ADMIN.into()),
-            limits: crease_server::Limits {
-                publish_hz: f64::INFINITY,
-                ..crease_server::Limits::default()
-            },
-            ..crease_server::Config::default()
-        },
-    );
-    crease_server::serve(state).await.unwrap()
+async fn serve_both(model: &TrainedModel) -> Served {
+    let dqs = TrainedModel {
+        skinning: Skinning::Dqs,
+        ..model.clone()
+    };
+    serve_models(
+        [("tube", model.clone()), ("tube-dqs", dqs)],
+        Some(ADMIN),
+        unthrottled(),
+    )
+    .await
 }
 
 /// The frame's control points.

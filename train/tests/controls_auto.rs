@@ -5,30 +5,11 @@ use std::path::Path;
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
+use crease_core::mesh::test_meshes::unit_grid;
 use crease_train::controls::{ControlError, auto_control_points};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data");
-
-/// A flat `w x w` grid in the xy plane, unit spacing.
-fn grid(w: usize) -> Mesh {
-    let positions = (0..w * w)
-        .map(|i| Vec3::new((i % w) as f32, (i / w) as f32, 0.0))
-        .collect();
-    let mut triangles = Vec::new();
-    for y in 0..w - 1 {
-        for x in 0..w - 1 {
-            let i = (y * w + x) as u32;
-            let d = w as u32;
-            triangles.push([i, i + 1, i + d + 1]);
-            triangles.push([i, i + d + 1, i + d]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
 
 /// Smooth bump of radius `r` around `c`, exactly zero outside.
 fn bump(p: Vec3, c: Vec3, r: f32) -> f32 {
@@ -60,7 +41,7 @@ fn two_region_frames(rest: &Mesh, examples: usize, seed: u64) -> Vec<Vec<Vec3>> 
 
 #[test]
 fn control_points_land_in_both_moving_regions() {
-    let rest = grid(30);
+    let rest = unit_grid(30);
     let frames = two_region_frames(&rest, 12, 29);
     let refs: Vec<&[Vec3]> = frames.iter().map(|f| f.as_slice()).collect();
     let moving = |v: u32| {
@@ -99,7 +80,7 @@ fn control_points_land_in_both_moving_regions() {
 fn more_points_than_components_fill_by_motion() {
     // One region with one mode: PCA has rank 1, so after its two representatives the rest come
     // from the fill step; they must still be moving vertices, spread apart.
-    let rest = grid(20);
+    let rest = unit_grid(20);
     let c = Vec3::new(10.0, 10.0, 0.0);
     let frames: Vec<Vec<Vec3>> = (0..4)
         .map(|t| {
@@ -121,7 +102,7 @@ fn more_points_than_components_fill_by_motion() {
 
 #[test]
 fn bad_inputs_are_errors() {
-    let rest = grid(4);
+    let rest = unit_grid(4);
     let moved: Vec<Vec3> = rest.positions.iter().map(|&p| p + Vec3::X).collect();
     let ok: Vec<&[Vec3]> = vec![&rest.positions, &moved];
     assert!(matches!(

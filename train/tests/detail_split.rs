@@ -12,6 +12,7 @@ use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::mesh::examples::ExampleSet;
 use crease_core::mesh::subdivision::{LoopSubdivision, SubdivisionError};
+use crease_core::mesh::test_meshes::unit_grid;
 use crease_train::detail::split::{BaseSubset, Smoothing, SplitError};
 use parry3d::math::Vector as ParryVec;
 use parry3d::shape::{CompositeShapeRef, TriMesh};
@@ -33,26 +34,6 @@ fn horse() -> Option<ExampleSet> {
 /// computed here rather than read from the code.
 fn two_percent(target: usize) -> usize {
     target * 2 / 100
-}
-
-/// Unit-spaced `w x w` grid in the z = 0 plane, counter-clockwise seen from +Z.
-fn grid(w: usize) -> Mesh {
-    let positions = (0..w * w)
-        .map(|i| Vec3::new((i % w) as f32, (i / w) as f32, 0.0))
-        .collect();
-    let mut triangles = Vec::new();
-    let d = w as u32;
-    for y in 0..d - 1 {
-        for x in 0..d - 1 {
-            let i = y * d + x;
-            triangles.push([i, i + 1, i + d + 1]);
-            triangles.push([i, i + d + 1, i + d]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
 }
 
 /// Unit octahedron: 0 = +Z (top), 1 = -Z (bottom), 2..6 = +X, +Y, -X, -Y; outward triangles.
@@ -380,7 +361,7 @@ fn simplify_is_deterministic() {
 
 #[test]
 fn open_grid_simplifies_without_losing_its_rim() {
-    let sheet = grid(30); // 900 vertices, border of 116
+    let sheet = unit_grid(30); // 900 vertices, border of 116
     let subset = BaseSubset::simplify(&sheet, 300).unwrap();
     assert!(subset.vertex_count().abs_diff(300) <= two_percent(300));
     check_structure(&subset, sheet.vertex_count());
@@ -394,7 +375,7 @@ fn open_grid_simplifies_without_losing_its_rim() {
 #[test]
 fn flat_grid_stays_in_its_plane() {
     // In-plane jitter so no neighbourhood is symmetric and every vertex moves in x and y.
-    let mut sheet = grid(9);
+    let mut sheet = unit_grid(9);
     for (i, p) in sheet.positions.iter_mut().enumerate() {
         let a = i as f32 * 2.399_963;
         *p += Vec3::new(0.2 * a.cos(), 0.2 * a.sin(), 0.0);
@@ -439,7 +420,7 @@ fn regular_grid_moves_only_its_corners_in_one_step() {
     // rim vertex but the corners the midpoint of its two rim neighbours: one step moves only
     // the corners, each by lambda times half the way to its two rim neighbours' midpoint.
     let w = 6;
-    let sheet = grid(w);
+    let sheet = unit_grid(w);
     let lambda = 0.5;
     let mut out = Vec::new();
     whole(&sheet)
@@ -528,7 +509,7 @@ fn octahedron_spike_is_damped_as_computed_by_hand() {
 #[test]
 fn constant_field_is_a_fixed_point() {
     let c = Vec3::new(0.1, -7.3, 1e4);
-    for mesh in [octahedron(), icosphere(1), grid(5)] {
+    for mesh in [octahedron(), icosphere(1), unit_grid(5)] {
         let subset = whole(&mesh);
         let full = vec![c; mesh.vertex_count()];
         let mut out = Vec::new();

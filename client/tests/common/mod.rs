@@ -1,13 +1,10 @@
-//! Helpers shared by the command-line tests: the `crease` binary and a bending tube trained
-//! into a small model.
+//! Helpers shared by the command-line tests: the `crease` binary and a bending tube (the
+//! crease-testkit tube model's) trained into a small model through it.
 #![allow(dead_code)]
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 use std::process::Command;
-
-use crease_core::glam::{Quat, Vec3};
-use crease_core::mesh::Mesh;
 
 pub(crate) fn crease() -> Command {
     Command::new(env!("CARGO_BIN_EXE_crease"))
@@ -25,55 +22,13 @@ pub(crate) fn run_ok(cmd: &mut Command) -> String {
     String::from_utf8(out.stdout).expect("utf-8 output")
 }
 
-pub(crate) const RINGS: usize = 8;
-pub(crate) const AROUND: usize = 6;
+#[allow(unused_imports)] // each test binary uses some of these
+pub(crate) use crease_testkit::model::{AROUND, RINGS, bent_mesh as bent, tube};
+#[allow(unused_imports)] // each test binary uses some of these
+pub(crate) use crease_testkit::server::{Served, serve_model};
+
 /// Control points: a base vertex, two at mid height, two at the tip.
 pub(crate) const CONTROLS: [usize; 5] = [0, 4 * AROUND, 4 * AROUND + 3, 7 * AROUND, 7 * AROUND + 3];
-
-/// A tube along z from 0 to 7 (unit radius), `RINGS` rings of `AROUND` vertices.
-pub(crate) fn tube() -> Mesh {
-    let mut positions = Vec::new();
-    for r in 0..RINGS {
-        for a in 0..AROUND {
-            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
-            positions.push(Vec3::new(phi.cos(), phi.sin(), r as f32));
-        }
-    }
-    let mut triangles = Vec::new();
-    for r in 0..RINGS - 1 {
-        for a in 0..AROUND {
-            let i0 = (r * AROUND + a) as u32;
-            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
-            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
-            triangles.push([i0, i1, j1]);
-            triangles.push([i0, j1, j0]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
-
-/// The tube with its upper half rotated by `angle` about the x axis through z = 3.5.
-pub(crate) fn bent(rest: &Mesh, angle: f32) -> Mesh {
-    let q = Quat::from_rotation_x(angle);
-    let pivot = Vec3::new(0.0, 0.0, 3.5);
-    Mesh {
-        positions: rest
-            .positions
-            .iter()
-            .map(|&p| {
-                if p.z > pivot.z {
-                    pivot + q * (p - pivot)
-                } else {
-                    p
-                }
-            })
-            .collect(),
-        triangles: rest.triangles.clone(),
-    }
-}
 
 /// Writes the rest tube and six bent poses, trains a 2-bone global model on them and returns
 /// the model's path.
@@ -114,40 +69,13 @@ pub(crate) fn train_model(dir: &Path) -> std::path::PathBuf {
     model
 }
 
-/// Starts a crease server on free loopback ports hosting `model` as `tube`, with `admin` as
-/// the admin token, and leaves it running for the rest of the test process. Returns its gRPC
-/// address.
+/// A crease server on free loopback ports hosting `model` as `tube`, with `admin` as the admin
+/// token and the default limits; it runs until the returned guard is dropped.
 pub(crate) async fn serve_tube(
     model: crease_core::model::TrainedModel,
     admin: Option<&str>,
-) -> std::net::SocketAddr {
-    serve_model("tube", model, admin, crease_server::Limits::default()).await
-}
-
-/// Starts a crease server on free loopback ports hosting `model` as `name`, with `admin` as
-/// its admin token and `limits`; returns the gRPC address.
-pub(crate) async fn serve_model(
-    name: &str,
-    model: crease_core::model::TrainedModel,
-    admin: Option<&str>,
-    limits: crease_server::Limits,
-) -> std::net::SocketAddr {
-    let registry = crease_server::registry::ModelRegistry::default();
-    registry.insert(name, model);
-    let state = crease_server::AppState::new(
-        registry,
-        crease_server::Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: admin.map(str::to_owned),
-            limits,
-            ..crease_server::Config::default()
-        },
-    );
-    let running = crease_server::serve(state).await.unwrap();
-    let addr = running.grpc;
-    std::mem::forget(running);
-    addr
+) -> Served {
+    serve_model("tube", &model, admin, crease_server::Limits::default()).await
 }
 
 /// `rel` below the shared data folder (`../shared/data` beside the checkout), or `None` with a

@@ -8,6 +8,8 @@
 //! - [`topology`]: vertex normals, unique edges, vertex adjacency ([`Adjacency`]).
 //! - [`examples`]: [`ExampleSet`], a folder or TOML manifest of meshes sharing one topology.
 //! - [`subdivision`]: Loop subdivision as a sparse matrix `S` (the detail layer's `S · base`).
+//! - [`test_meshes`]: the fixture meshes every test shares (tube, grid, tetrahedron); only in
+//!   tests (core's own, or any crate's with the `test-meshes` feature).
 //!
 //! Every reader keeps the file's vertex order (examples correspond by vertex index) and returns a
 //! mesh that passes [`Mesh::validate`]: indices in range, coordinates finite.
@@ -23,8 +25,9 @@ pub mod gltf;
 pub mod obj;
 pub mod ply;
 pub mod subdivision;
-#[cfg(test)]
-pub(crate) mod test_meshes;
+// `doc` too, so the docs (and the Layout's link) show it whatever the features.
+#[cfg(any(test, feature = "test-meshes", doc))]
+pub mod test_meshes;
 pub mod topology;
 
 pub use error::{Location, MeshError};

@@ -150,32 +150,19 @@ impl Adjacency {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::test_meshes::tetrahedron;
+    use crate::mesh::test_meshes::{grid, tetrahedron};
 
     /// An n x n grid of quads in the z = 0 plane, with uneven spacing so the area weights
     /// differ, split into counter-clockwise (seen from +Z) triangles.
-    fn grid(n: u32) -> Mesh {
-        let mut m = Mesh::default();
-        for j in 0..=n {
-            for i in 0..=n {
-                let x = (i as f32).powf(1.5);
-                let y = (j as f32).powf(1.3);
-                m.positions.push(Vec3::new(x, y, 0.0));
-            }
-        }
-        let id = |i: u32, j: u32| j * (n + 1) + i;
-        for j in 0..n {
-            for i in 0..n {
-                m.triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                m.triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        m
+    fn uneven_grid(n: u32) -> Mesh {
+        grid(n + 1, n + 1, |i, j| {
+            Vec3::new((i as f32).powf(1.5), (j as f32).powf(1.3), 0.0)
+        })
     }
 
     #[test]
     fn flat_grid_normals_are_plus_z() {
-        for n in grid(4).vertex_normals() {
+        for n in uneven_grid(4).vertex_normals() {
             assert!((n - Vec3::Z).length() < 1e-6, "{n}");
         }
     }
@@ -260,7 +247,7 @@ mod tests {
     #[test]
     fn grid_edges_match_a_count_and_adjacency_is_symmetric_sorted_unique() {
         let n = 5;
-        let m = grid(n);
+        let m = uneven_grid(n);
         // Horizontal + vertical + one diagonal per quad.
         let expected = 2 * n * (n + 1) + n * n;
         assert_eq!(m.edges().len(), expected as usize);

@@ -4,35 +4,12 @@
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
+use crease_core::mesh::test_meshes::tube;
 use crease_core::runtime::edge_skin::EdgeSkin;
 use crease_core::runtime::skin::SkinWeights;
 use crease_core::runtime::translations::TranslationSolver;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-
-/// A closed-ring tube of `rings x segments` vertices (open at both ends), radius 1, length 2.
-pub(crate) fn tube(rings: usize, segments: usize) -> Mesh {
-    let mut positions = Vec::new();
-    for r in 0..rings {
-        let z = 2.0 * r as f32 / (rings - 1) as f32 - 1.0;
-        for s in 0..segments {
-            let a = std::f32::consts::TAU * s as f32 / segments as f32;
-            positions.push(Vec3::new(a.cos(), a.sin(), z));
-        }
-    }
-    let mut triangles = Vec::new();
-    let id = |r: usize, s: usize| (r * segments + s % segments) as u32;
-    for r in 0..rings - 1 {
-        for s in 0..segments {
-            triangles.push([id(r, s), id(r, s + 1), id(r + 1, s + 1)]);
-            triangles.push([id(r, s), id(r + 1, s + 1), id(r + 1, s)]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
 
 /// `n` rows of `k` random bones below `bones` (repeats allowed) with random weights, about one
 /// slot in five at zero weight.
@@ -106,7 +83,11 @@ pub(crate) struct Problem {
 /// The tube with `used` bones carrying weight out of `bones`.
 pub(crate) fn problem(seed: u64, bones: usize, used: u32) -> Problem {
     let mut rng = StdRng::seed_from_u64(seed);
-    let mesh = tube(10, 10);
+    // A closed-ring tube of 10 x 10 vertices, radius 1, length 2, centred on the origin.
+    let mut mesh = tube(10, 10, 2.0);
+    for p in &mut mesh.positions {
+        p.z -= 1.0;
+    }
     let edges = mesh.edges();
     let skin = random_skin(&mut rng, mesh.vertex_count(), 3, used);
     // Scalar eq. 10 weights as vectors, then a random vector moved from slot 1 to slot 0 of

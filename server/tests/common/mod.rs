@@ -1,106 +1,34 @@
 //! What the server's end-to-end tests share (and `demo/tests/cluster.rs`, through `#[path]`):
-//! a model trained in-process on a bending tube (with a fixed detail layer on request), the
-//! in-process prediction a decoded frame is checked against, control frames, and small HTTP
-//! and metrics helpers.
+//! crease-testkit's tube model and in-process server (below), the in-process prediction a
+//! decoded frame is checked against, control frames, and small HTTP and metrics helpers.
 #![allow(dead_code, clippy::unwrap_used)] // each test binary uses some of these
 
 pub(crate) mod palette_check;
 
+// crease-testkit's model and server, compiled in by path: the kit depends on crease-server, so
+// the server's own tests cannot take it as a dev-dependency (ARCHITECTURE.md's rule); both
+// files name only other crates for this reason.
+#[allow(unreachable_pub)]
+#[path = "../../../testkit/src/model.rs"]
+mod kit_model;
+#[allow(unreachable_pub)]
+#[path = "../../../testkit/src/server.rs"]
+mod kit_server;
+
+#[allow(unused_imports)] // each test binary uses some of these
+pub(crate) use kit_model::{AROUND, RINGS, bent, curled, model, model_of, model_with_detail, tube};
+#[allow(unused_imports)] // each test binary uses some of these
+pub(crate) use kit_server::{Served, serve_model, serve_models, unthrottled};
+
 use std::sync::Arc;
 
 use crease_core::codec::FrameDecoder;
-use crease_core::glam::{Quat, Vec3};
+use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
 use crease_core::predictor::Predictor;
 use crease_proto::v1;
-use crease_train::bones::FitOptions;
-use crease_train::pipeline::{self, ControlSpec, TrainInput, TrainOptions};
 use tonic::Request;
-
-pub(crate) const RINGS: usize = 8;
-pub(crate) const AROUND: usize = 6;
-
-pub(crate) fn tube() -> Mesh {
-    let mut positions = Vec::new();
-    for r in 0..RINGS {
-        for a in 0..AROUND {
-            let phi = std::f32::consts::TAU * a as f32 / AROUND as f32;
-            positions.push(Vec3::new(phi.cos(), phi.sin(), r as f32));
-        }
-    }
-    let mut triangles = Vec::new();
-    for r in 0..RINGS - 1 {
-        for a in 0..AROUND {
-            let i0 = (r * AROUND + a) as u32;
-            let i1 = (r * AROUND + (a + 1) % AROUND) as u32;
-            let (j0, j1) = (i0 + AROUND as u32, i1 + AROUND as u32);
-            triangles.push([i0, i1, j1]);
-            triangles.push([i0, j1, j0]);
-        }
-    }
-    Mesh {
-        positions,
-        triangles,
-    }
-}
-
-pub(crate) fn bent(rest: &Mesh, angle: f32) -> Vec<Vec3> {
-    let q = Quat::from_rotation_x(angle);
-    let pivot = Vec3::new(0.0, 0.0, 3.5);
-    rest.positions
-        .iter()
-        .map(|&p| {
-            if p.z > pivot.z {
-                pivot + q * (p - pivot)
-            } else {
-                p
-            }
-        })
-        .collect()
-}
-
-/// The tube curled: the ring at height `z` turned about the x axis through the origin by
-/// `angle * z / (RINGS - 1)`, a bend whose rotation grows along the tube. Its fitted bones
-/// blend over the rings (where [`bent`]'s are rigid segments), so LBS and DQS differ on it.
-pub(crate) fn curled(rest: &Mesh, angle: f32) -> Vec<Vec3> {
-    rest.positions
-        .iter()
-        .map(|&p| Quat::from_rotation_x(angle * p.z / (RINGS - 1) as f32) * p)
-        .collect()
-}
-
-pub(crate) fn model() -> TrainedModel {
-    model_of(bent)
-}
-
-/// The tube model trained on `deform` at 0 to 1.25 rad.
-pub(crate) fn model_of(deform: fn(&Mesh, f32) -> Vec<Vec3>) -> TrainedModel {
-    let rest = tube();
-    let frames: Vec<Vec<Vec3>> = (0..6).map(|k| deform(&rest, 0.25 * k as f32)).collect();
-    let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
-    let names: Vec<String> = (0..frames.len()).map(|k| format!("f{k}")).collect();
-    let options = TrainOptions {
-        fit: FitOptions {
-            bones: 4,
-            max_influences: 2,
-            ..FitOptions::default()
-        },
-        controls: ControlSpec::Vertices(vec![0, 45, 42]),
-        ..TrainOptions::default()
-    };
-    pipeline::train(
-        TrainInput {
-            rest: &rest,
-            frames: &refs,
-            names: &names,
-        },
-        &options,
-        &mut |_| {},
-    )
-    .unwrap()
-    .0
-}
 
 /// A plain HTTP/1.1 GET: status code and body.
 pub(crate) async fn http_get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
@@ -167,42 +95,6 @@ pub(crate) fn check_decoded(
     header.qbox.bits()
 }
 
-/// A server on free loopback ports hosting `model` as `name`, with admin token `admin` and no
-/// publish rate limit (the tests publish as fast as the room predicts).
-pub(crate) async fn serve_model(
-    name: &str,
-    model: &TrainedModel,
-    admin: &str,
-) -> crease_server::Running {
-    let limits = crease_server::Limits {
-        publish_hz: f64::INFINITY,
-        ..crease_server::Limits::default()
-    };
-    serve_with_limits(name, model, admin, limits).await
-}
-
-/// [`serve_model`] under `limits`.
-pub(crate) async fn serve_with_limits(
-    name: &str,
-    model: &TrainedModel,
-    admin: &str,
-    limits: crease_server::Limits,
-) -> crease_server::Running {
-    let registry = crease_server::registry::ModelRegistry::default();
-    registry.insert(name, model.clone());
-    let state = crease_server::AppState::new(
-        registry,
-        crease_server::Config {
-            grpc: "127.0.0.1:0".parse().unwrap(),
-            http: "127.0.0.1:0".parse().unwrap(),
-            admin_token: Some(admin.into()),
-            limits,
-            ..crease_server::Config::default()
-        },
-    );
-    crease_server::serve(state).await.unwrap()
-}
-
 pub(crate) fn authed<T>(msg: T, token: &str) -> Request<T> {
     let mut r = Request::new(msg);
     r.metadata_mut()
@@ -240,24 +132,6 @@ pub(crate) fn control_frame_of(
         valid: Vec::new(),
         ..Default::default()
     }
-}
-
-/// The tube model with a fixed detail layer (one Loop level, a displacement per detail vertex
-/// that does not depend on the controls): detail frames are checkable in-process.
-pub(crate) fn model_with_detail() -> TrainedModel {
-    use crease_core::mesh::subdivision::subdivided_vertex_count;
-    use crease_core::model::DetailLayer;
-    use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
-    let mut model = model();
-    let n = subdivided_vertex_count(&model.rig.rest, 1);
-    let h: Vec<f32> = (0..n)
-        .map(|i| 0.02 * ((i * 7919) % 13) as f32 / 13.0)
-        .collect();
-    model.detail = Some(DetailLayer {
-        levels: 1,
-        regressor: DetailRegressor::fixed(DetailInput::Controls, 3 * model.controls.len(), h),
-    });
-    model
 }
 
 /// A WebSocket on `url`, from the local address `from` (any loopback address: the server counts
