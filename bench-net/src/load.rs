@@ -15,9 +15,9 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::Channel;
 
+use super::args::{BenchNetArgs, Scenario};
 use super::report::{Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread};
 use super::server::{Target, clock_ticks, cpu_seconds, random_token};
-use super::{BenchNetArgs, Scenario};
 use crease_remote::mesh_stream::{self, StreamReader, Subscription};
 use crease_remote::publish::{PublishOptions, Sink, publish};
 use crease_remote::{authorized, connect, unix_us};

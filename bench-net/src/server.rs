@@ -13,7 +13,7 @@ use anyhow::{Context, bail};
 use crease_proto::v1;
 use tokio::time::Instant;
 
-use super::BenchNetArgs;
+use super::args::BenchNetArgs;
 use crease_remote::connect;
 
 /// How long the spawned server may take to load its model and listen: the horse loads in

@@ -38,7 +38,7 @@ use rand::Rng as _;
 use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 
-use super::BenchNetArgs;
+use super::args::BenchNetArgs;
 use super::server::{Target, random_token, spawn_server_with};
 use crease_remote::mesh_stream::{StreamReader, subscribe_encoded};
 use crease_remote::publish::{PublishError, PublishOptions, Sink, publish};

@@ -1,0 +1,176 @@
+//! The options of `crease bench-net` / `crease-bench` ([`BenchNetArgs`]) and the load shapes
+//! they choose ([`Scenario`]): what every other module of the crate reads, so it sits below
+//! them all.
+
+use std::path::PathBuf;
+
+/// The horse gallop beside the checkout (`../shared/data`), as the core benches find it.
+pub(crate) const DEFAULT_GALLOP: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/data/horse/gallop"
+);
+
+/// Issue 6's first scenario: one room watched by 100 viewers (the p99 target is set for it).
+const ONE_ROOM: (usize, usize) = (1, 100);
+/// Issue 6's second scenario: 20 rooms of 5 viewers (as many streams, 20x the predictions).
+const MANY_ROOMS: (usize, usize) = (20, 5);
+const AFTER_HELP: &str = "\
+The issue 6 figures use the horse of BENCHMARKS.md (issue 3 split, 150 bones, K = 8, 8 automatic
+control points, global predictor), trained and benched with release builds:
+
+  cargo build --release -p crease-cli -p crease-server
+  target/release/crease train --examples bench/horse/train.toml --bones 150 --max-influences 8 \\
+      --out /tmp/horse.crease
+  RAYON_NUM_THREADS=1 target/release/crease bench-net --model /tmp/horse.crease
+
+The server binary is looked up beside this `crease` (or --server-bin); build it with
+`cargo build --release -p crease-server`. Latency is the server's own figure
+(Frame.server_latency_us: control frame received -> mesh frame handed to the subscriber's
+stream); the client-side figure (capture time -> frame read by the client, one clock, one
+machine) adds HTTP/2 and the clients' own scheduling.";
+
+/// Which of issue 6's scenarios to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ScenarioChoice {
+    /// 1 room x 100 subscribers.
+    OneRoom,
+    /// 20 rooms x 5 subscribers.
+    ManyRooms,
+    /// Both, one after the other.
+    Both,
+}
+
+/// Options of `crease bench-net`.
+#[derive(Clone, Debug, clap::Args)]
+#[command(after_long_help = AFTER_HELP)]
+pub struct BenchNetArgs {
+    /// The trained model (the horse for issue 6's figures: see --help).
+    #[arg(long, value_name = "FILE")]
+    pub model: PathBuf,
+    /// Folder of meshes (the model's topology) whose control vertices make the control frames,
+    /// looped. Default: the horse gallop in ../shared/data beside the checkout.
+    #[arg(long, value_name = "DIR", conflicts_with = "controls")]
+    pub gallop: Option<PathBuf>,
+    /// Control frames from a CSV or JSON file (as `crease synth --controls` reads them), looped,
+    /// instead of --gallop.
+    #[arg(long, value_name = "FILE")]
+    pub controls: Option<PathBuf>,
+    /// Scenarios: one-room (1 x 100 subscribers), many-rooms (20 x 5) or both.
+    #[arg(long, value_enum, default_value = "both")]
+    pub scenario: ScenarioChoice,
+    /// Rooms of one custom scenario instead of --scenario (with --subscribers).
+    #[arg(long, value_name = "N", requires = "subscribers")]
+    pub rooms: Option<usize>,
+    /// Subscribers per room of the custom scenario (with --rooms).
+    #[arg(long, value_name = "M", requires = "rooms")]
+    pub subscribers: Option<usize>,
+    /// Control frames per second, per room.
+    #[arg(long, default_value_t = 60.0)]
+    pub rate: f64,
+    /// The measured window, seconds.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Seconds of traffic before the window (not recorded).
+    #[arg(long, default_value_t = 2.0)]
+    pub warmup: f64,
+    /// Bench a running server (its gRPC URL, e.g. http://127.0.0.1:50051) instead of spawning
+    /// one; it must host the model and have an admin token.
+    #[arg(long, value_name = "URL")]
+    pub server: Option<String>,
+    /// With --server: its process id, to measure its CPU (Linux /proc).
+    #[arg(long, value_name = "PID", requires = "server")]
+    pub server_pid: Option<u32>,
+    /// With --server: its admin token (opens the rooms). Also read from CREASE_ADMIN_TOKEN.
+    /// A spawned server gets a fresh random one.
+    #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
+    pub admin_token: Option<String>,
+    /// With --server: the model's name there. Default: the model file's stem.
+    #[arg(long, value_name = "NAME", requires = "server")]
+    pub model_name: Option<String>,
+    /// The crease-server binary to spawn. Default: `crease-server` beside this `crease`.
+    #[arg(long, value_name = "PATH", conflicts_with = "server")]
+    pub server_bin: Option<PathBuf>,
+    /// Print one JSON object on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// The level the subscribers watch: `base` or `detail` (a model with a detail layer).
+    #[arg(long, default_value = "base", value_parser = ["base", "detail"])]
+    pub level: String,
+    /// How the subscribers receive frames: `vertices` or `palette` (issue 18: the bones and
+    /// the detail kernel vector; the checking subscriber decodes them on the CPU).
+    #[arg(long, default_value = "vertices", value_parser = ["vertices", "palette"])]
+    pub encoding: String,
+    /// Bench a cluster instead: a local `nats-server` (JetStream) and this many `crease-server`
+    /// replicas joined to it; one room, opened on the first replica (its owner), its
+    /// --subscribers (default 300) spread over the replicas, and the same count / replicas
+    /// on the owner alone for comparison. Reports each replica's latency and CPU and the NATS
+    /// bytes per published frame.
+    #[arg(long, value_name = "N", conflicts_with = "server")]
+    pub replicas: Option<usize>,
+    /// The `nats-server` binary for --replicas. Default: /usr/sbin/nats-server (Debian's) or
+    /// one on the PATH.
+    #[arg(long, value_name = "PATH", requires = "replicas")]
+    pub nats_bin: Option<PathBuf>,
+    /// Soak instead of bench: MINUTES of churn and faults against a spawned server (rooms,
+    /// reconnecting publishers with malformed frames, viewers over gRPC and WebSocket that
+    /// join, stall and leave, rooms opened and closed), sampling its RSS, fds and tasks; fails
+    /// on a panic, a non-finite mesh, a stuck room or memory growth (issue 21, RELIABILITY.md).
+    #[arg(long, value_name = "MINUTES", conflicts_with_all = ["server", "replicas"])]
+    pub soak: Option<f64>,
+    /// Soak: base rooms.
+    #[arg(long, default_value_t = 20, requires = "soak")]
+    pub soak_rooms: usize,
+    /// Soak: rooms whose viewers watch the detail level (a model with a detail layer).
+    #[arg(long, default_value_t = 2, requires = "soak")]
+    pub soak_detail_rooms: usize,
+    /// Soak: viewers (besides one checking viewer per room).
+    #[arg(long, default_value_t = 200, requires = "soak")]
+    pub soak_viewers: usize,
+    /// Soak: seconds between samples of the server.
+    #[arg(long, default_value_t = 5.0, requires = "soak")]
+    pub sample_seconds: f64,
+}
+
+/// One load shape: rooms, each with its publisher and subscribers.
+#[derive(Clone, Debug)]
+pub(crate) struct Scenario {
+    /// `one-room`, `many-rooms`, `custom`, `cluster` or `owner-only`.
+    pub(crate) name: String,
+    /// Rooms.
+    pub(crate) rooms: usize,
+    /// Subscribers per room.
+    pub(crate) subscribers: usize,
+    /// The subscribers are spread round-robin over the first this many servers (1: all on
+    /// the one where the rooms are opened).
+    pub(crate) spread: usize,
+}
+
+/// Viewers of the cluster scenario when --subscribers is not given (issue 17).
+const CLUSTER_VIEWERS: usize = 300;
+
+pub(crate) fn scenarios(args: &BenchNetArgs) -> Vec<Scenario> {
+    let named = |name: &str, (rooms, subscribers): (usize, usize)| Scenario {
+        name: name.to_owned(),
+        rooms,
+        subscribers,
+        spread: 1,
+    };
+    if let Some(n) = args.replicas {
+        let viewers = args.subscribers.unwrap_or(CLUSTER_VIEWERS);
+        return vec![
+            Scenario {
+                spread: n,
+                ..named("cluster", (1, viewers))
+            },
+            named("owner-only", (1, viewers.div_ceil(n))),
+        ];
+    }
+    if let (Some(rooms), Some(subscribers)) = (args.rooms, args.subscribers) {
+        return vec![named("custom", (rooms, subscribers))];
+    }
+    match args.scenario {
+        ScenarioChoice::OneRoom => vec![named("one-room", ONE_ROOM)],
+        ScenarioChoice::ManyRooms => vec![named("many-rooms", MANY_ROOMS)],
+        ScenarioChoice::Both => vec![named("one-room", ONE_ROOM), named("many-rooms", MANY_ROOMS)],
+    }
+}
