@@ -10,9 +10,10 @@
 //!   room), the session entered once (token, rate), the wire frame read, a typed
 //!   [`ingest::PublishError`]; in a cluster, a relay's frames go to the owner through the
 //!   room's fan-out, and the owner takes them here.
-//! - [`state`]: what the services share ([`AppState`]): the models, the private room table,
-//!   and the one way to open and close a room ([`AppState::open_room`] from a
-//!   `crease_proto::room::RoomSpec`, [`AppState::close_room`]; one [`OpenRoomError`]).
+//! - [`state`]: what the services share ([`state::AppState`]): the models, the private room
+//!   table, and the one way to open and close a room ([`state::AppState::open_room`] from a
+//!   `crease_proto::room::RoomSpec`, [`state::AppState::close_room`]; one
+//!   [`state::OpenRoomError`]).
 //! - [`room`]: a live room, tying together its [`session`] (identity, token in constant
 //!   time, rate limit, subscriber slots), its [`pipeline`] (One Euro filter, predictor,
 //!   encoders, frame pools; blocking work, run on the blocking pool), its [`mailbox`] (latest
@@ -32,8 +33,8 @@
 //!   operations both transports call (start, stop, list, export, replay rooms).
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
 //!   Prometheus metrics.
-//! - [`config`]: the server's [`Config`] and [`Limits`]; [`listen`]: binds the listeners and
-//!   runs until shut down ([`Running`]).
+//! - [`config`]: the server's [`config::Config`] and [`config::Limits`]; [`listen`]: binds the
+//!   listeners and runs until shut down ([`listen::Running`]).
 //!
 //! Every wire shape (protobuf conversions, a room's spec and registry entry, the JSON of the
 //! HTTP side, error codes) is `crease-proto`'s. Depends on `crease-core`, `crease-proto` and
