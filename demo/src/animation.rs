@@ -15,7 +15,7 @@ use crease_hand::surface::Resolution;
 use crease_server::AppState;
 use crease_server::room::Room;
 
-use crate::DemoError;
+use crate::hand_model::DemoError;
 
 /// Seconds a named pose is held.
 const HOLD_S: f32 = 0.7;
