@@ -226,7 +226,7 @@ fn enter(room: &Room, who: Publisher<'_>, hz: Option<f64>) -> Result<(), Publish
 }
 
 /// Owner: the frames relays forward into this server's rooms, their tokens checked there
-/// ([`publish_forwarded`]), acked.
+/// (`publish_forwarded`), acked.
 impl cluster::Ingest for AppState {
     fn publish_forwarded(
         self: Arc<Self>,

@@ -128,7 +128,7 @@ impl Room {
         self
     }
 
-    /// Whether the room is private ([`Room::private`]).
+    /// Whether the room is private (a take's replay: `RoomSpec::private`).
     pub fn is_private(&self) -> bool {
         self.private
     }
