@@ -12,11 +12,10 @@ use crease_core::model::TrainedModel;
 use crease_hand::rig::{HandRig, Layers, RigScratch};
 use crease_hand::skeleton::{HandPose, NamedPose};
 use crease_hand::surface::Resolution;
-use crease_proto::v1;
 use crease_server::AppState;
 use crease_server::room::Room;
 
-use crate::DemoError;
+use crate::hand_model::DemoError;
 
 /// Seconds a named pose is held.
 const HOLD_S: f32 = 0.7;
@@ -135,14 +134,12 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
         t += now.duration_since(last_tick).as_secs_f64();
         last_tick = now;
         animation.controls_at(t, &mut positions);
-        let frame = v1::ControlFrame {
-            room: room.id.clone(),
+        let frame = crease_proto::control::control_frame_flat(
+            &room.id,
             seq,
-            capture_time_us: now_us(),
-            positions: std::mem::take(&mut positions),
-            valid: Vec::new(),
-            ..Default::default()
-        };
+            now_us(),
+            std::mem::take(&mut positions),
+        );
         let outcome = crease_server::ingest::publish(&state, Some(&token), frame).await;
         ours = room.published();
         if let Err(e) = outcome {

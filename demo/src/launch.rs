@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
+use crease_proto::room::{Placement, RoomOptions, RoomSpec, RoomToken};
 use crease_server::registry::{ModelRegistry, RegistryError};
-use crease_server::room::{Room, RoomError, RoomOptions};
-use crease_server::{AddRoomError, AppState, Running};
+use crease_server::{AppState, OpenRoomError, Running};
 
 use crate::animation::{DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
@@ -90,13 +90,10 @@ pub enum LaunchError {
     Demo(#[from] DemoError),
     /// The demo room could not be opened.
     #[error("the demo room: {0}")]
-    Room(#[from] RoomError),
-    /// The WebXR room's joint map does not bind to the demo model.
+    Room(#[from] OpenRoomError),
+    /// The WebXR room could not be opened (its joint map does not bind to the demo model).
     #[error("the demo's WebXR room {DEMO_HANDS_ROOM:?}: {0}")]
     Hands(String),
-    /// The demo room could not be added.
-    #[error("the demo room: {0}")]
-    AddRoom(#[from] AddRoomError),
     /// Binding a listener, or the TLS files.
     #[error("serving: {0}")]
     Io(#[from] std::io::Error),
@@ -247,19 +244,28 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let mut demo_token = None;
     if let Some((model, animation)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
-        let options = RoomOptions {
-            beta: Some(DEMO_BETA),
-            ..RoomOptions::default()
+        // The demo's rooms are this replica's alone, in a cluster too.
+        let spec = RoomSpec {
+            id: DEMO_ROOM.into(),
+            model: model.name.clone(),
+            options: RoomOptions {
+                beta: Some(DEMO_BETA),
+                ..RoomOptions::default()
+            },
+            token: config
+                .demo_token
+                .clone()
+                .map_or(RoomToken::Random, RoomToken::Fixed),
+            placement: Placement::Local,
+            ..RoomSpec::default()
         };
-        let mut room =
-            Room::open(DEMO_ROOM, Arc::clone(&model), options, state.config.stream).await?;
-        if let Some(token) = &config.demo_token {
-            room = room.with_token(token);
-        }
-        let room = state.add_room(room)?;
+        let room = state.open_room(spec).await?;
         let token = room.token().unwrap_or_default().to_owned();
         tokio::spawn(drive(Arc::clone(&state), room, animation, config.demo_rate));
-        state.add_room(hands_room(&model, &state, &token).await?)?;
+        state
+            .open_room(hands_room(&model, &token))
+            .await
+            .map_err(|e| LaunchError::Hands(e.to_string()))?;
         demo_token = Some(token);
     }
     let running = crease_server::serve(state).await?;
@@ -274,39 +280,32 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
 /// retargets the viewer's WebXR joints through [`WEBXR_MAP`], in metres, with the demo's beta
 /// and no filter (headset runtimes smooth their hand tracking already, and every filtered
 /// frame would add latency).
-async fn hands_room(
-    model: &Arc<crease_server::registry::LoadedModel>,
-    state: &AppState,
-    token: &str,
-) -> Result<Room, LaunchError> {
-    let wire = crease_proto::v1::Retarget {
-        map_toml: WEBXR_MAP.to_owned(),
-        markers: crease_hand::joint_map::capture_markers(),
-        units: "m".into(),
-        ..Default::default()
-    };
-    let spec = crease_server::capture::CaptureSpec::build(wire, None, Arc::clone(model))
-        .await
-        .map_err(|e| LaunchError::Hands(e.to_string()))?;
-    // A performer's hands leave the training poses: the refinement holds the fingers to the
-    // tracked joints where the regression extrapolates (issue 20; BENCHMARKS.md "Beyond the
-    // examples": half the regression's error on hands far from the examples).
-    let options = RoomOptions {
-        beta: Some(DEMO_BETA),
-        filter: None,
-        refine: Some(DEMO_HANDS_REFINE),
-        // The model's default (the demo hand is trained with LBS): the viewer may subscribe
-        // with palette frames, which it skins with LBS, and a DQS room refuses those.
-        skinning: None,
-    };
-    let room = Room::open(
-        DEMO_HANDS_ROOM,
-        Arc::clone(model),
-        options,
-        state.config.stream,
-    )
-    .await?;
-    Ok(room.with_capture(Arc::new(spec)).with_token(token))
+fn hands_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
+    let retarget = crease_proto::room::retarget(
+        WEBXR_MAP.to_owned(),
+        crease_hand::joint_map::capture_markers(),
+        "m".into(),
+    );
+    RoomSpec {
+        id: DEMO_HANDS_ROOM.into(),
+        model: model.name.clone(),
+        // A performer's hands leave the training poses: the refinement holds the fingers to
+        // the tracked joints where the regression extrapolates (issue 20; BENCHMARKS.md
+        // "Beyond the examples": half the regression's error on hands far from the examples).
+        options: RoomOptions {
+            beta: Some(DEMO_BETA),
+            filter: None,
+            refine: Some(DEMO_HANDS_REFINE),
+            // The model's default (the demo hand is trained with LBS): the viewer may
+            // subscribe with palette frames, which it skins with LBS, and a DQS room refuses
+            // those.
+            skinning: None,
+        },
+        retarget: Some(retarget),
+        token: RoomToken::Fixed(token.to_owned()),
+        placement: Placement::Local,
+        ..RoomSpec::default()
+    }
 }
 
 /// [`start`], the banner on stderr, then serving until `shutdown` resolves (the binary passes

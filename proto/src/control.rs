@@ -175,6 +175,23 @@ pub fn read_control_frame(
     Ok(invalid)
 }
 
+/// A control frame for the wire whose `positions` are flattened already (`x, y, z` per
+/// control point, all valid): a publisher that fills one buffer per frame.
+pub fn control_frame_flat(
+    room: &str,
+    seq: u64,
+    capture_time_us: i64,
+    positions: Vec<f32>,
+) -> v1::ControlFrame {
+    v1::ControlFrame {
+        room: room.to_owned(),
+        seq,
+        capture_time_us,
+        positions,
+        ..Default::default()
+    }
+}
+
 /// A control frame for the wire: `positions` flattened to `x, y, z` (a point that is not
 /// finite is sent as zeros; mark it invalid), and the validity mask, left empty when every
 /// point is valid (which the server reads as "all valid").

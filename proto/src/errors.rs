@@ -116,6 +116,34 @@ pub fn error_ack(seq: u64, error: v1::FrameError) -> v1::PublishAck {
     }
 }
 
+/// What the server reports of a frame it published, for [`ok_ack`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AckParts {
+    /// Microseconds from arrival to the meshes being handed to the subscribers.
+    pub server_latency_us: u32,
+    /// Control points held (invalid or occluded).
+    pub held_controls: u32,
+    /// RMS control residual, model units.
+    pub control_residual: f32,
+    /// The same in the capture's units (retargeting rooms).
+    pub control_residual_capture: f32,
+    /// How far the frame lies from the model's training examples.
+    pub confidence: f32,
+}
+
+/// The ack of frame `seq`, published.
+pub fn ok_ack(seq: u64, p: AckParts) -> v1::PublishAck {
+    v1::PublishAck {
+        seq,
+        server_latency_us: p.server_latency_us,
+        held_controls: p.held_controls,
+        error: None,
+        control_residual: p.control_residual,
+        control_residual_capture: p.control_residual_capture,
+        confidence: p.confidence,
+    }
+}
+
 /// The status that ends a `Synthesize` batch whose frame `index` was refused with `code`: the
 /// message says `SynthesizeRequest.frames[index].<field>: ...` (or `frames[index]: ...` when
 /// no field is at fault) for people, and the details hold the [`v1::FrameError`] with

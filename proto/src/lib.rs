@@ -16,20 +16,29 @@
 //!   and [`read_palette_topology`] / [`StreamPalette`].
 //! - [`convert`]: the small wire <-> core conversions: points, boxes, the One Euro filter,
 //!   [`Level`], [`Encoding`], [`model_info`].
+//! - [`room`]: what it takes to open a room, checked once: [`room::RoomSpec`] from an
+//!   `OpenRoomRequest`, a cluster's `RoomEntry` or a take's header; a room's settings back on
+//!   the wire; [`room::RoomOptions`] and [`room::StreamSettings`].
+//! - [`cluster`]: the messages replicas exchange: a room's registry entry, a relay's interest,
+//!   a forwarded control frame.
 //! - [`json`]: the JSON the WebSocket and `/api/rooms` speak: control frames in, acks out,
 //!   room documents, one serde mapping each.
 //! - [`take`]: take files (issue 22; `take.proto`): writing a room's recorded frames, reading
 //!   them back up to the last whole frame, and unpacking their frames into core types.
+//! - [`take_info`]: a take's header and summary as the server builds them.
 //! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
 //!   integers), error acks, and the batch error status that names its frame in a field.
 
+pub mod cluster;
 pub mod control;
 pub mod convert;
 pub mod errors;
 pub mod json;
 pub mod mesh;
 pub mod palette;
+pub mod room;
 pub mod take;
+pub mod take_info;
 
 pub use control::{
     control_frame, encode_valid_mask, read_control_frame, read_marker_frame, valid_bit,
@@ -38,6 +47,7 @@ pub use convert::{Encoding, Level, box3, model_info};
 pub use errors::WireError;
 pub use mesh::{StreamTopology, TopologyParts, frame_message, read_topology, topology_message};
 pub use palette::{PaletteParts, StreamPalette, palette_topology_message, read_palette_topology};
+pub use room::{RoomOptions, RoomSpec, StreamSettings};
 
 /// The generated `crease.v1` package.
 #[allow(missing_docs, clippy::all, missing_debug_implementations)]

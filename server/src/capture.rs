@@ -122,10 +122,7 @@ impl CaptureSpec {
             .iter()
             .map(|c| model.rig.rest.positions[c.vertex as usize])
             .collect();
-        let resolved = v1::Retarget {
-            map_toml: text,
-            ..wire.clone()
-        };
+        let resolved = crease_proto::room::resolved_retarget(&wire, text);
         Ok(CaptureSpec {
             wire,
             resolved,

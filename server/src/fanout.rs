@@ -13,7 +13,8 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use crease_proto::{Encoding, Level};
+use crease_proto::{Encoding, Level, v1};
+use futures_util::future::BoxFuture;
 use tokio::sync::watch;
 
 use crate::frames::MeshUpdate;
@@ -108,9 +109,20 @@ pub trait Fanout: Send + Sync + std::fmt::Debug {
     }
 
     /// Whether another replica predicts the room and this one only relays its frames (then
-    /// control frames are forwarded to the owner, `crate::cluster::control`).
+    /// control frames are forwarded to the owner: [`Fanout::forward`]).
     fn relays(&self) -> bool {
         false
+    }
+
+    /// A relay's way in, the fan-out's reverse: forwards `frame` (its token checked here) to
+    /// the replica that predicts the room and resolves to its ack (`crate::cluster::control`).
+    /// Asked only of a fan-out that [relays](Fanout::relays); a local room has no owner
+    /// elsewhere, so the local fan-out refuses.
+    fn forward(
+        &self,
+        _frame: v1::ControlFrame,
+    ) -> BoxFuture<'static, Result<v1::PublishAck, String>> {
+        Box::pin(async { Err("this room is predicted here: nothing to forward to".to_owned()) })
     }
 }
 

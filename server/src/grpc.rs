@@ -12,13 +12,15 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crease_proto::room::{RoomSpec, refinement};
+
 use crate::admission::Permit;
 use crate::fanout::Channel;
-use crate::ingest;
-use crate::registry::LoadedModel;
-use crate::room::{Room, RoomOptions, StreamSettings};
+use crate::ingest::{self, PublishError};
+use crate::room::{Room, RoomOptions};
+use crate::state::{AppState, OpenRoomError};
+use crate::status;
 use crate::take_service as takes;
-use crate::{AddRoomError, AppState};
 
 /// The largest message the server sends: what it sends is its own (a limit on requests,
 /// `limits.message_bytes`, protects it from clients), and a detail palette header is one
@@ -41,9 +43,9 @@ pub struct CreaseService {
 /// With `tls` (PEM certificate chain and key), gRPC is served over TLS (rustls).
 pub fn router(
     state: Arc<AppState>,
-    tls: Option<&crate::TlsPem>,
+    tls: Option<&crate::config::TlsPem>,
 ) -> std::io::Result<tonic::transport::server::Router> {
-    let max = state.config.limits.message_bytes;
+    let max = state.config().limits.message_bytes;
     let (reporter, health) = tonic_health::server::health_reporter();
     let reflection = || {
         tonic_reflection::server::Builder::configure()
@@ -86,7 +88,7 @@ fn bearer<T>(req: &Request<T>) -> Option<String> {
 
 impl CreaseService {
     fn require_admin<T>(&self, req: &Request<T>) -> Result<(), Status> {
-        let Some(admin) = &self.state.config.admin_token else {
+        let Some(admin) = &self.state.config().admin_token else {
             return Err(Status::permission_denied(
                 "this server has no admin token: rooms are opened at start only",
             ));
@@ -100,13 +102,6 @@ impl CreaseService {
         }
     }
 
-    fn model(&self, name: &str) -> Result<Arc<LoadedModel>, Status> {
-        self.state
-            .models
-            .get(name)
-            .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
-    }
-
     /// A stream slot for the request's client address (`Limits::streams`), or
     /// RESOURCE_EXHAUSTED naming the address and the cap.
     fn admit<T>(&self, req: &Request<T>) -> Result<Permit, Status> {
@@ -114,13 +109,16 @@ impl CreaseService {
             .remote_addr()
             .map_or(IpAddr::V4(std::net::Ipv4Addr::UNSPECIFIED), |a| a.ip());
         self.state
-            .streams
+            .streams()
             .admit(ip)
             .map_err(|e| Status::resource_exhausted(e.to_string()))
     }
 
     async fn room(&self, id: &str) -> Result<Arc<Room>, Status> {
-        self.state.find_room(id).await.map_err(|e| e.status())
+        self.state
+            .find_room(id)
+            .await
+            .map_err(|e| status::publish(&PublishError::from(e)))
     }
 }
 
@@ -135,7 +133,7 @@ impl Crease for CreaseService {
         Ok(Response::new(v1::ListModelsResponse {
             models: self
                 .state
-                .models
+                .models()
                 .list()
                 .iter()
                 .map(|m| m.info.clone())
@@ -149,7 +147,7 @@ impl Crease for CreaseService {
     ) -> Result<Response<v1::ModelInfo>, Status> {
         let name = &req.get_ref().model;
         self.state
-            .models
+            .models()
             .get(name)
             .map(|m| Response::new(m.info.clone()))
             .ok_or_else(|| Status::not_found(format!("model: no model {name:?}")))
@@ -160,30 +158,13 @@ impl Crease for CreaseService {
         req: Request<v1::OpenRoomRequest>,
     ) -> Result<Response<v1::OpenRoomResponse>, Status> {
         self.require_admin(&req)?;
-        let r = req.into_inner();
-        let model = self.model(&r.model)?;
-        let (options, capture) =
-            crate::room::options_from_request(&r, &model, self.state.config.maps.clone()).await?;
-        let room = match self.state.cluster() {
-            Some(cluster) => {
-                Arc::clone(cluster)
-                    .open_room(&self.state, &r.room, model, options, capture)
-                    .await?
-            }
-            None => {
-                let room = Room::open(&r.room, model, options, self.state.config.stream)
-                    .await
-                    .map_err(|e| e.status())?;
-                let room = match capture {
-                    Some(spec) => room.with_capture(spec),
-                    None => room,
-                };
-                self.state.add_room(room).map_err(|e| match e {
-                    AddRoomError::Exists(_) => Status::already_exists(e.to_string()),
-                    AddRoomError::Limit(_) => Status::resource_exhausted(e.to_string()),
-                })?
-            }
-        };
+        let spec = RoomSpec::from_request(req.get_ref())
+            .map_err(|e| status::open(&OpenRoomError::from(e)))?;
+        let room = self
+            .state
+            .open_room(spec)
+            .await
+            .map_err(|e| status::open(&e))?;
         let response = v1::OpenRoomResponse {
             room: room.id.clone(),
             publish_token: room.token().unwrap_or_default().to_owned(),
@@ -224,15 +205,11 @@ impl Crease for CreaseService {
         req: Request<v1::CloseRoomRequest>,
     ) -> Result<Response<v1::CloseRoomResponse>, Status> {
         self.require_admin(&req)?;
-        let id = &req.get_ref().room;
-        if let Some(cluster) = self.state.cluster() {
-            cluster.close_room(&self.state, id).await?;
-            return Ok(Response::new(v1::CloseRoomResponse {}));
-        }
-        match self.state.remove_room(id) {
-            Some(_) => Ok(Response::new(v1::CloseRoomResponse {})),
-            None => Err(Status::not_found(format!("room: no room {id:?}"))),
-        }
+        self.state
+            .close_room(&req.get_ref().room)
+            .await
+            .map_err(|e| status::open(&e))?;
+        Ok(Response::new(v1::CloseRoomResponse {}))
     }
 
     type PublishStream = BoxStream<v1::PublishAck>;
@@ -282,9 +259,10 @@ impl Crease for CreaseService {
         let room = self.room(&r.room).await?;
         check_level(&room, level)?;
         let channel = Channel::new(level, encoding);
-        room.check_channel(channel)?;
+        room.check_channel(channel)
+            .map_err(|e| status::channel(&e))?;
         let subscription = room
-            .subscribe(channel, self.state.config.limits.subscribers_per_room)
+            .subscribe(channel, self.state.config().limits.subscribers_per_room)
             .map_err(|e| Status::resource_exhausted(format!("room {:?}: {e}", room.id)))?;
         Ok(Response::new(holding(
             permit,
@@ -301,16 +279,18 @@ impl Crease for CreaseService {
         let permit = self.admit(&req)?;
         let r = req.into_inner();
         let level = Level::from_wire("SynthesizeRequest", r.level)?;
-        let model = self.model(&r.model)?;
+        let spec_error = |e| status::open(&OpenRoomError::Spec(e));
         let options = RoomOptions {
             beta: (r.beta != 0.0).then_some(r.beta),
             filter: None,
-            refine: crate::room::refinement(r.refine)?,
+            refine: refinement(r.refine).map_err(spec_error)?,
             skinning: crease_proto::convert::skinning_from_wire("SynthesizeRequest", r.skinning)?,
         };
-        let room = Room::open("batch", model, options, StreamSettings::full())
+        let room = self
+            .state
+            .batch_room(&r.model, options)
             .await
-            .map_err(|e| e.status())?;
+            .map_err(|e| status::open(&e))?;
         check_level(&room, level)?;
         Ok(Response::new(holding(
             permit,
@@ -327,7 +307,7 @@ impl Crease for CreaseService {
         takes::start(&self.state, &r.room, r.name)
             .await
             .map(Response::new)
-            .map_err(|e| e.status())
+            .map_err(|e| status::take(&e))
     }
 
     async fn stop_take(
@@ -338,7 +318,7 @@ impl Crease for CreaseService {
         takes::stop(&self.state, &req.get_ref().room)
             .await
             .map(Response::new)
-            .map_err(|e| e.status())
+            .map_err(|e| status::take(&e))
     }
 
     async fn list_takes(
@@ -347,7 +327,7 @@ impl Crease for CreaseService {
     ) -> Result<Response<v1::ListTakesResponse>, Status> {
         let takes = takes::list(&self.state, req.into_inner().room)
             .await
-            .map_err(|e| e.status())?;
+            .map_err(|e| status::take(&e))?;
         Ok(Response::new(v1::ListTakesResponse { takes }))
     }
 
@@ -359,7 +339,7 @@ impl Crease for CreaseService {
     ) -> Result<Response<Self::GetTakeStream>, Status> {
         let bytes = takes::bytes(&self.state, req.into_inner().take)
             .await
-            .map_err(|e| e.status())?;
+            .map_err(|e| status::take(&e))?;
         let bytes = prost::bytes::Bytes::from(bytes);
         let chunks: Vec<Result<v1::TakeChunk, Status>> = (0..bytes.len())
             .step_by(TAKE_CHUNK_BYTES)

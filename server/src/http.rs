@@ -16,11 +16,13 @@ use axum::routing::get;
 
 use crease_proto::json::{RoomDocument, RoomList, RoomOwner, TakeList, TakeSummary};
 
-use crate::AppState;
+use crate::ingest::PublishError;
+use crate::state::AppState;
+use crate::status;
 
 /// The HTTP router over shared state.
 pub fn router(state: Arc<AppState>) -> Router {
-    let web = state.config.web.clone();
+    let web = state.config().web.clone();
     let router = Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
         .route("/readyz", get(readyz))
@@ -46,7 +48,7 @@ async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         (StatusCode::SERVICE_UNAVAILABLE, "shutting down\n")
     } else if state.cluster().is_some_and(|c| !c.is_connected()) {
         (StatusCode::SERVICE_UNAVAILABLE, "NATS disconnected\n")
-    } else if state.models.is_empty() && state.cluster().is_none() {
+    } else if state.models().is_empty() && state.cluster().is_none() {
         (StatusCode::SERVICE_UNAVAILABLE, "no models loaded\n")
     } else {
         (StatusCode::OK, "ready\n")
@@ -71,17 +73,8 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
             replica: Some(cluster.replica.clone()),
         });
     }
-    let mut ids: Vec<String> = state
-        .rooms
-        .read()
-        .unwrap_or_else(|e| e.into_inner())
-        .values()
-        .filter(|r| !r.is_private())
-        .map(|r| r.id.clone())
-        .collect();
-    ids.sort();
     axum::Json(RoomList {
-        rooms: ids,
+        rooms: state.listed_rooms(),
         cluster: Vec::new(),
         replica: None,
     })
@@ -94,9 +87,9 @@ async fn room_info(
     State(state): State<Arc<AppState>>,
     axum::extract::Path(id): axum::extract::Path<String>,
 ) -> axum::response::Response {
-    let room = match state.find_room(&id).await {
+    let room = match state.find_room(&id).await.map_err(PublishError::from) {
         Ok(room) => room,
-        Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
+        Err(e) => return (status::publish_http(&e), format!("{e}\n")).into_response(),
     };
     axum::Json(
         RoomDocument::new(
@@ -117,7 +110,7 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
             header::CONTENT_TYPE,
             "application/openmetrics-text; version=1.0.0; charset=utf-8",
         )],
-        state.metrics.render(),
+        state.metrics().render(),
     )
 }
 
@@ -130,7 +123,7 @@ struct TakesQuery {
 
 /// A take operation's error as a plain-text response.
 fn take_error(e: &crate::take_service::TakeOpError) -> axum::response::Response {
-    (e.http_status(), format!("{e}\n")).into_response()
+    (status::take_http(e), format!("{e}\n")).into_response()
 }
 
 /// `GET /api/takes[?room=ID]`: the takes, newest first ([`TakeList`]).

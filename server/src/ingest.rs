@@ -1,20 +1,27 @@
 //! Ingest: the one publish path of every transport. A control frame from gRPC's `Publish`, a
 //! WebSocket (binary protobuf or JSON text) or the embedded demo comes here: the room is looked
-//! up, the token checked, the rate limit applied, the wire frame read into the model's control
-//! points and run through the room's pipeline on the blocking pool. What went wrong is a typed
-//! [`PublishError`], mapped once per transport: [`PublishError::frame_error`] for the ack
-//! ([`ack`]; the WebSocket sends the same ack as JSON) and [`PublishError::ws_close`] for
-//! whether a WebSocket closes.
+//! up (a WebSocket session holds its room: [`publish_into`]), its session entered once (the
+//! token, then the rate limit: `Session::enter`), the wire frame read into the model's control
+//! points and run through the room's pipeline on the blocking pool. In a cluster a relay's
+//! room forwards the frame to its owner through its fan-out (`Fanout::forward`), and the owner
+//! takes forwarded frames here too ([`crate::cluster::Ingest`], implemented below for the
+//! server's state). What went wrong is a typed [`PublishError`], mapped once per transport:
+//! [`PublishError::frame_error`] for the ack ([`ack`]; the WebSocket sends the same ack as
+//! JSON), `crate::status` for a gRPC status or an HTTP status, and [`PublishError::ws_close`]
+//! for whether a WebSocket closes.
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use crease_proto::errors::{ErrorCode, batch_error_status, batch_status, error_ack, frame_error};
+use crease_proto::errors::{AckParts, ErrorCode, error_ack, frame_error, ok_ack};
 use crease_proto::{WireError, v1};
+use futures_util::future::BoxFuture;
 
-use crate::AppState;
+use crate::cluster::{self, LookupError};
 use crate::pipeline::{PipelineError, Published};
 use crate::room::Room;
+use crate::session::{Publisher, Refusal};
+use crate::state::AppState;
 
 /// Why a control frame was refused; the room is unchanged.
 #[derive(Debug, thiserror::Error)]
@@ -55,9 +62,8 @@ pub enum PublishError {
     Forwarded(v1::FrameError),
 }
 
-impl From<crate::cluster::LookupError> for PublishError {
-    fn from(e: crate::cluster::LookupError) -> Self {
-        use crate::cluster::LookupError;
+impl From<LookupError> for PublishError {
+    fn from(e: LookupError) -> Self {
         match e {
             LookupError::NoRoom(id) => PublishError::NoRoom(id),
             LookupError::Unavailable(why) => PublishError::Unavailable(why),
@@ -79,7 +85,7 @@ impl From<PipelineError> for PublishError {
 }
 
 impl PublishError {
-    /// The named code of this refusal.
+    /// The named code of this refusal (gRPC's status code and the ack's `FrameError.code`).
     pub fn code(&self) -> ErrorCode {
         match self {
             PublishError::NoRoom(_) => ErrorCode::NotFound,
@@ -95,34 +101,12 @@ impl PublishError {
         }
     }
 
-    /// gRPC: the `FrameError` of the ack.
+    /// The `FrameError` of the ack.
     pub fn frame_error(&self) -> v1::FrameError {
         match self {
             PublishError::Forwarded(e) => e.clone(),
             e => frame_error(e.code(), e.to_string()),
         }
-    }
-
-    /// gRPC: the status that ends a `Synthesize` batch at its frame `index`, the frame index in
-    /// its details ([`batch_error_status`]).
-    pub fn batch_status(&self, index: usize) -> tonic::Status {
-        match self {
-            PublishError::Wire(e) => batch_status(index, e),
-            e => batch_error_status(index, e.code(), None, &e.to_string()),
-        }
-    }
-
-    /// HTTP: the status of a room lookup's refusal (`/api/rooms/{id}`, the WebSocket upgrade).
-    pub fn http_status(&self) -> axum::http::StatusCode {
-        match self.code() {
-            ErrorCode::NotFound => axum::http::StatusCode::NOT_FOUND,
-            _ => axum::http::StatusCode::SERVICE_UNAVAILABLE,
-        }
-    }
-
-    /// gRPC: as a status, for a call that fails as a whole.
-    pub fn status(&self) -> tonic::Status {
-        tonic::Status::new(self.code().grpc(), self.to_string())
     }
 
     /// WebSocket: the close code this refusal ends the socket with, if any. The socket's ack
@@ -145,13 +129,38 @@ pub async fn publish(
     frame: v1::ControlFrame,
 ) -> Result<Published, PublishError> {
     let received = Instant::now();
-    let done = publish_inner(state, token, frame, received).await;
+    let done = match state.find_room(&frame.room).await {
+        Ok(room) => publish_to(state, room, token, frame, received).await,
+        Err(e) => Err(e.into()),
+    };
+    count(state, &done);
+    done
+}
+
+/// Publishes one control frame into `room`, which the publisher holds (a WebSocket session
+/// looked it up once; `frame.room` is the room's), and counts it in the metrics. A room
+/// closed since is refused as one looked up now would be.
+///
+/// # Errors
+/// [`PublishError`]; the room is unchanged then.
+pub async fn publish_into(
+    state: &Arc<AppState>,
+    room: &Arc<Room>,
+    token: Option<&str>,
+    frame: v1::ControlFrame,
+) -> Result<Published, PublishError> {
+    let received = Instant::now();
+    let done = if room.is_closed() {
+        Err(PublishError::NoRoom(room.id.clone()))
+    } else {
+        publish_to(state, Arc::clone(room), token, frame, received).await
+    };
     count(state, &done);
     done
 }
 
 fn count(state: &AppState, done: &Result<Published, PublishError>) {
-    let m = &state.metrics;
+    let m = state.metrics();
     match done {
         Ok(p) => {
             m.frames_published.inc();
@@ -170,50 +179,64 @@ fn count(state: &AppState, done: &Result<Published, PublishError>) {
     }
 }
 
-async fn publish_inner(
+/// The session entered once (the token; the rate, unless a relay forwards the frame to the
+/// owner, which applies it), then the pipeline, here or at the owner.
+async fn publish_to(
     state: &Arc<AppState>,
+    room: Arc<Room>,
     token: Option<&str>,
     frame: v1::ControlFrame,
     received: Instant,
 ) -> Result<Published, PublishError> {
-    let room = state.find_room(&frame.room).await?;
-    let session = room.session();
-    if !session.accepts(token) {
-        return Err(PublishError::Token(room.id.clone()));
+    let relays = room.relays();
+    let hz = state.config().limits.publish_hz;
+    enter(&room, Publisher::Token(token), (!relays).then_some(hz))?;
+    if !relays {
+        return process(room, frame, received).await;
     }
-    // In a cluster, a relay forwards the frame to the owner, which applies the rate.
-    if room.relays()
-        && let Some(cluster) = state.cluster()
-    {
-        let ack = crate::cluster::control::forward(cluster, &room.id, frame)
-            .await
-            .map_err(PublishError::Unavailable)?;
-        return match ack.error {
-            Some(e) => Err(PublishError::Forwarded(e)),
-            None => Ok(Published {
-                held: ack.held_controls,
-                latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
-                control_rms: ack.control_residual,
-                // The owner synthesised (or not) the detail layer: not this replica's work.
-                detail: false,
-                control_rms_capture: ack.control_residual_capture,
-                confidence: ack.confidence,
-            }),
-        };
+    let ack = room
+        .forward(frame)
+        .await
+        .map_err(PublishError::Unavailable)?;
+    match ack.error {
+        Some(e) => Err(PublishError::Forwarded(e)),
+        None => Ok(Published {
+            held: ack.held_controls,
+            latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
+            control_rms: ack.control_residual,
+            // The owner synthesised (or not) the detail layer: not this replica's work.
+            detail: false,
+            control_rms_capture: ack.control_residual_capture,
+            confidence: ack.confidence,
+        }),
     }
-    admit_and_process(state, room, frame, received).await
 }
 
-/// Owner: the ack of a frame a relay forwarded (rate, pipeline, metrics), for the cluster's
-/// control service (`crate::cluster::control::ControlHandler`).
-pub fn ack_forwarded(
-    state: Arc<AppState>,
-    frame: v1::ControlFrame,
-) -> futures_util::future::BoxFuture<'static, v1::PublishAck> {
-    Box::pin(async move {
-        let seq = frame.seq;
-        ack(seq, &publish_forwarded(&state, frame).await)
-    })
+/// `room`'s session entered by `who` (the rate `hz` applied when given).
+fn enter(room: &Room, who: Publisher<'_>, hz: Option<f64>) -> Result<(), PublishError> {
+    room.session()
+        .enter(who, hz)
+        .map_err(|refusal| match refusal {
+            Refusal::Token => PublishError::Token(room.id.clone()),
+            Refusal::Rate => PublishError::Rate {
+                room: room.id.clone(),
+                hz: hz.unwrap_or_default(),
+            },
+        })
+}
+
+/// Owner: the frames relays forward into this server's rooms, their tokens checked there
+/// (`publish_forwarded`), acked.
+impl cluster::Ingest for AppState {
+    fn publish_forwarded(
+        self: Arc<Self>,
+        frame: v1::ControlFrame,
+    ) -> BoxFuture<'static, v1::PublishAck> {
+        Box::pin(async move {
+            let seq = frame.seq;
+            ack(seq, &publish_forwarded(&self, frame).await)
+        })
+    }
 }
 
 /// Owner: a frame a relay forwarded (its token checked there): the rate limit, then the
@@ -226,29 +249,16 @@ pub(crate) async fn publish_forwarded(
     frame: v1::ControlFrame,
 ) -> Result<Published, PublishError> {
     let received = Instant::now();
+    let hz = state.config().limits.publish_hz;
     let done = match state.room(&frame.room) {
-        Some(room) => admit_and_process(state, room, frame, received).await,
+        Some(room) => match enter(&room, Publisher::Forwarded, Some(hz)) {
+            Ok(()) => process(room, frame, received).await,
+            Err(e) => Err(e),
+        },
         None => Err(PublishError::NoRoom(frame.room.clone())),
     };
     count(state, &done);
     done
-}
-
-async fn admit_and_process(
-    state: &Arc<AppState>,
-    room: Arc<Room>,
-    frame: v1::ControlFrame,
-    received: Instant,
-) -> Result<Published, PublishError> {
-    let session = room.session();
-    let hz = state.config.limits.publish_hz;
-    if !session.admit(hz) {
-        return Err(PublishError::Rate {
-            room: room.id.clone(),
-            hz,
-        });
-    }
-    process(room, frame, received).await
 }
 
 /// Runs `frame` through `room`'s pipeline on the blocking pool, latest wins
@@ -268,18 +278,19 @@ pub(crate) async fn process(
     }
 }
 
-/// The gRPC ack of frame `seq`'s outcome.
+/// The ack of frame `seq`'s outcome.
 pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAck {
     match outcome {
-        Ok(p) => v1::PublishAck {
+        Ok(p) => ok_ack(
             seq,
-            server_latency_us: p.latency_us,
-            held_controls: p.held,
-            error: None,
-            control_residual: p.control_rms,
-            control_residual_capture: p.control_rms_capture,
-            confidence: p.confidence,
-        },
+            AckParts {
+                server_latency_us: p.latency_us,
+                held_controls: p.held,
+                control_residual: p.control_rms,
+                control_residual_capture: p.control_rms_capture,
+                confidence: p.confidence,
+            },
+        ),
         Err(e) => error_ack(seq, e.frame_error()),
     }
 }
@@ -325,10 +336,10 @@ mod tests {
             let fe = a.error.clone().unwrap();
             assert_eq!((a.seq, fe.code, fe.frame), (4, code, None), "{e}");
             assert_eq!(fe.message, e.to_string());
-            assert_eq!(e.status().code(), grpc, "{e}");
-            assert_eq!(e.status().message(), e.to_string());
+            assert_eq!(crate::status::publish(e).code(), grpc, "{e}");
+            assert_eq!(crate::status::publish(e).message(), e.to_string());
             // A batch names the refused frame in the details, whatever the refusal.
-            let batch = e.batch_status(7);
+            let batch = crate::status::batch(e, 7);
             assert_eq!(batch.code(), grpc, "{e}");
             let be = crease_proto::errors::batch_frame_error(&batch).unwrap();
             assert_eq!((be.frame, be.code), (Some(7), code), "{e}");

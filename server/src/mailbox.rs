@@ -1,4 +1,4 @@
-//! Latest wins on the way in: a room's control frames wait for its pipeline in a [`Mailbox`]
+//! Latest wins on the way in: a room's control frames wait for its pipeline in a `Mailbox`
 //! of one. While a frame runs, at most one more waits; a newer frame supersedes the waiting
 //! one, whose sender learns so at once (its publisher gets an ABORTED ack, `crate::ingest`).
 //!

@@ -36,7 +36,7 @@ pub struct Metrics {
     /// it for leaks).
     pub tasks: Gauge,
     /// The cluster's (zero on a single server).
-    pub cluster: crate::cluster::ClusterMetrics,
+    pub cluster: crate::cluster::metrics::ClusterMetrics,
 }
 
 impl Default for Metrics {
@@ -55,7 +55,7 @@ impl Default for Metrics {
             rooms: Gauge::default(),
             subscribers: Gauge::default(),
             tasks: Gauge::default(),
-            cluster: crate::cluster::ClusterMetrics::default(),
+            cluster: crate::cluster::metrics::ClusterMetrics::default(),
             registry: Registry::default(),
         };
         m.cluster.register(&mut registry);

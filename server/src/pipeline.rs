@@ -32,9 +32,7 @@ use std::time::Instant;
 use crease_core::codec::palette::{
     PaletteError, palette_lanes, palette_vertex_count, translation_box,
 };
-use crease_core::codec::{
-    CodecError, DEFAULT_KEYFRAME_INTERVAL, FrameEncoder, FrameHeader, QuantBox, encode_indices,
-};
+use crease_core::codec::{CodecError, FrameEncoder, FrameHeader, QuantBox, encode_indices};
 use crease_core::glam::Vec3;
 use crease_core::model::{ControlPoint, TrainedModel};
 use crease_core::predictor::{FrameContext, PredictError, Predictor, Refinement};
@@ -42,6 +40,8 @@ use crease_core::runtime::filter::{OneEuro, OneEuroParams};
 use crease_core::runtime::skin::Skinning;
 use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
+
+pub use crease_proto::room::{RoomOptions, StreamSettings};
 
 use crate::capture::{Capture, CaptureSpec};
 use crate::fanout::{Channel, Fanout};
@@ -52,54 +52,6 @@ use crate::takes::Recorder;
 /// Quantisation box margin around the box of the model's training poses, as a fraction of its
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
 const BOX_MARGIN: f32 = 0.25;
-
-/// How a room's meshes are streamed: quantisation bits per level and the vertex order.
-///
-/// Live rooms default to 12 bits for the base mesh: its half-step error (1/8190 of the padded
-/// box, ~2e-4 of the model's size) is ~50x below the horse's prediction error (9.3e-3 RMS,
-/// BENCHMARKS.md) and invisible at any viewing distance, and it brings the gallop to ~1.5
-/// bytes per vertex per frame where 16 bits need ~3 (meshopt's vertex codec stores the low bits
-/// of every moving vertex nearly verbatim: each bit costs ~3/8 byte per vertex). The detail
-/// mesh carries wrinkles a few 1e-3 deep, so it keeps 14 bits. Batches (`Synthesize`) are for
-/// pipelines and default to the full 16.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct StreamSettings {
-    /// Bits per coordinate of base frames, 1..=16.
-    pub base_bits: u8,
-    /// Bits per coordinate of detail frames, 1..=16.
-    pub detail_bits: u8,
-    /// Stream vertices in a spatial order (`Topology.vertex_order`): 7-10% smaller frames.
-    pub spatial_order: bool,
-    /// A keyframe every this many frames (0: only the first). Live rooms need few: a
-    /// subscriber without the base of a delta (joined late, skipped frames) gets a keyframe of
-    /// that frame on demand ([`MeshUpdate::frame_for`](crate::frames::MeshUpdate::frame_for)), so periodic keyframes only bound how
-    /// long a client that lost its state by itself waits.
-    pub keyframe_interval: u32,
-}
-
-impl Default for StreamSettings {
-    fn default() -> Self {
-        Self {
-            base_bits: 12,
-            detail_bits: 14,
-            spatial_order: true,
-            // 10 s at 60 Hz: +0.1% bytes on the horse gallop, where every 30 frames costs +1%.
-            keyframe_interval: 600,
-        }
-    }
-}
-
-impl StreamSettings {
-    /// Full 16-bit precision at both levels (batches).
-    pub fn full() -> Self {
-        Self {
-            base_bits: 16,
-            detail_bits: 16,
-            keyframe_interval: DEFAULT_KEYFRAME_INTERVAL,
-            ..Self::default()
-        }
-    }
-}
 
 /// What publishing one frame did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -181,24 +133,6 @@ struct State {
     last_time: Option<(i64, Instant)>,
     /// The take being recorded (`crate::takes`), if any.
     take: Option<Recorder>,
-}
-
-/// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter,
-/// refine and skinning; the streaming side is the server's [`StreamSettings`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RoomOptions {
-    /// Translation-solve beta; the model's default when `None`.
-    pub beta: Option<f32>,
-    /// Smooth the control points with a One Euro filter (mocap rooms); `None` passes them
-    /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
-    pub filter: Option<OneEuroParams>,
-    /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
-    /// (the default: it pays where the control points are dense, the hands, and costs ~40 µs
-    /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
-    pub refine: Option<Refinement>,
-    /// How the room skins (issue 22); the model's default ([`TrainedModel::skinning`]) when
-    /// `None`. A DQS room streams vertices only ([`Pipeline::check_encoding`]).
-    pub skinning: Option<Skinning>,
 }
 
 /// A room's filter, predictor and encoders (module docs).

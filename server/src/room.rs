@@ -4,9 +4,11 @@
 //! reach it through [`crate::ingest`]; subscribers leave it through [`crate::stream`].
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 use crease_core::runtime::filter::OneEuroParams;
+use crease_proto::room::RoomSettings;
 use crease_proto::v1;
 
 pub use crate::fanout::Channel;
@@ -35,21 +37,10 @@ pub enum RoomError {
     Panicked(String),
 }
 
-impl RoomError {
-    /// The gRPC status of a room that could not be opened.
-    pub fn status(&self) -> tonic::Status {
-        match self {
-            RoomError::BadId(_) => tonic::Status::invalid_argument(format!("room: {self}")),
-            RoomError::Build(BuildError::Predictor(e)) => {
-                tonic::Status::invalid_argument(format!("beta: {e}"))
-            }
-            RoomError::Build(BuildError::Codec(e)) => {
-                tonic::Status::internal(format!("model: {e}"))
-            }
-            RoomError::Panicked(_) => tonic::Status::internal(self.to_string()),
-        }
-    }
-}
+/// A channel a room cannot serve ([`Room::check_channel`]): says why.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ChannelRefused(pub String);
 
 /// A live session on one model (module docs).
 pub struct Room {
@@ -64,6 +55,12 @@ pub struct Room {
     mailbox: Mailbox<(v1::ControlFrame, Instant), Result<Published, PipelineError>>,
     /// A private room (a take's replay, `crate::takes`): not listed in `/api/rooms`.
     private: bool,
+    /// Set when the room leaves the server's room table: a publisher holding the room (a
+    /// WebSocket session) is refused from then on, as one looking it up would be.
+    closed: AtomicBool,
+    /// Frames the pipeline ran through (counted here, after the pipeline: the session is
+    /// entered once per frame, before it).
+    published: AtomicU64,
 }
 
 impl std::fmt::Debug for Room {
@@ -84,27 +81,19 @@ pub struct Subscription {
 }
 
 impl Room {
-    /// Opens a room on `model` with `options` (beta, filter, refinement, skinning) and a fresh random
-    /// publish token, streaming as `settings` says. The predictor's factorisation runs on
-    /// the blocking pool, not on the caller's async thread.
+    /// Builds a room on `model` with `options` (beta, filter, refinement, skinning) and a
+    /// fresh random publish token, streaming as `settings` says, its frames handed to `fanout`
+    /// (a cluster's room link) or else a [`LocalFanout`]. The predictor's factorisation runs on
+    /// the blocking pool, not on the caller's async thread. Only `crate::state` builds rooms
+    /// (`AppState::open_room`, and a batch's private room).
     ///
     /// # Errors
-    /// [`RoomError`]: a bad id, the predictor's or the encoder's error.
+    /// [`RoomError`]: a bad id, the predictor's or the encoder's.
     ///
     /// # Panics
-    /// If `options` holds an invalid filter or refinement (callers check what users send:
-    /// [`OneEuroParams::is_valid`], `Refinement::validate`).
-    pub async fn open(
-        id: &str,
-        model: Arc<LoadedModel>,
-        options: RoomOptions,
-        settings: StreamSettings,
-    ) -> Result<Room, RoomError> {
-        Room::open_with(id, model, options, settings, None).await
-    }
-
-    /// [`Room::open`] with `fanout` (a cluster's room link) instead of a [`LocalFanout`].
-    pub(crate) async fn open_with(
+    /// If `options` holds an invalid filter or refinement (`crease_proto::room::RoomSpec`
+    /// checks what users send).
+    pub(crate) async fn build(
         id: &str,
         model: Arc<LoadedModel>,
         options: RoomOptions,
@@ -125,6 +114,8 @@ impl Room {
                 fanout: fanout.unwrap_or_else(|| Arc::new(LocalFanout::default())),
                 mailbox: Mailbox::default(),
                 private: false,
+                closed: AtomicBool::new(false),
+                published: AtomicU64::new(0),
             })
         })
         .await
@@ -132,12 +123,12 @@ impl Room {
     }
 
     /// Makes this a private room: open to whoever knows its id, not listed.
-    pub fn private(mut self) -> Self {
+    pub(crate) fn private(mut self) -> Self {
         self.private = true;
         self
     }
 
-    /// Whether the room is private ([`Room::private`]).
+    /// Whether the room is private (a take's replay: `RoomSpec::private`).
     pub fn is_private(&self) -> bool {
         self.private
     }
@@ -145,15 +136,44 @@ impl Room {
     /// The room's settings as the request that would open it again: id, model, beta,
     /// filter, retargeting, refinement, skinning (no token). What a take's header keeps.
     pub fn settings(&self) -> v1::OpenRoomRequest {
-        v1::OpenRoomRequest {
-            room: self.id.clone(),
-            model: self.model.name.clone(),
+        crease_proto::room::room_settings(self.settings_parts(false))
+    }
+
+    /// The room's settings in use, its retarget as sent or (`resolved`) with the map's TOML
+    /// filled in (what a cluster's registry carries).
+    pub fn settings_parts(&self, resolved: bool) -> RoomSettings<'_> {
+        let capture = self.pipeline.capture();
+        RoomSettings {
+            room: &self.id,
+            model: &self.model.name,
             beta: self.beta(),
-            filter: self.filter().map(v1::MarkerFilter::from),
-            retarget: self.pipeline.capture().map(|c| c.wire().clone()),
-            refine: self.refinement().map(v1::Refine::from),
-            skinning: v1::Skinning::from(self.skinning()) as i32,
+            filter: self.filter(),
+            retarget: capture.map(|c| if resolved { c.resolved() } else { c.wire() }),
+            refine: self.refinement(),
+            skinning: self.skinning(),
         }
+    }
+
+    /// Whether the room left the server's room table (closed).
+    pub fn is_closed(&self) -> bool {
+        self.closed.load(Ordering::Acquire)
+    }
+
+    /// Marks the room closed (it left the room table).
+    pub(crate) fn mark_closed(&self) {
+        self.closed.store(true, Ordering::Release);
+    }
+
+    /// In a cluster, a relay's room: forwards `frame` (its token checked here) to the room's
+    /// owner through the fan-out ([`Fanout::forward`]) and returns the owner's ack.
+    ///
+    /// # Errors
+    /// Why no owner answered.
+    pub(crate) fn forward(
+        &self,
+        frame: v1::ControlFrame,
+    ) -> futures_util::future::BoxFuture<'static, Result<v1::PublishAck, String>> {
+        self.fanout.forward(frame)
     }
 
     /// In a cluster: whether another replica predicts this room (this one relays its frames
@@ -170,13 +190,13 @@ impl Room {
 
     /// Makes this a retargeting room (issue 19): its publishers send `spec`'s markers, which
     /// the pipeline retargets to control points (`crate::capture`).
-    pub fn with_capture(mut self, spec: Arc<crate::capture::CaptureSpec>) -> Self {
+    pub(crate) fn with_capture(mut self, spec: Arc<crate::capture::CaptureSpec>) -> Self {
         self.pipeline.set_capture(spec);
         self
     }
 
     /// Replaces the publish token (an operator's fixed token, e.g. `--demo-token`).
-    pub fn with_token(mut self, token: &str) -> Self {
+    pub(crate) fn with_token(mut self, token: &str) -> Self {
         self.session.set_token(token);
         self
     }
@@ -197,9 +217,9 @@ impl Room {
         self.session.token()
     }
 
-    /// Frames published into this room so far (accepted ones).
+    /// Frames published into this room so far (the ones its pipeline ran through).
     pub fn published(&self) -> u64 {
-        self.session.published()
+        self.published.load(Ordering::Relaxed)
     }
 
     /// Live subscriptions (both levels).
@@ -228,14 +248,14 @@ impl Room {
     }
 
     /// A subscription on `channel` the room cannot serve (a palette stream of a DQS room,
-    /// [`Pipeline::check_encoding`]), as FAILED_PRECONDITION naming the room and its skinning.
+    /// [`Pipeline::check_encoding`]), naming the room and its skinning.
     ///
     /// # Errors
-    /// That status.
-    pub fn check_channel(&self, channel: Channel) -> Result<(), tonic::Status> {
+    /// [`ChannelRefused`] (gRPC's FAILED_PRECONDITION, HTTP's 409: `crate::status`).
+    pub fn check_channel(&self, channel: Channel) -> Result<(), ChannelRefused> {
         self.pipeline
             .check_encoding(channel.encoding)
-            .map_err(|e| tonic::Status::failed_precondition(format!("room {:?}: {e}", self.id)))
+            .map_err(|e| ChannelRefused(format!("room {:?}: {e}", self.id)))
     }
 
     /// Whether the model has a detail layer.
@@ -243,11 +263,6 @@ impl Room {
         self.pipeline.has_detail()
     }
 
-    /// Runs one control frame through the pipeline into the fan-out and counts it. Blocking
-    /// (run it on the blocking pool). A bad frame changes nothing.
-    ///
-    /// # Errors
-    /// The pipeline's.
     /// Hands `frame` to the pipeline, latest wins (`crate::mailbox`): the outcome comes once
     /// it ran, or `None` when a newer frame superseded it while it waited. The room's frames
     /// run one after another on the blocking pool, on one thread at a time; a panic in the
@@ -280,6 +295,11 @@ impl Room {
         outcome
     }
 
+    /// Runs one control frame through the pipeline into the fan-out and counts it. Blocking
+    /// (run it on the blocking pool). A bad frame changes nothing.
+    ///
+    /// # Errors
+    /// The pipeline's.
     pub(crate) fn process(
         &self,
         frame: &v1::ControlFrame,
@@ -288,7 +308,7 @@ impl Room {
         let published = self
             .pipeline
             .process(frame, received, self.fanout.as_ref())?;
-        self.session.count_published();
+        self.published.fetch_add(1, Ordering::Relaxed);
         Ok(published)
     }
 
@@ -304,57 +324,5 @@ impl Room {
             frames: self.fanout.subscribe(channel),
             _slot: slot,
         })
-    }
-}
-
-/// What an `OpenRoomRequest` asks of the room, checked: its [`RoomOptions`] (beta, filter,
-/// refinement) and, for a retargeting room, its capture (the marker map resolved).
-///
-/// # Errors
-/// INVALID_ARGUMENT naming the field.
-pub(crate) async fn options_from_request(
-    r: &v1::OpenRoomRequest,
-    model: &Arc<LoadedModel>,
-    maps: Option<std::path::PathBuf>,
-) -> Result<(RoomOptions, Option<Arc<crate::capture::CaptureSpec>>), tonic::Status> {
-    use tonic::Status;
-    let beta = (r.beta != 0.0).then_some(r.beta);
-    let filter = r.filter.map(OneEuroParams::from);
-    if let Some(f) = filter
-        && !f.is_valid()
-    {
-        return Err(Status::invalid_argument(format!(
-            "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
-            f.min_cutoff_hz, f.beta, f.d_cutoff_hz
-        )));
-    }
-    let options = RoomOptions {
-        beta,
-        filter,
-        refine: refinement(r.refine)?,
-        skinning: crease_proto::convert::skinning_from_wire("OpenRoomRequest", r.skinning)?,
-    };
-    let capture = match r.retarget.clone() {
-        None => None,
-        Some(spec) => {
-            let spec = crate::capture::CaptureSpec::build(spec, maps, Arc::clone(model))
-                .await
-                .map_err(|e| Status::invalid_argument(e.to_string()))?;
-            Some(Arc::new(spec))
-        }
-    };
-    Ok((options, capture))
-}
-
-/// A request's refinement, checked (`refine: ...` names the field in the error).
-pub(crate) fn refinement(
-    wire: Option<v1::Refine>,
-) -> Result<Option<crease_core::predictor::Refinement>, tonic::Status> {
-    use crease_core::predictor::Refinement;
-    use tonic::Status;
-    let refine = wire.map(Refinement::from);
-    match refine.map(|r| r.validate()) {
-        Some(Err(e)) => Err(Status::invalid_argument(format!("refine: {e}"))),
-        _ => Ok(refine),
     }
 }

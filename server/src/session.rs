@@ -1,9 +1,9 @@
 //! A room's session: who may publish (the token), what it allows (the publish rate's token
-//! bucket, the subscriber limit) and what it counted (published frames, live subscribers).
-//! The first thing a control frame meets after the room lookup ([`crate::ingest`]), so refused
-//! frames cost nothing further.
+//! bucket, the subscriber limit) and its live subscribers. The first thing a control frame
+//! meets after the room lookup ([`crate::ingest`]), entered once per frame
+//! ([`Session::enter`]: the token, then the rate), so refused frames cost nothing further.
 
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -11,6 +11,24 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("room is full: {0} subscribers, the limit")]
 pub struct RoomFull(pub usize);
+
+/// Who sends a control frame into a session ([`Session::enter`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Publisher<'a> {
+    /// A publisher, with the token it presented (if any).
+    Token(Option<&'a str>),
+    /// Another replica of a cluster, forwarding a frame whose token it checked.
+    Forwarded,
+}
+
+/// Why a session refused a control frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refusal {
+    /// Not the room's publish token (or none).
+    Token,
+    /// Over the room's publish rate.
+    Rate,
+}
 
 /// A token bucket: `tokens` frames may be published now; it refills at the rate limit, up to a
 /// quarter second's worth.
@@ -28,7 +46,6 @@ pub struct Session {
     token: Option<String>,
     token_sha256: [u8; 32],
     budget: Mutex<Budget>,
-    published: AtomicU64,
     /// Live subscriptions of both levels (the subscriber limit).
     subscribers: Arc<AtomicUsize>,
 }
@@ -88,7 +105,6 @@ impl Session {
                 tokens: f64::INFINITY,
                 at: Instant::now(),
             }),
-            published: AtomicU64::new(0),
             subscribers: Arc::new(AtomicUsize::new(0)),
         }
     }
@@ -140,14 +156,22 @@ impl Session {
         }
     }
 
-    /// Frames published so far (accepted ones).
-    pub fn published(&self) -> u64 {
-        self.published.load(Ordering::Relaxed)
-    }
-
-    /// Counts one accepted frame.
-    pub(crate) fn count_published(&self) {
-        self.published.fetch_add(1, Ordering::Relaxed);
+    /// The one check of a control frame (module docs): `who`'s token, then, when `rate_hz`
+    /// is given, the publish rate ([`Session::admit`]; a relay leaves the rate to the room's
+    /// owner, which applies it to the forwarded frame).
+    ///
+    /// # Errors
+    /// [`Refusal`]: not the token, or over the rate.
+    pub fn enter(&self, who: Publisher<'_>, rate_hz: Option<f64>) -> Result<(), Refusal> {
+        if let Publisher::Token(token) = who
+            && !self.accepts(token)
+        {
+            return Err(Refusal::Token);
+        }
+        match rate_hz {
+            Some(hz) if !self.admit(hz) => Err(Refusal::Rate),
+            _ => Ok(()),
+        }
     }
 
     /// Live subscriptions (both levels).

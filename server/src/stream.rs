@@ -9,7 +9,7 @@
 //! else the frame's shared keyframe ([`MeshUpdate::frame_for`], encoded on the blocking pool
 //! the first time a subscriber needs it). A batch runs its frames through a private room, in
 //! order, with a bounded response buffer; a refused frame ends it with a status naming the
-//! frame by index in its details (`PublishError::batch_status`, whatever the refusal).
+//! frame by index in its details (`crate::status::batch`, whatever the refusal).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -21,9 +21,9 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::Status;
 
-use crate::AppState;
 use crate::ingest;
 use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
+use crate::state::AppState;
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
@@ -88,12 +88,12 @@ pub fn subscribe(
     let (tx, rx) = mpsc::channel(BUFFER);
     let receiver_gone = tx.clone();
     let closing = state.closing();
-    let gauge = state.metrics.subscribers.clone();
+    let gauge = state.metrics().subscribers.clone();
     let stream = async move {
         // The whole subscription moves in (a closure would capture only `sub.frames.rx`, and
         // the subscriber slot would be given back at once).
         let mut sub = sub;
-        let metrics = &state.metrics;
+        let metrics = state.metrics();
         let first = first_message(&room, channel).await;
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
@@ -170,7 +170,7 @@ pub fn batch(
             let latency = match outcome {
                 Ok(p) => p.latency_us,
                 Err(e) => {
-                    let _ = tx.send(Err(e.batch_status(k))).await;
+                    let _ = tx.send(Err(crate::status::batch(&e, k))).await;
                     return;
                 }
             };
@@ -185,8 +185,8 @@ pub fn batch(
                 }
             };
             drop(update);
-            state.metrics.bytes_out.inc_by(data.len() as u64);
-            state.metrics.frames_out.inc();
+            state.metrics().bytes_out.inc_by(data.len() as u64);
+            state.metrics().frames_out.inc();
             let msg = frame_message(seq, 0, latency, 0, data);
             if tx.send(Ok(msg)).await.is_err() {
                 return;

@@ -1,6 +1,8 @@
 //! The take operations both transports call (gRPC `StartTake` / `StopTake` / `ListTakes` /
 //! `GetTake`, HTTP `/api/takes...`): each looks the room or take up, does its file work on the
-//! blocking pool, and fails with one [`TakeOpError`] that knows its gRPC and HTTP status.
+//! blocking pool, and fails with one [`TakeOpError`] (its gRPC and HTTP status are
+//! `crate::status`'s). A replay room opens as every room does, through
+//! `AppState::open_room`, from the take's header (`RoomSpec::from_take`).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -9,10 +11,12 @@ use crease_core::model::gltf_export;
 use crease_proto::json::{ReplayRoom, TakeFrames};
 use crease_proto::{take, v1};
 
+use crease_proto::room::RoomSpec;
+
 use crate::ingest::PublishError;
 use crate::room::Room;
+use crate::state::AppState;
 use crate::takes::TakeError;
-use crate::{AddRoomError, AppState};
 
 /// Most private replay rooms open at once (each also counts against `Limits::rooms`).
 pub const MAX_REPLAY_ROOMS: usize = 8;
@@ -43,33 +47,6 @@ pub enum TakeOpError {
     Panicked(String),
 }
 
-impl TakeOpError {
-    /// The gRPC status.
-    pub fn status(&self) -> tonic::Status {
-        match self {
-            TakeOpError::Take(e) => e.status(),
-            TakeOpError::Room(e) => e.status(),
-            TakeOpError::Model(m) => tonic::Status::failed_precondition(m.clone()),
-            TakeOpError::Open(m) => tonic::Status::invalid_argument(format!("replay room: {m}")),
-            TakeOpError::Replays(_) => tonic::Status::resource_exhausted(self.to_string()),
-            TakeOpError::Panicked(_) => tonic::Status::internal(self.to_string()),
-        }
-    }
-
-    /// The HTTP status.
-    pub fn http_status(&self) -> axum::http::StatusCode {
-        use axum::http::StatusCode;
-        match self {
-            TakeOpError::Take(e) => e.http_status(),
-            TakeOpError::Room(e) => e.http_status(),
-            TakeOpError::Model(_) => StatusCode::CONFLICT,
-            TakeOpError::Open(_) => StatusCode::BAD_REQUEST,
-            TakeOpError::Replays(_) => StatusCode::TOO_MANY_REQUESTS,
-            TakeOpError::Panicked(_) => StatusCode::INTERNAL_SERVER_ERROR,
-        }
-    }
-}
-
 /// Runs `f` on the blocking pool.
 async fn blocking<T: Send + 'static>(
     f: impl FnOnce() -> Result<T, TakeOpError> + Send + 'static,
@@ -81,7 +58,7 @@ async fn blocking<T: Send + 'static>(
 
 /// The room `id`, predicted here (in a cluster, a room another replica owns records there).
 async fn local_room(state: &Arc<AppState>, id: &str) -> Result<Arc<Room>, TakeOpError> {
-    let room = state.find_room(id).await?;
+    let room = state.find_room(id).await.map_err(PublishError::from)?;
     if room.relays() {
         let owner = state
             .cluster()
@@ -203,7 +180,7 @@ fn take_and_model(
         .as_ref()
         .map(|r| r.model.clone())
         .unwrap_or_default();
-    let model = state.models.get(&name).ok_or_else(|| {
+    let model = state.models().get(&name).ok_or_else(|| {
         TakeOpError::Model(format!(
             "take {id:?} was recorded on model {name:?}, which this server has not loaded"
         ))
@@ -242,38 +219,22 @@ pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpErr
 /// # Errors
 /// [`TakeError::NoTake`], the model missing or changed, [`TakeOpError::Replays`], the room's.
 pub async fn open_replay(state: &Arc<AppState>, id: String) -> Result<ReplayRoom, TakeOpError> {
-    let replays = state
-        .rooms
-        .read()
-        .unwrap_or_else(|e| e.into_inner())
-        .values()
-        .filter(|r| r.is_private())
-        .count();
+    let replays = state.private_rooms();
     if replays >= MAX_REPLAY_ROOMS {
         return Err(TakeOpError::Replays(replays));
     }
-    let (take, model) = {
+    let (take, _) = {
         let state = Arc::clone(state);
         let id = id.clone();
         blocking(move || take_and_model(&state, &id)).await?
     };
-    let settings = take.header().room.clone().unwrap_or_default();
-    let (options, capture) =
-        crate::room::options_from_request(&settings, &model, state.config.maps.clone())
-            .await
-            .map_err(|s| TakeOpError::Open(s.message().to_owned()))?;
     let room_id = format!("replay-{}", &crate::session::new_token()[..12]);
-    let room = Room::open(&room_id, model, options, state.config.stream)
+    let spec = RoomSpec::from_take(&room_id, take.header())
+        .map_err(|e| TakeOpError::Open(e.to_string()))?;
+    let room = state
+        .open_room(spec)
         .await
-        .map_err(|e| TakeOpError::Open(e.to_string()))?
-        .private();
-    let room = match capture {
-        Some(spec) => room.with_capture(spec),
-        None => room,
-    };
-    let room = state.add_room(room).map_err(|e| match e {
-        AddRoomError::Exists(_) | AddRoomError::Limit(_) => TakeOpError::Open(e.to_string()),
-    })?;
+        .map_err(|e| TakeOpError::Open(e.to_string()))?;
     tracing::info!(room = %room.id, take = %id, "replay room opened");
     close_when_idle(Arc::downgrade(state), room.id.clone());
     Ok(ReplayRoom {
@@ -298,7 +259,7 @@ fn close_when_idle(state: std::sync::Weak<AppState>, id: String) {
                 Duration::ZERO
             };
             if idle >= REPLAY_IDLE || state.is_closing() {
-                state.remove_room(&id);
+                let _ = state.close_room(&id).await;
                 tracing::info!(room = %id, "replay room closed: nobody watched it");
                 return;
             }

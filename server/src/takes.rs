@@ -19,6 +19,7 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use crease_core::glam::Vec3;
 use crease_core::runtime::skin::RigidTransform;
 use crease_proto::take::{self, Scan};
+use crease_proto::take_info::{TakeFile, empty_take_frame, take_header, take_info};
 use crease_proto::v1;
 
 /// Frames a take's writer may be behind before the room drops the next one.
@@ -79,33 +80,6 @@ pub enum TakeError {
         /// What is wrong with it.
         error: take::TakeError,
     },
-}
-
-impl TakeError {
-    /// The gRPC status of this error.
-    pub fn status(&self) -> tonic::Status {
-        let m = self.to_string();
-        match self {
-            TakeError::NoFolder
-            | TakeError::Recording { .. }
-            | TakeError::NotRecording(_)
-            | TakeError::Elsewhere { .. } => tonic::Status::failed_precondition(m),
-            TakeError::NoTake(_) => tonic::Status::not_found(m),
-            TakeError::Name(_) => tonic::Status::invalid_argument(m),
-            TakeError::Io { .. } | TakeError::File { .. } => tonic::Status::internal(m),
-        }
-    }
-
-    /// The HTTP status of this error.
-    pub fn http_status(&self) -> axum::http::StatusCode {
-        use axum::http::StatusCode;
-        match self {
-            TakeError::NoTake(_) => StatusCode::NOT_FOUND,
-            TakeError::Name(_) => StatusCode::BAD_REQUEST,
-            TakeError::Io { .. } | TakeError::File { .. } => StatusCode::INTERNAL_SERVER_ERROR,
-            _ => StatusCode::CONFLICT,
-        }
-    }
 }
 
 /// Whether `id` can name a take: 1-160 characters of `[A-Za-z0-9_-]` (a room id, a stamp and a
@@ -222,15 +196,15 @@ impl Takes {
                 Err(error) => return Err(TakeError::Io { path, error }),
             }
         };
-        let header = v1::TakeHeader {
-            take: id.clone(),
-            name: name.to_owned(),
-            room: Some(room),
-            model_sha256: model_sha256.to_owned(),
+        let header = take_header(
+            &id,
+            name,
+            room,
+            model_sha256,
             started_unix_us,
-            bones: bones as u32,
-            controls: controls as u32,
-        };
+            bones,
+            controls,
+        );
         let mut file = file;
         let mut head = Vec::new();
         take::write_header(&mut head, &header).expect("a Vec takes every write");
@@ -335,22 +309,16 @@ fn info_of(path: &Path, recording: &[String]) -> Result<v1::TakeInfo, TakeError>
 /// A take's summary.
 fn info(scan: &Scan, bytes: u64, recording: &[String]) -> v1::TakeInfo {
     let h = &scan.header;
-    let live = recording.contains(&h.take);
-    let room = h.room.as_ref();
-    v1::TakeInfo {
-        take: h.take.clone(),
-        room: room.map(|r| r.room.clone()).unwrap_or_default(),
-        name: h.name.clone(),
-        model: room.map(|r| r.model.clone()).unwrap_or_default(),
-        model_sha256: h.model_sha256.clone(),
-        started_unix_us: h.started_unix_us,
-        frames: scan.frames,
-        duration_us: scan.last_received_us,
-        bytes,
-        recording: live,
-        // A take being written ends in part of a record only for the instant of a write.
-        truncated: scan.truncated && !live,
-    }
+    take_info(
+        h,
+        TakeFile {
+            frames: scan.frames,
+            duration_us: scan.last_received_us,
+            bytes,
+            recording: recording.contains(&h.take),
+            truncated: scan.truncated,
+        },
+    )
 }
 
 /// A take being recorded: lives in its room's pipeline (module docs).
@@ -394,7 +362,7 @@ impl Recorder {
             path,
             header,
             started: Instant::now(),
-            record: v1::TakeFrame::default(),
+            record: empty_take_frame(),
             to_writer: writer.as_ref().map(|_| to_writer),
             free,
             writer,

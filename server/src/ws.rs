@@ -21,8 +21,9 @@
 //! A session is a stream for the caps on what one client address may hold
 //! ([`crate::admission`]): over them the upgrade is refused with `429` naming the cap.
 //!
-//! A bad message is answered by an error ack and the socket stays open. Publishing goes through
-//! [`crate::ingest`] as gRPC's does, and the ack is gRPC's as JSON (`crease_proto::json`); a
+//! A bad message is answered by an error ack and the socket stays open. The session holds its
+//! room, looked up once at the upgrade: each frame goes into it through
+//! [`crate::ingest::publish_into`] (the rest of gRPC's publish path), and the ack is gRPC's as JSON (`crease_proto::json`); a
 //! refusal's close code, if any, comes from [`PublishError::ws_close`].
 
 use std::sync::Arc;
@@ -37,11 +38,12 @@ use futures_util::{SinkExt, StreamExt};
 use prost::Message as _;
 use tokio::sync::mpsc;
 
-use crate::AppState;
 use crate::admission::Peer;
 use crate::fanout::Channel;
 use crate::ingest::{self, PublishError};
 use crate::room::{Room, Subscription};
+use crate::state::AppState;
+use crate::status;
 
 /// Query parameters of `/ws/rooms/{id}`.
 #[derive(Debug, serde::Deserialize)]
@@ -129,13 +131,13 @@ pub async fn room_socket(
         Ok(token) => token,
         Err(e) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
     };
-    let permit = match state.streams.admit(peer.ip()) {
+    let permit = match state.streams().admit(peer.ip()) {
         Ok(permit) => permit,
         Err(e) => return (StatusCode::TOO_MANY_REQUESTS, format!("{e}\n")).into_response(),
     };
-    let room = match state.find_room(&id).await {
+    let room = match state.find_room(&id).await.map_err(PublishError::from) {
         Ok(room) => room,
-        Err(e) => return (e.http_status(), format!("{e}\n")).into_response(),
+        Err(e) => return (status::publish_http(&e), format!("{e}\n")).into_response(),
     };
     let level = match Level::from_query(params.level.as_deref()) {
         Ok(Level::Detail) if !room.has_detail() => {
@@ -159,10 +161,10 @@ pub async fn room_socket(
     } else {
         // A palette stream of a DQS room: gRPC's FAILED_PRECONDITION, here as 409 Conflict
         // (the request is well formed; the room's state refuses it), with the same message.
-        if let Err(status) = room.check_channel(channel) {
-            return (StatusCode::CONFLICT, format!("{}\n", status.message())).into_response();
+        if let Err(e) = room.check_channel(channel) {
+            return (status::channel_http(&e), format!("{e}\n")).into_response();
         }
-        match room.subscribe(channel, state.config.limits.subscribers_per_room) {
+        match room.subscribe(channel, state.config().limits.subscribers_per_room) {
             Ok(s) => Some(s),
             Err(e) => {
                 return (
@@ -174,7 +176,7 @@ pub async fn room_socket(
         }
     };
     ws.protocols([PROTOCOL])
-        .max_message_size(state.config.limits.message_bytes)
+        .max_message_size(state.config().limits.message_bytes)
         .on_upgrade(move |socket| async move {
             // The stream slot is held for the whole session.
             let _permit = permit;
@@ -246,7 +248,10 @@ async fn session(
         let (seq, outcome) = match frame {
             Ok(mut f) => {
                 f.room.clone_from(&room.id);
-                (f.seq, ingest::publish(&state, token.as_deref(), f).await)
+                (
+                    f.seq,
+                    ingest::publish_into(&state, &room, token.as_deref(), f).await,
+                )
             }
             Err(e) => (0, Err(PublishError::Wire(e))),
         };

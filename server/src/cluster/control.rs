@@ -1,6 +1,6 @@
 //! Controls across replicas: a publisher may connect to any replica. A relay checks the frame
-//! against the token's digest (the registry's) and forwards it to the owner as a NATS request
-//! (`crease.control.<room>`); the owner applies the room's rate limit (so it holds per room,
+//! against the token's digest (the registry's) and its room's fan-out ([`super::RoomLink`],
+//! `Fanout::forward`) forwards it to the owner as a NATS request (`crease.control.<room>`); the owner applies the room's rate limit (so it holds per room,
 //! cluster-wide), runs the frame through its pipeline as a local one, and replies with the
 //! ack. The relay returns that ack to the publisher with the same fields; a refusal keeps the
 //! owner's code and message.
@@ -8,14 +8,14 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crease_proto::cluster::{forwarded_control, read_forwarded_control};
 use crease_proto::errors::{ErrorCode, error_ack, frame_error};
 use crease_proto::v1;
 use futures_util::StreamExt;
 use futures_util::future::BoxFuture;
 use prost::Message as _;
 
-use super::{Cluster, subject};
-use crate::AppState;
+use super::{Cluster, Host, subject};
 
 /// How long a relay waits for the owner's ack. A forwarded frame normally takes about a
 /// millisecond; one whose owner died mid-request would otherwise hold up the publisher's later
@@ -23,12 +23,18 @@ use crate::AppState;
 /// half a second late is stale anyway.
 const FORWARD_TIMEOUT: Duration = Duration::from_millis(500);
 
-/// What the owner does with a forwarded control frame: rate, pipeline, ack (the server's
-/// publish path, `crate::ingest::ack_forwarded`, handed to [`super::join`] so that the
-/// cluster does not depend on the layer above it).
-pub type ControlHandler = Arc<
-    dyn Fn(Arc<AppState>, v1::ControlFrame) -> BoxFuture<'static, v1::PublishAck> + Send + Sync,
->;
+/// The owner's side of forwarded control frames: what its server does with one (the rate, the
+/// pipeline, the metrics, the ack: the server's publish path, `crate::ingest`, implements it
+/// for the server's state). A trait the server implements, so that the cluster does not
+/// depend on the layer above it.
+pub trait Ingest: Send + Sync {
+    /// The ack of `frame`, which a relay forwarded into one of this server's rooms (its token
+    /// checked there).
+    fn publish_forwarded(
+        self: Arc<Self>,
+        frame: v1::ControlFrame,
+    ) -> BoxFuture<'static, v1::PublishAck>;
+}
 
 /// Relay: forwards `frame` (its token already checked here) to the owner of `room` and
 /// returns the owner's ack (which may carry the owner's refusal).
@@ -37,18 +43,15 @@ pub type ControlHandler = Arc<
 /// Why no owner answered (it died and the room is not adopted yet, or NATS is down), or its
 /// reply was not an ack.
 pub async fn forward(
-    cluster: &Cluster,
-    room: &str,
+    cluster: Arc<Cluster>,
+    room: String,
     frame: v1::ControlFrame,
 ) -> Result<v1::PublishAck, String> {
-    let request = v1::ForwardedControl {
-        frame: Some(frame),
-        replica: cluster.replica.clone(),
-    };
+    let request = forwarded_control(frame, &cluster.replica);
     let reply = cluster
         .client
         .send_request(
-            subject::control(room),
+            subject::control(&room),
             async_nats::Request::new()
                 .payload(request.encode_to_vec().into())
                 .timeout(Some(FORWARD_TIMEOUT)),
@@ -66,7 +69,7 @@ pub async fn forward(
 
 /// Owner: serves the frames relays forward into `room` until the task is aborted (the room
 /// changed owner or closed).
-pub(crate) async fn serve(state: Arc<AppState>, cluster: Arc<Cluster>, room: String) {
+pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: String) {
     let Ok(mut sub) = cluster.client.subscribe(subject::control(&room)).await else {
         tracing::error!(%room, "cannot subscribe to forwarded controls");
         return;
@@ -75,21 +78,13 @@ pub(crate) async fn serve(state: Arc<AppState>, cluster: Arc<Cluster>, room: Str
         let Some(reply) = msg.reply else {
             continue;
         };
-        let ack = match v1::ForwardedControl::decode(msg.payload.as_ref()) {
-            Ok(v1::ForwardedControl {
-                frame: Some(mut frame),
-                ..
-            }) => {
+        let forwarded = v1::ForwardedControl::decode(msg.payload.as_ref());
+        let ack = match forwarded.map(read_forwarded_control) {
+            Ok(Ok(mut frame)) => {
                 room.clone_into(&mut frame.room);
-                (cluster.controls)(Arc::clone(&state), frame).await
+                Arc::clone(&host).publish_forwarded(frame).await
             }
-            Ok(_) => error_ack(
-                0,
-                frame_error(
-                    ErrorCode::InvalidArgument,
-                    "ForwardedControl.frame: missing",
-                ),
-            ),
+            Ok(Err(e)) => error_ack(0, frame_error(ErrorCode::InvalidArgument, e.to_string())),
             Err(e) => error_ack(
                 0,
                 frame_error(

@@ -14,13 +14,15 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use crease_core::codec::{CodecError, FrameDecoder};
+use crease_proto::cluster::interest;
 use crease_proto::{Encoding, Level, frame_message, v1};
 use futures_util::StreamExt;
+use futures_util::future::BoxFuture;
 use prost::Message as _;
 use tokio::sync::{Notify, mpsc};
 use tokio::task::JoinHandle;
 
-use super::{Cluster, subject};
+use super::{Cluster, Host, subject};
 use crate::fanout::{Channel, Fanout, LocalFanout, Receiver};
 use crate::frames::{FramePool, MeshUpdate};
 
@@ -129,14 +131,14 @@ impl RoomLink {
     /// services if this replica owns the room.
     pub(crate) fn start(
         self: &Arc<Self>,
-        state: &Arc<crate::AppState>,
+        host: &Arc<dyn Host>,
         rx: mpsc::Receiver<(Channel, Arc<MeshUpdate>)>,
     ) {
         let sender = tokio::spawn(Arc::clone(self).send_frames(rx));
         let relay = tokio::spawn(Arc::clone(self).relay_loop());
         lock(&self.tasks).extend([sender, relay]);
         if self.is_owner() {
-            self.start_owner(state);
+            self.start_owner(host);
         }
     }
 
@@ -179,7 +181,7 @@ impl RoomLink {
     /// relays' decoders hold the previous owner's frames).
     pub(crate) fn become_owner(
         self: &Arc<Self>,
-        state: &Arc<crate::AppState>,
+        host: &Arc<dyn Host>,
         entry: v1::RoomEntry,
         revision: u64,
     ) {
@@ -189,7 +191,7 @@ impl RoomLink {
         }
         self.confirmed.store(true, Ordering::Release);
         if !self.owner.swap(true, Ordering::AcqRel) {
-            self.start_owner(state);
+            self.start_owner(host);
         }
         self.wake.notify_one();
     }
@@ -227,11 +229,11 @@ impl RoomLink {
 
     /// Owner: the services of an owned room: other replicas' interest, their keyframe requests
     /// and their forwarded control frames.
-    fn start_owner(self: &Arc<Self>, state: &Arc<crate::AppState>) {
+    fn start_owner(self: &Arc<Self>, host: &Arc<dyn Host>) {
         let interest = tokio::spawn(Arc::clone(self).take_interest());
         let keyframes = tokio::spawn(Arc::clone(self).take_keyframe_requests());
         let controls = tokio::spawn(super::control::serve(
-            Arc::clone(state),
+            Arc::clone(host),
             Arc::clone(&self.cluster),
             self.room.clone(),
         ));
@@ -337,12 +339,12 @@ impl RoomLink {
                 }
                 if wanted && local && announced[i].is_none_or(|t| now - t >= ANNOUNCE) {
                     announced[i] = Some(now);
-                    let interest = v1::Interest {
-                        replica: self.cluster.replica.clone(),
-                        level: v1::Level::from(channel.level) as i32,
-                        ttl_ms: INTEREST_TTL.as_millis() as u32,
-                        encoding: v1::Encoding::from(channel.encoding) as i32,
-                    };
+                    let interest = interest(
+                        &self.cluster.replica,
+                        channel.level,
+                        channel.encoding,
+                        INTEREST_TTL.as_millis() as u32,
+                    );
                     let _ = self
                         .cluster
                         .client
@@ -465,6 +467,17 @@ impl Fanout for RoomLink {
 
     fn relays(&self) -> bool {
         !self.is_owner()
+    }
+
+    fn forward(
+        &self,
+        frame: v1::ControlFrame,
+    ) -> BoxFuture<'static, Result<v1::PublishAck, String>> {
+        Box::pin(super::control::forward(
+            Arc::clone(&self.cluster),
+            self.room.clone(),
+            frame,
+        ))
     }
 }
 

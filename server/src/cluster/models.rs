@@ -8,21 +8,21 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use async_nats::jetstream;
 use async_nats::jetstream::object_store::ObjectMetadata;
 use crease_core::model::TrainedModel;
 use tokio::io::AsyncReadExt;
 
-use super::Cluster;
-use crate::AppState;
-use crate::registry::{LoadedModel, sha256_hex};
+use super::{Cluster, ClusterError, MODELS_BUCKET};
+use crate::registry::{LoadedModel, ModelRegistry, sha256_hex};
 
 /// The metadata key of an object's SHA-256.
 const SHA256: &str = "sha256";
 
 /// Serialises every local model once, on the blocking pool: sets its digest (so that nothing
 /// on the async threads computes one) and returns the bytes to [`offer`].
-pub(crate) async fn serialise_local(state: &AppState) -> Vec<(Arc<LoadedModel>, Vec<u8>)> {
-    let models = state.models.list();
+pub(crate) async fn serialise_local(models: &ModelRegistry) -> Vec<(Arc<LoadedModel>, Vec<u8>)> {
+    let models = models.list();
     let serialised = tokio::task::spawn_blocking(move || {
         models
             .into_iter()
@@ -87,12 +87,12 @@ pub(crate) async fn offer(cluster: Arc<Cluster>, serialised: Vec<(Arc<LoadedMode
 /// What stops this replica from using it: a local model of that name with another digest, no
 /// copy in the cluster, a copy failing its digest or not loading.
 pub(crate) async fn ensure(
-    state: &Arc<AppState>,
+    models: &ModelRegistry,
     cluster: &Cluster,
     name: &str,
     sha256: &str,
 ) -> Result<Arc<LoadedModel>, String> {
-    if let Some(model) = state.models.get(name) {
+    if let Some(model) = models.get(name) {
         return if model.sha256() == sha256 {
             Ok(model)
         } else {
@@ -124,8 +124,36 @@ pub(crate) async fn ensure(
         .await
         .map_err(|e| format!("model {name:?}: loading: {e}"))?
         .map_err(|e| format!("model {name:?}: the cluster's copy: {e}"))?;
-    let loaded = state.models.insert(name, model);
+    let loaded = models.insert(name, model);
     loaded.set_sha256(got);
     tracing::info!(model = %name, "model fetched from the cluster");
     Ok(loaded)
+}
+
+/// The models' object store, made if it is not there yet.
+pub(super) async fn open_object_store(
+    js: &jetstream::Context,
+) -> Result<jetstream::object_store::ObjectStore, ClusterError> {
+    if let Ok(store) = js.get_object_store(MODELS_BUCKET).await {
+        return Ok(store);
+    }
+    let created = js
+        .create_object_store(jetstream::object_store::Config {
+            bucket: MODELS_BUCKET.into(),
+            description: Some(
+                "crease models: name -> .crease file (sha256 in its metadata)".into(),
+            ),
+            ..Default::default()
+        })
+        .await;
+    match created {
+        Ok(store) => Ok(store),
+        Err(e) => js
+            .get_object_store(MODELS_BUCKET)
+            .await
+            .map_err(|_| ClusterError::Bucket {
+                bucket: MODELS_BUCKET,
+                message: e.to_string(),
+            }),
+    }
 }

@@ -1,0 +1,404 @@
+//! What it takes to open a room, as one value: [`RoomSpec`], built once from whatever asks for
+//! a room (an `OpenRoomRequest`, a cluster's `RoomEntry`, a take's header) with every wire
+//! field checked here, so the server validates a room's options in one place. Also the room's
+//! settings back on the wire ([`room_settings`]: what a take's header keeps) and the options
+//! a room is built with ([`RoomOptions`], [`StreamSettings`]), which the server re-exports.
+
+use crease_core::codec::DEFAULT_KEYFRAME_INTERVAL;
+use crease_core::predictor::Refinement;
+use crease_core::runtime::filter::OneEuroParams;
+use crease_core::runtime::skin::Skinning;
+
+use crate::convert::skinning_from_wire;
+use crate::errors::WireError;
+use crate::v1;
+
+/// What a room's opener chooses about its prediction (`OpenRoomRequest`'s beta, filter,
+/// refine and skinning; the streaming side is the server's [`StreamSettings`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RoomOptions {
+    /// Translation-solve beta; the model's default when `None`.
+    pub beta: Option<f32>,
+    /// Smooth the control points with a One Euro filter (mocap rooms); `None` passes them
+    /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
+    pub filter: Option<OneEuroParams>,
+    /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
+    /// (the default: it pays where the control points are dense, the hands, and costs ~40 µs
+    /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
+    pub refine: Option<Refinement>,
+    /// How the room skins (issue 22); the model's default (`TrainedModel::skinning`) when
+    /// `None`. A DQS room streams vertices only (the server's `Pipeline::check_encoding`).
+    pub skinning: Option<Skinning>,
+}
+
+/// How a room's meshes are streamed: quantisation bits per level and the vertex order.
+///
+/// Live rooms default to 12 bits for the base mesh: its half-step error (1/8190 of the padded
+/// box, ~2e-4 of the model's size) is ~50x below the horse's prediction error (9.3e-3 RMS,
+/// BENCHMARKS.md) and invisible at any viewing distance, and it brings the gallop to ~1.5
+/// bytes per vertex per frame where 16 bits need ~3 (meshopt's vertex codec stores the low bits
+/// of every moving vertex nearly verbatim: each bit costs ~3/8 byte per vertex). The detail
+/// mesh carries wrinkles a few 1e-3 deep, so it keeps 14 bits. Batches (`Synthesize`) are for
+/// pipelines and default to the full 16.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamSettings {
+    /// Bits per coordinate of base frames, 1..=16.
+    pub base_bits: u8,
+    /// Bits per coordinate of detail frames, 1..=16.
+    pub detail_bits: u8,
+    /// Stream vertices in a spatial order (`Topology.vertex_order`): 7-10% smaller frames.
+    pub spatial_order: bool,
+    /// A keyframe every this many frames (0: only the first). Live rooms need few: a
+    /// subscriber without the base of a delta (joined late, skipped frames) gets a keyframe of
+    /// that frame on demand (the server's `MeshUpdate::frame_for`), so periodic keyframes only
+    /// bound how long a client that lost its state by itself waits.
+    pub keyframe_interval: u32,
+}
+
+impl Default for StreamSettings {
+    fn default() -> Self {
+        Self {
+            base_bits: 12,
+            detail_bits: 14,
+            spatial_order: true,
+            // 10 s at 60 Hz: +0.1% bytes on the horse gallop, where every 30 frames costs +1%.
+            keyframe_interval: 600,
+        }
+    }
+}
+
+impl StreamSettings {
+    /// Full 16-bit precision at both levels (batches).
+    pub fn full() -> Self {
+        Self {
+            base_bits: 16,
+            detail_bits: 16,
+            keyframe_interval: DEFAULT_KEYFRAME_INTERVAL,
+            ..Self::default()
+        }
+    }
+
+    /// The stream settings a cluster's [`v1::RoomEntry`] names (bits clamped to 16).
+    pub fn from_entry(entry: &v1::RoomEntry) -> Self {
+        Self {
+            base_bits: entry.base_bits.min(16) as u8,
+            detail_bits: entry.detail_bits.min(16) as u8,
+            spatial_order: entry.spatial_order,
+            keyframe_interval: entry.keyframe_interval,
+        }
+    }
+}
+
+/// A room's publish token at open.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum RoomToken {
+    /// A fresh random token (every room opened by a request).
+    #[default]
+    Random,
+    /// An operator's fixed token (`--demo-token`).
+    Fixed(String),
+    /// Only the token's SHA-256 (a room opened on another replica of a cluster).
+    Digest([u8; 32]),
+}
+
+/// Where a room lives, which the server's `AppState::open_room` acts on.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Placement {
+    /// The server's room: in a cluster the cluster's (registered, predicted here), else this
+    /// server's (an `OpenRoomRequest`).
+    #[default]
+    Shared,
+    /// This server's alone, never registered in a cluster (the demo's rooms, a take's replay).
+    Local,
+    /// A relay of a cluster's room, as the registry held it at `revision`.
+    Relay {
+        /// The registry's entry.
+        entry: Box<v1::RoomEntry>,
+        /// Its revision.
+        revision: u64,
+    },
+}
+
+/// Everything needed to open a room (module docs).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RoomSpec {
+    /// The room id (the server checks its form when it opens the room).
+    pub id: String,
+    /// The model's name.
+    pub model: String,
+    /// The model's SHA-256 (hex) the room must run on: a cluster's relay fetches or checks it.
+    pub model_sha256: Option<String>,
+    /// Beta, filter, refinement and skinning, checked.
+    pub options: RoomOptions,
+    /// A retargeting room's map and markers (issue 19), as sent; the server resolves the map.
+    pub retarget: Option<v1::Retarget>,
+    /// The publish token.
+    pub token: RoomToken,
+    /// How the room streams; `None`: the server's settings.
+    pub stream: Option<StreamSettings>,
+    /// A private room: open to whoever knows its id, not listed (a take's replay).
+    pub private: bool,
+    /// Where the room lives.
+    pub placement: Placement,
+}
+
+/// Why a wire message does not describe a room that can be opened: names the field.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SpecError {
+    /// The One Euro filter's cutoffs or beta are out of range.
+    #[error(
+        "filter: cutoffs must be positive and beta non-negative, got min_cutoff_hz {} beta {} d_cutoff_hz {}",
+        .0.min_cutoff_hz, .0.beta, .0.d_cutoff_hz
+    )]
+    Filter(OneEuroParams),
+    /// The refinement is out of range.
+    #[error("refine: {0}")]
+    Refine(String),
+    /// A field that is not what its type allows (the skinning).
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    /// A registry entry's token digest is not a SHA-256.
+    #[error("token digest has {0} bytes, a SHA-256 has 32")]
+    TokenDigest(usize),
+}
+
+/// The wire's filter, refinement and skinning of a room in `message_type`, checked.
+fn options(
+    message_type: &'static str,
+    beta: Option<f32>,
+    filter: Option<v1::MarkerFilter>,
+    refine: Option<v1::Refine>,
+    skinning: i32,
+) -> Result<RoomOptions, SpecError> {
+    let filter = filter.map(OneEuroParams::from);
+    if let Some(f) = filter
+        && !f.is_valid()
+    {
+        return Err(SpecError::Filter(f));
+    }
+    Ok(RoomOptions {
+        beta,
+        filter,
+        refine: refinement(refine)?,
+        skinning: skinning_from_wire(message_type, skinning)?,
+    })
+}
+
+/// A request's refinement, checked (`refine: ...` names the field in the error).
+///
+/// # Errors
+/// [`SpecError::Refine`].
+pub fn refinement(wire: Option<v1::Refine>) -> Result<Option<Refinement>, SpecError> {
+    let refine = wire.map(Refinement::from);
+    match refine.map(|r| r.validate()) {
+        Some(Err(e)) => Err(SpecError::Refine(e.to_string())),
+        _ => Ok(refine),
+    }
+}
+
+impl RoomSpec {
+    /// The room an `OpenRoomRequest` asks for (a fresh token, the server's stream settings,
+    /// shared in a cluster).
+    ///
+    /// # Errors
+    /// [`SpecError`] naming the field (filter, refine, `OpenRoomRequest.skinning`).
+    pub fn from_request(r: &v1::OpenRoomRequest) -> Result<RoomSpec, SpecError> {
+        Ok(RoomSpec {
+            id: r.room.clone(),
+            model: r.model.clone(),
+            options: options(
+                "OpenRoomRequest",
+                (r.beta != 0.0).then_some(r.beta),
+                r.filter,
+                r.refine,
+                r.skinning,
+            )?,
+            retarget: r.retarget.clone(),
+            ..RoomSpec::default()
+        })
+    }
+
+    /// A private replay room `id` of a take recorded with `header`'s room settings: this
+    /// server's alone.
+    ///
+    /// # Errors
+    /// [`SpecError`], as [`RoomSpec::from_request`].
+    pub fn from_take(id: &str, header: &v1::TakeHeader) -> Result<RoomSpec, SpecError> {
+        let settings = header.room.clone().unwrap_or_default();
+        Ok(RoomSpec {
+            id: id.to_owned(),
+            private: true,
+            placement: Placement::Local,
+            ..RoomSpec::from_request(&settings)?
+        })
+    }
+
+    /// A relay of the cluster's room `id` as the registry's `entry` at `revision` describes
+    /// it: its model by digest, the token's digest, the owner's stream settings, the resolved
+    /// map (an adopter then retargets the publishers' markers as the owner did).
+    ///
+    /// # Errors
+    /// [`SpecError`]: an entry no replica writes (a server bug or a foreign writer).
+    pub fn from_entry(
+        id: &str,
+        entry: &v1::RoomEntry,
+        revision: u64,
+    ) -> Result<RoomSpec, SpecError> {
+        // Unspecified skinning (an entry of a replica older than issue 22): the model's
+        // default, which is what that owner skinned with.
+        let options = options(
+            "RoomEntry",
+            Some(entry.beta),
+            entry.filter,
+            entry.refine,
+            entry.skinning,
+        )?;
+        let digest = <[u8; 32]>::try_from(entry.token_sha256.as_slice())
+            .map_err(|_| SpecError::TokenDigest(entry.token_sha256.len()))?;
+        Ok(RoomSpec {
+            id: id.to_owned(),
+            model: entry.model.clone(),
+            model_sha256: Some(entry.model_sha256.clone()),
+            options,
+            retarget: entry.retarget.clone(),
+            token: RoomToken::Digest(digest),
+            stream: Some(StreamSettings::from_entry(entry)),
+            private: false,
+            placement: Placement::Relay {
+                entry: Box::new(entry.clone()),
+                revision,
+            },
+        })
+    }
+}
+
+/// What a live room runs with, for [`room_settings`] and [`crate::cluster::room_entry`].
+#[derive(Clone, Copy, Debug)]
+pub struct RoomSettings<'a> {
+    /// The room id.
+    pub room: &'a str,
+    /// The model's name.
+    pub model: &'a str,
+    /// The beta in use.
+    pub beta: f32,
+    /// The filter, if the room filters.
+    pub filter: Option<OneEuroParams>,
+    /// The retarget (as sent for [`room_settings`]; resolved for a registry entry).
+    pub retarget: Option<&'a v1::Retarget>,
+    /// The refinement, when on.
+    pub refine: Option<Refinement>,
+    /// The skinning in use.
+    pub skinning: Skinning,
+}
+
+/// A room's settings as the request that would open it again (no token): what a take's
+/// header keeps.
+pub fn room_settings(s: RoomSettings<'_>) -> v1::OpenRoomRequest {
+    v1::OpenRoomRequest {
+        room: s.room.to_owned(),
+        model: s.model.to_owned(),
+        beta: s.beta,
+        filter: s.filter.map(v1::MarkerFilter::from),
+        retarget: s.retarget.cloned(),
+        refine: s.refine.map(v1::Refine::from),
+        skinning: v1::Skinning::from(s.skinning) as i32,
+    }
+}
+
+/// A retarget of `markers` (the capture's names, in frame order, in `units`) through the
+/// marker map `map_toml` (the demo's WebXR room).
+pub fn retarget(map_toml: String, markers: Vec<String>, units: String) -> v1::Retarget {
+    v1::Retarget {
+        map_toml,
+        markers,
+        units,
+        ..Default::default()
+    }
+}
+
+/// `wire` with its map given as `map_toml` (a map named from a maps folder, resolved so that
+/// another replica can rebuild the room without that folder).
+pub fn resolved_retarget(wire: &v1::Retarget, map_toml: String) -> v1::Retarget {
+    v1::Retarget {
+        map_toml,
+        ..wire.clone()
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_is_checked_once_naming_the_field() {
+        let ok = v1::OpenRoomRequest {
+            room: "r".into(),
+            model: "m".into(),
+            beta: 2.0,
+            ..Default::default()
+        };
+        let spec = RoomSpec::from_request(&ok).unwrap();
+        assert_eq!((spec.id.as_str(), spec.options.beta), ("r", Some(2.0)));
+        assert_eq!(spec.placement, Placement::Shared);
+        let bad_filter = v1::OpenRoomRequest {
+            filter: Some(v1::MarkerFilter {
+                min_cutoff_hz: -1.0,
+                beta: 0.0,
+                d_cutoff_hz: 1.0,
+            }),
+            ..ok.clone()
+        };
+        let e = RoomSpec::from_request(&bad_filter).unwrap_err();
+        assert!(e.to_string().starts_with("filter: "), "{e}");
+        let bad_skinning = v1::OpenRoomRequest {
+            skinning: 7,
+            ..ok.clone()
+        };
+        assert_eq!(
+            RoomSpec::from_request(&bad_skinning)
+                .unwrap_err()
+                .to_string(),
+            "OpenRoomRequest.skinning: 7 is not a Skinning (0 unspecified, 1 lbs, 2 dqs)"
+        );
+        let bad_refine = v1::OpenRoomRequest {
+            refine: Some(v1::Refine {
+                iterations: 0,
+                strength: 0.01,
+            }),
+            ..ok
+        };
+        assert_eq!(
+            RoomSpec::from_request(&bad_refine).unwrap_err().to_string(),
+            "refine: iterations must be 1 to 32, got 0"
+        );
+    }
+
+    #[test]
+    fn an_entry_is_a_relay_with_the_owners_digest_and_settings() {
+        let entry = v1::RoomEntry {
+            model: "m".into(),
+            model_sha256: "ab".into(),
+            beta: 3.0,
+            token_sha256: vec![7; 32],
+            base_bits: 40,
+            detail_bits: 14,
+            ..Default::default()
+        };
+        let spec = RoomSpec::from_entry("r", &entry, 5).unwrap();
+        assert_eq!(spec.token, RoomToken::Digest([7; 32]));
+        assert_eq!(spec.stream.unwrap().base_bits, 16);
+        assert!(matches!(
+            spec.placement,
+            Placement::Relay { revision: 5, .. }
+        ));
+        let short = v1::RoomEntry {
+            token_sha256: vec![1; 3],
+            ..entry
+        };
+        assert_eq!(
+            RoomSpec::from_entry("r", &short, 1).unwrap_err(),
+            SpecError::TokenDigest(3)
+        );
+    }
+}

@@ -1,0 +1,79 @@
+//! The per-replica cluster metrics (`crease_cluster_*` in `/metrics`): frames and bytes into
+//! NATS and relayed out of it, forwarded controls, adoptions, the connection. The server's
+//! metrics (`crate::metrics`) hold one and register it.
+
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::gauge::Gauge;
+
+/// The per-replica cluster metrics (in `/metrics`, `crease_cluster_*`).
+#[derive(Clone, Debug, Default)]
+pub struct ClusterMetrics {
+    /// Frames this replica published into NATS (owner).
+    pub nats_frames_out: Counter,
+    /// Their bytes.
+    pub nats_bytes_out: Counter,
+    /// Frames dropped on their way to NATS (the sender fell behind).
+    pub nats_frames_dropped: Counter,
+    /// Frames received from an owner and fanned out here (relay).
+    pub relayed_frames: Counter,
+    /// Their bytes.
+    pub relayed_bytes: Counter,
+    /// Control frames this replica forwarded to an owner.
+    pub forwarded_controls: Counter,
+    /// Rooms this replica adopted from a dead owner.
+    pub adoptions: Counter,
+    /// 1 while connected to NATS.
+    pub nats_connected: Gauge,
+}
+
+impl ClusterMetrics {
+    /// Registers the metrics in `registry`.
+    pub(crate) fn register(&self, registry: &mut prometheus_client::registry::Registry) {
+        let r = registry.sub_registry_with_prefix("cluster");
+        let counters = [
+            (
+                "nats_frames_out",
+                "Frames published into NATS (owner)",
+                &self.nats_frames_out,
+            ),
+            (
+                "nats_bytes_out",
+                "Bytes of frames published into NATS",
+                &self.nats_bytes_out,
+            ),
+            (
+                "nats_frames_dropped",
+                "Frames dropped on their way to NATS",
+                &self.nats_frames_dropped,
+            ),
+            (
+                "relayed_frames",
+                "Frames received from an owner and fanned out here",
+                &self.relayed_frames,
+            ),
+            (
+                "relayed_bytes",
+                "Bytes of relayed frames",
+                &self.relayed_bytes,
+            ),
+            (
+                "forwarded_controls",
+                "Control frames forwarded to an owner",
+                &self.forwarded_controls,
+            ),
+            (
+                "adoptions",
+                "Rooms adopted from a dead owner",
+                &self.adoptions,
+            ),
+        ];
+        for (name, help, counter) in counters {
+            r.register(name, help, counter.clone());
+        }
+        r.register(
+            "nats_connected",
+            "1 while connected to NATS",
+            self.nats_connected.clone(),
+        );
+    }
+}

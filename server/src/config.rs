@@ -1,0 +1,134 @@
+//! The server's configuration: [`Config`] (addresses, admin token, [`Limits`], stream settings,
+//! TLS, the web, maps and takes folders) and the TLS files it reads ([`TlsFiles`]).
+
+use std::net::SocketAddr;
+
+use crate::admission;
+
+/// Limits that protect the server from its clients.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Most rooms open at once.
+    pub rooms: usize,
+    /// Largest gRPC or WebSocket message accepted, bytes.
+    pub message_bytes: usize,
+    /// Most live subscriptions per room (gRPC and WebSocket together).
+    pub subscribers_per_room: usize,
+    /// Most control frames per second a room accepts (bursts of a quarter second's worth);
+    /// frames over it are refused with RESOURCE_EXHAUSTED and change nothing.
+    pub publish_hz: f64,
+    /// TCP connections, per client address and in total, on each listener's count together
+    /// ([`admission`]).
+    pub connections: admission::Caps,
+    /// Long-lived calls (gRPC Publish, Subscribe, Synthesize; WebSocket sessions), per client
+    /// address and in total ([`admission`]).
+    pub streams: admission::Caps,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            rooms: 64,
+            message_bytes: 4 << 20,
+            subscribers_per_room: 512,
+            // Twice the fastest mocap rigs we expect (120 Hz).
+            publish_hz: 240.0,
+            // A classroom behind one NAT address stays well inside these; one client opening
+            // sockets in a loop does not.
+            connections: admission::Caps {
+                per_address: 256,
+                total: 4096,
+            },
+            streams: admission::Caps {
+                per_address: 256,
+                total: 8192,
+            },
+        }
+    }
+}
+
+/// Server configuration.
+#[derive(Clone, Debug)]
+pub struct Config {
+    /// gRPC listen address (port 0: any free port).
+    pub grpc: SocketAddr,
+    /// HTTP listen address (port 0: any free port).
+    pub http: SocketAddr,
+    /// Token required to open and close rooms (`None`: nobody can).
+    pub admin_token: Option<String>,
+    /// Limits.
+    pub limits: Limits,
+    /// How live rooms stream their meshes (bits, vertex order).
+    pub stream: crate::pipeline::StreamSettings,
+    /// Static files served at `/` (the browser viewer), if any.
+    pub web: Option<std::path::PathBuf>,
+    /// Serve gRPC and HTTP (and so WebSocket) over TLS with this certificate and key.
+    pub tls: Option<TlsFiles>,
+    /// Folder of marker maps (`*.toml`) a retargeting room may name (`Retarget.map_name`).
+    pub maps: Option<std::path::PathBuf>,
+    /// Folder rooms record their takes into (`StartTake`); `None`: no takes.
+    pub takes: Option<std::path::PathBuf>,
+}
+
+/// A TLS certificate chain and its private key, PEM files.
+#[derive(Clone, Debug)]
+pub struct TlsFiles {
+    /// The certificate chain (leaf first).
+    pub cert: std::path::PathBuf,
+    /// The private key (PKCS#8, PKCS#1 or SEC1).
+    pub key: std::path::PathBuf,
+}
+
+/// The contents of [`TlsFiles`].
+#[derive(Clone)]
+pub struct TlsPem {
+    /// The certificate chain, PEM.
+    pub cert: Vec<u8>,
+    /// The private key, PEM.
+    pub key: Vec<u8>,
+}
+
+impl std::fmt::Debug for TlsPem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TlsPem").finish_non_exhaustive()
+    }
+}
+
+impl TlsFiles {
+    /// Reads both files.
+    ///
+    /// # Errors
+    /// The I/O error, naming the file.
+    pub fn load(&self) -> std::io::Result<TlsPem> {
+        let read = |what: &str, path: &std::path::Path| {
+            std::fs::read(path).map_err(|e| {
+                std::io::Error::new(e.kind(), format!("TLS {what} {}: {e}", path.display()))
+            })
+        };
+        Ok(TlsPem {
+            cert: read("certificate", &self.cert)?,
+            key: read("key", &self.key)?,
+        })
+    }
+}
+
+/// The default gRPC address: every interface, port 50051.
+pub const DEFAULT_GRPC: &str = "0.0.0.0:50051";
+/// The default HTTP (and WebSocket) address: every interface, port 8080.
+pub const DEFAULT_HTTP: &str = "0.0.0.0:8080";
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            grpc: DEFAULT_GRPC.parse().expect("a valid address"),
+            http: DEFAULT_HTTP.parse().expect("a valid address"),
+            admin_token: None,
+            limits: Limits::default(),
+            stream: crate::pipeline::StreamSettings::default(),
+            web: None,
+            tls: None,
+            maps: None,
+            takes: None,
+        }
+    }
+}
