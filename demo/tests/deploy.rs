@@ -631,16 +631,40 @@ fn the_builder_stages_stand_ins_are_manifests_cargo_accepts() {
 /// The paths under `/node_modules/` that web/index.html's import map names.
 fn import_map_modules() -> Vec<String> {
     let html = read("web/index.html");
-    html.split("\"/node_modules/")
+    let mut modules: Vec<String> = html
+        .split("\"/node_modules/")
         .skip(1)
         .map(|rest| rest[..rest.find('"').expect("a closing quote")].to_owned())
-        .collect()
+        .collect();
+    // The modules import some packages by a relative path (a worker sees no import map).
+    let mut scripts: Vec<_> = std::fs::read_dir(repo().join("web"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "js"))
+        .collect();
+    scripts.sort();
+    for script in scripts {
+        let text = std::fs::read_to_string(&script).unwrap();
+        for line in text
+            .lines()
+            .filter(|l| l.trim_start().starts_with("import "))
+        {
+            if let Some(rest) = line.split("\"./node_modules/").nth(1) {
+                let module = rest[..rest.find('"').expect("a closing quote")].to_owned();
+                if !modules.contains(&module) {
+                    modules.push(module);
+                }
+            }
+        }
+    }
+    modules
 }
 
 /// The image installs the viewer's packages from web/'s lockfile (`npm ci`), the runtime
 /// stage copies them beside web/, a local `node_modules` stays out of the build context, and
 /// the stage's RUN, run here outside Docker on the files it copies, gives every module the
-/// import map names.
+/// import map names and every module the viewer's scripts import from `./node_modules/`.
 #[test]
 fn the_image_installs_the_viewers_packages_from_the_lockfile() {
     let docker = Dockerfile::read();
@@ -742,7 +766,7 @@ fn the_image_installs_the_viewers_packages_from_the_lockfile() {
             } else {
                 path.is_file()
             },
-            "the import map names /node_modules/{m}, which stage {name} does not install"
+            "the viewer imports /node_modules/{m}, which stage {name} does not install"
         );
     }
     // The locked versions, as web/package.json pins them.

@@ -90,6 +90,7 @@ pub(crate) fn tokens(src: &str) -> Vec<Tok> {
                 b'*' => Tok::Punct("*"),
                 b'=' => Tok::Punct("="),
                 b'|' => Tok::Punct("|"),
+                b'&' => Tok::Punct("&"),
                 _ if c.is_ascii_whitespace() => {
                     i += 1;
                     continue;
