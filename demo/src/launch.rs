@@ -325,10 +325,21 @@ pub async fn run(
         Arc::new(|line: &str| eprintln!("{line}"))
     };
     let started = start(config, Arc::clone(&say)).await?;
+    // Armed before the banner tells anyone the server is up: `shutdown_signal` installs its
+    // handlers when first polled, and a SIGTERM between the banner and that poll took the
+    // default action (the process killed, not stopped; RELIABILITY.md).
+    let mut shutdown = std::pin::pin!(shutdown);
+    let signalled = tokio::select! {
+        biased;
+        () = &mut shutdown => true,
+        () = std::future::ready(()) => false,
+    };
     for line in started.banner(token_chosen) {
         say(&line);
     }
-    shutdown.await;
+    if !signalled {
+        shutdown.await;
+    }
     say("shutting down");
     started.running.shutdown(drain).await?;
     Ok(())

@@ -638,14 +638,15 @@ fn import_map_modules() -> Vec<String> {
         .collect();
     // The modules import some packages by a relative path (a worker sees no import map).
     let mut scripts: Vec<_> = std::fs::read_dir(repo().join("web"))
-        .unwrap()
+        .expect("web/ is readable")
         .flatten()
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "js"))
         .collect();
     scripts.sort();
     for script in scripts {
-        let text = std::fs::read_to_string(&script).unwrap();
+        let text = std::fs::read_to_string(&script)
+            .unwrap_or_else(|e| panic!("{}: {e}", script.display()));
         for line in text
             .lines()
             .filter(|l| l.trim_start().starts_with("import "))
