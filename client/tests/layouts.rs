@@ -14,34 +14,14 @@
 //! The crates are the workspace's members, read from the root `Cargo.toml`.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
+mod source_scan;
+
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+
+use source_scan::{relative, repo, rust_files, workspace_members};
 
 /// A module path from the crate root, `a::b`.
 type ModPath = String;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("client/ sits in the workspace root")
-        .to_path_buf()
-}
-
-/// The workspace's member folders, read from the root `Cargo.toml`'s `members = [...]`.
-fn workspace_members(root: &Path) -> Vec<String> {
-    let manifest = root.join("Cargo.toml");
-    let text = std::fs::read_to_string(&manifest)
-        .unwrap_or_else(|e| panic!("reading {}: {e}", manifest.display()));
-    let list = text
-        .lines()
-        .find_map(|l| l.trim().strip_prefix("members = ["))
-        .unwrap_or_else(|| panic!("{}: no `members = [...]` line", manifest.display()));
-    list.split('"')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_owned)
-        .collect()
-}
 
 /// What a crate's `lib.rs` says and declares.
 #[derive(Debug, Default)]
@@ -211,26 +191,6 @@ fn layout_errors(name: &str, c: &Crate, exists: impl Fn(&str) -> bool) -> Vec<St
     errors
 }
 
-/// The `.rs` files under `dir`, relative to `base`, `/`-separated.
-fn rust_files(base: &Path, dir: &Path, out: &mut Vec<String>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let path = e.path();
-        if path.is_dir() {
-            rust_files(base, &path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            let rel = path.strip_prefix(base).unwrap();
-            let parts: Vec<String> = rel
-                .iter()
-                .map(|p| p.to_string_lossy().into_owned())
-                .collect();
-            out.push(parts.join("/"));
-        }
-    }
-}
-
 #[test]
 fn every_crate_layout_names_its_modules_and_only_its_modules() {
     let root = repo();
@@ -241,8 +201,9 @@ fn every_crate_layout_names_its_modules_and_only_its_modules() {
         let Ok(lib) = std::fs::read_to_string(src.join("lib.rs")) else {
             continue;
         };
-        let mut files = Vec::new();
-        rust_files(&src, &src, &mut files);
+        let mut paths = Vec::new();
+        rust_files(&src, &mut paths);
+        let files: Vec<String> = paths.iter().map(|p| relative(&src, p)).collect();
         let c = read_crate(&lib, &files);
         let crate_dir = root.join(&name);
         errors.extend(layout_errors(&name, &c, |f| {

@@ -21,36 +21,15 @@
 mod source_scan;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use source_scan::{Tok, drop_test_modules, matching_brace, paths_from, tokens};
+use source_scan::{
+    Tok, drop_test_modules, matching_brace, paths_from, rust_files, tokens, workspace_members,
+};
 
 /// The node that stands for the items written in a crate's `lib.rs` (a name no module can
 /// have).
 const ROOT_ITEMS: &str = "(crate root)";
-
-/// The workspace's member folders, read from the root `Cargo.toml`'s `members = [...]`.
-fn workspace_members(root: &Path) -> Vec<String> {
-    let manifest = root.join("Cargo.toml");
-    let text = std::fs::read_to_string(&manifest)
-        .unwrap_or_else(|e| panic!("reading {}: {e}", manifest.display()));
-    let list = text
-        .lines()
-        .find_map(|l| l.trim().strip_prefix("members = ["))
-        .unwrap_or_else(|| panic!("{}: no `members = [...]` line", manifest.display()));
-    let members: Vec<String> = list
-        .split('"')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_owned)
-        .collect();
-    assert!(
-        members.len() >= 8,
-        "{}: expected the workspace's members, got {members:?}",
-        manifest.display()
-    );
-    members
-}
 
 /// Cycles found and not yet broken, each with why it is still here. The test fails on any
 /// other cycle, and on one of these once it is gone (so the list only shrinks).
@@ -84,21 +63,6 @@ fn module_of(src: &Path, file: &Path, has_lib: bool) -> Option<ModPath> {
         name => {
             parts.push(name.strip_suffix(".rs")?.to_owned());
             Some(parts)
-        }
-    }
-}
-
-/// Every `.rs` file under `dir`.
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let path = e.path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            out.push(path);
         }
     }
 }

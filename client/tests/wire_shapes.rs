@@ -17,9 +17,12 @@
 mod source_scan;
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use source_scan::{Tok, drop_test_modules, matching_brace, paths_from, tokens};
+use source_scan::{
+    Tok, drop_test_modules, matching_brace, paths_from, relative, repo, rust_files, tokens,
+    workspace_members,
+};
 
 /// The transport modules that may construct wire messages, each with why: they answer (or
 /// make) the calls, so the reply is built where it is sent.
@@ -86,13 +89,6 @@ const KNOWN: [(&str, &str); 9] = [
         "a received frame re-wrapped for the capture file; to be a crease-proto helper",
     ),
 ];
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("client/ sits in the workspace root")
-        .to_path_buf()
-}
 
 /// The names of every message of `crease.v1` (nested ones too), from the `.proto` files.
 fn message_names(root: &Path) -> BTreeSet<String> {
@@ -213,47 +209,6 @@ fn constructions(toks: &[Tok], messages: &BTreeSet<String>) -> Vec<(String, usiz
         }
     }
     found
-}
-
-/// Every `.rs` file under `dir`.
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let path = e.path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            out.push(path);
-        }
-    }
-}
-
-/// The workspace's member folders, read from the root `Cargo.toml`'s `members = [...]`.
-fn workspace_members(root: &Path) -> Vec<String> {
-    let manifest = root.join("Cargo.toml");
-    let text = std::fs::read_to_string(&manifest).unwrap();
-    let list = text
-        .lines()
-        .find_map(|l| l.trim().strip_prefix("members = ["))
-        .unwrap_or_else(|| panic!("{}: no `members = [...]` line", manifest.display()));
-    list.split('"')
-        .skip(1)
-        .step_by(2)
-        .map(str::to_owned)
-        .collect()
-}
-
-/// `path` relative to the repository, `/`-separated.
-fn relative(root: &Path, path: &Path) -> String {
-    let parts: Vec<String> = path
-        .strip_prefix(root)
-        .unwrap()
-        .iter()
-        .map(|p| p.to_string_lossy().into_owned())
-        .collect();
-    parts.join("/")
 }
 
 #[test]

@@ -1,7 +1,10 @@
-//! The source scanner the house-rule tests share (`module_cycles.rs`, `wire_shapes.rs`): Rust
+//! What the house-rule tests share (`module_cycles.rs`, `wire_shapes.rs`, `layouts.rs`): the
+//! workspace's members and files, and a source scanner: Rust
 //! source as tokens, with comments, strings and char literals dropped, and the `#[cfg(test)]`
 //! module blocks taken out. A text scan, no parser: enough to follow paths and braces.
 #![allow(dead_code)] // each test binary uses its own part
+
+use std::path::{Path, PathBuf};
 
 /// A token of the stripped source: an identifier or keyword, or one punctuation mark (`::` is
 /// one token).
@@ -265,4 +268,61 @@ pub(crate) fn paths_from(toks: &[Tok], mut i: usize) -> (Vec<Vec<String>>, usize
             return (vec![path], i);
         }
     }
+}
+
+/// The repository's root (the workspace), from this crate's manifest folder.
+pub(crate) fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("client/ sits in the workspace root")
+        .to_path_buf()
+}
+
+/// The workspace's member folders, read from the root `Cargo.toml`'s `members = [...]`.
+pub(crate) fn workspace_members(root: &Path) -> Vec<String> {
+    let manifest = root.join("Cargo.toml");
+    let text = std::fs::read_to_string(&manifest)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", manifest.display()));
+    let list = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("members = ["))
+        .unwrap_or_else(|| panic!("{}: no `members = [...]` line", manifest.display()));
+    let members: Vec<String> = list
+        .split('"')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_owned)
+        .collect();
+    assert!(
+        members.len() >= 8,
+        "{}: expected the workspace's members, got {members:?}",
+        manifest.display()
+    );
+    members
+}
+
+/// Every `.rs` file under `dir`, appended to `out`.
+pub(crate) fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let path = e.path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|x| x == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// `path` relative to `root`, `/`-separated.
+pub(crate) fn relative(root: &Path, path: &Path) -> String {
+    let parts: Vec<String> = path
+        .strip_prefix(root)
+        .expect("a path below the root")
+        .iter()
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect();
+    parts.join("/")
 }
