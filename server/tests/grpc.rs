@@ -837,18 +837,8 @@ async fn filtered_rooms_lag_a_step_and_acks_report_the_control_residual() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() {
     use crease_core::mesh::subdivision::subdivided_vertex_count;
-    use crease_core::model::DetailLayer;
-    use crease_core::runtime::displacement::{DetailInput, DetailRegressor};
-    let mut model = model();
-    let rest = model.rig.rest.clone();
-    let n = subdivided_vertex_count(&rest, 1);
-    let h: Vec<f32> = (0..n)
-        .map(|i| 0.02 * ((i * 7919) % 13) as f32 / 13.0)
-        .collect();
-    model.detail = Some(DetailLayer {
-        levels: 1,
-        regressor: DetailRegressor::fixed(DetailInput::Controls, 3 * model.controls.len(), h),
-    });
+    let model = model_with_detail();
+    let n = subdivided_vertex_count(&model.rig.rest, 1);
     let running = serve_tube(&model, Limits::default()).await;
     let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
         .await
