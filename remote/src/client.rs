@@ -76,11 +76,23 @@ pub fn authorized<T>(msg: T, token: &str) -> anyhow::Result<tonic::Request<T>> {
     let mut req = tonic::Request::new(msg);
     req.metadata_mut().insert(
         "authorization",
-        format!("Bearer {token}")
-            .parse()
-            .context("the token is not a valid header value")?,
+        bearer(token).context("the token is not a valid header value")?,
     );
     Ok(req)
+}
+
+/// The `authorization` header's value for `token` (`Bearer <token>`), for every authorised
+/// call: [`authorized`]'s and the publish loop's.
+///
+/// # Errors
+/// When the token holds characters a header cannot carry.
+pub fn bearer(
+    token: &str,
+) -> Result<
+    tonic::metadata::MetadataValue<tonic::metadata::Ascii>,
+    tonic::metadata::errors::InvalidMetadataValue,
+> {
+    format!("Bearer {token}").parse()
 }
 
 /// Wall clock, microseconds since the Unix epoch (the wire's capture clock).

@@ -219,9 +219,7 @@ where
     Fut::Output: Send + 'static,
     A: Acks + ?Sized,
 {
-    let bearer: tonic::metadata::MetadataValue<tonic::metadata::Ascii> = format!("Bearer {token}")
-        .parse()
-        .map_err(PublishError::Token)?;
+    let bearer = crate::client::bearer(token).map_err(PublishError::Token)?;
     let (tx, rx) = mpsc::channel(options.queue);
     let (end_tx, end_rx) = watch::channel(false);
     let mut task = tokio::spawn(source(Sink {

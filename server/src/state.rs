@@ -340,10 +340,11 @@ impl AppState {
     /// [`OpenRoomError::NoRoom`], or in a cluster [`OpenRoomError::Registry`] when the
     /// registry cannot be written.
     pub async fn close_room(self: &Arc<Self>, id: &str) -> Result<(), OpenRoomError> {
-        let private = self.room(id).is_some_and(|r| r.is_private());
+        let (here, private) = self
+            .room(id)
+            .map_or((false, false), |r| (true, r.is_private()));
         match self.cluster() {
             Some(cluster) if !private => {
-                let here = self.room(id).is_some();
                 cluster.close_room(self.host(), id, here).await?;
                 Ok(())
             }
