@@ -6,6 +6,7 @@
 //! - [`commands::fit`]: `crease fit` — proxy bones and skinning weights from example meshes.
 //! - [`commands::train`]: `crease train` — a whole model (bones, controls, regressors).
 //! - [`commands::eval`]: `crease eval` — leave-one-out and test tables of every method.
+//! - [`commands::model`]: `crease model mirror` — a model reflected (a left hand from a right).
 //! - [`commands::synth`]: `crease synth` — control frames in, meshes out, here;
 //!   [`commands::remote_synth`]: the same on a server (`--server`).
 //! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
@@ -62,6 +63,8 @@ pub enum Command {
     Synth(commands::synth::SynthArgs),
     /// Compare methods by leave-one-out and on held-out test poses.
     Eval(commands::eval::EvalArgs),
+    /// Operate on a trained model file: `mirror` (a left hand from a right-hand model).
+    Model(commands::model::ModelArgs),
     /// Generate a hand data set (LYK06 sweep hand): posed meshes at two resolutions, joint
     /// angles, control-point layouts, manifests for train/eval, and a contact sheet.
     Handgen(commands::handgen::HandgenArgs),
@@ -100,6 +103,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             None => commands::synth::run(&args),
         },
         Command::Eval(args) => commands::eval::run(&args),
+        Command::Model(args) => commands::model::run(&args),
         Command::Handgen(args) => commands::handgen::run(&args),
         Command::Pose(args) => commands::handgen::run_pose(&args),
         Command::Watch(args) => commands::watch::run(&args),

@@ -7,6 +7,7 @@ pub mod eval;
 pub mod fit;
 pub mod handgen;
 pub mod layers;
+pub mod model;
 pub mod remote_synth;
 pub mod report;
 pub mod retarget;

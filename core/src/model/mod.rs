@@ -10,6 +10,8 @@
 //!   weights: what `crease train` writes and the predictor loads; container kind 2.
 //! - [`gltf_export`]: [`export_rig_glb`], a rig as a skinned, animated glTF 2.0 binary for any
 //!   viewer.
+//! - [`mirror`]: [`TrainedModel::mirrored`], a model reflected across a plane through the
+//!   origin (a left hand from a right-hand model, issue 38).
 
 use std::io;
 use std::path::PathBuf;
@@ -18,11 +20,13 @@ use crate::runtime::skin::SkinError;
 
 pub mod file;
 pub mod gltf_export;
+pub mod mirror;
 pub mod rig;
 pub mod trained;
 
 pub use file::{FormatError, ModelKind};
 pub use gltf_export::export_rig_glb;
+pub use mirror::{MirrorPlane, MirrorPlaneError, mirror_name};
 pub use rig::{Rig, RigExample};
 pub use trained::{ControlPoint, DetailLayer, TrainedModel};
 
