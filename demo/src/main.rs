@@ -80,6 +80,9 @@ struct Args {
     /// Most control frames per second a room accepts.
     #[arg(long, default_value_t = Limits::default().publish_hz)]
     max_publish_hz: f64,
+    /// Most actors a room may hold (both hands of a performer are two).
+    #[arg(long, default_value_t = Limits::default().actors_per_room)]
+    max_actors: usize,
     /// Largest gRPC or WebSocket message accepted, bytes.
     #[arg(long, default_value_t = Limits::default().message_bytes)]
     max_message_bytes: usize,
@@ -147,6 +150,7 @@ impl From<Args> for Config {
                     rooms: args.max_rooms,
                     subscribers_per_room: args.max_subscribers,
                     publish_hz: args.max_publish_hz,
+                    actors_per_room: args.max_actors,
                     message_bytes: args.max_message_bytes,
                     connections: Caps {
                         per_address: args.max_connections_per_address,

@@ -141,6 +141,7 @@ pub fn ok_ack(seq: u64, p: AckParts) -> v1::PublishAck {
         control_residual: p.control_residual,
         control_residual_capture: p.control_residual_capture,
         confidence: p.confidence,
+        actors: Vec::new(),
     }
 }
 

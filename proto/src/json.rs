@@ -92,6 +92,7 @@ impl JsonControlFrame {
             valid,
             markers: self.markers,
             markers_valid,
+            actors: Vec::new(),
         })
     }
 }

@@ -130,6 +130,10 @@ pub fn topology_message(t: TopologyParts<'_>) -> v1::MeshFrame {
             quantization: Some(box3(t.qbox.min(), t.qbox.max())),
             vertex_order: t.vertex_order.to_vec(),
             bits: u32::from(t.qbox.bits()),
+            // A one-actor room's stream (issue 38's rooms of actors name theirs).
+            actor: String::new(),
+            actor_index: 0,
+            actor_count: 0,
         })),
     }
 }
@@ -149,6 +153,7 @@ pub fn frame_message(
             server_latency_us,
             data,
             skipped,
+            actors: Vec::new(),
         })),
     }
 }

@@ -91,6 +91,9 @@ pub fn palette_topology_message(p: PaletteParts<'_>) -> Result<v1::MeshFrame, Co
             examples,
             detail_rows,
             detail_scales,
+            actor: String::new(),
+            actor_index: 0,
+            actor_count: 0,
         })),
     })
 }

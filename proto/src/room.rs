@@ -5,6 +5,7 @@
 //! a room is built with ([`RoomOptions`], [`StreamSettings`]), which the server re-exports.
 
 use crease_core::codec::DEFAULT_KEYFRAME_INTERVAL;
+use crease_core::model::MirrorPlane;
 use crease_core::predictor::Refinement;
 use crease_core::runtime::filter::OneEuroParams;
 use crease_core::runtime::skin::Skinning;
@@ -140,6 +141,169 @@ pub struct RoomSpec {
     pub private: bool,
     /// Where the room lives.
     pub placement: Placement,
+    /// A room of several actors (issue 38), checked: then `model`, `options` and `retarget`
+    /// above are unset, each actor has its own. Empty for a one-actor room, which the fields
+    /// above describe and which streams as rooms always did.
+    pub actors: Vec<ActorSpec>,
+}
+
+/// Which side of its performer an actor is (`Actor.side`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Side {
+    /// No side (a body, a prop).
+    #[default]
+    None,
+    /// The performer's left.
+    Left,
+    /// The performer's right.
+    Right,
+}
+
+impl Side {
+    /// The wire's spelling: `""`, `"left"`, `"right"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::None => "",
+            Side::Left => "left",
+            Side::Right => "right",
+        }
+    }
+}
+
+/// One actor of a room (`v1::Actor`), checked: a name unique in its room, its model, side,
+/// mirror plane, performer and options.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ActorSpec {
+    /// 1 to [`ACTOR_NAME_MAX`] characters of `[A-Za-z0-9_-]`.
+    pub name: String,
+    /// The model's name.
+    pub model: String,
+    /// Which side of its performer.
+    pub side: Side,
+    /// The plane the model is mirrored across before use (`crease_core::model::mirror`).
+    pub mirror: Option<MirrorPlane>,
+    /// The performer it belongs to (its own name when the wire leaves it empty).
+    pub performer: String,
+    /// Beta, filter, refinement and skinning, checked.
+    pub options: RoomOptions,
+    /// A retargeting actor's map and markers, as sent.
+    pub retarget: Option<v1::Retarget>,
+}
+
+/// The longest actor or performer name.
+pub const ACTOR_NAME_MAX: usize = 32;
+
+impl ActorSpec {
+    /// Actor `index` of a request, checked; errors name it and the field.
+    fn from_wire(index: usize, a: &v1::Actor) -> Result<ActorSpec, SpecError> {
+        let label = if a.name.is_empty() {
+            format!("#{index}")
+        } else {
+            format!("{:?}", a.name)
+        };
+        let bad = |field: &'static str, message: String| SpecError::Actor {
+            actor: label.clone(),
+            field,
+            message,
+        };
+        check_name(&a.name).map_err(|m| bad("name", m))?;
+        if !a.performer.is_empty() {
+            check_name(&a.performer).map_err(|m| bad("performer", m))?;
+        }
+        if a.model.is_empty() {
+            return Err(bad(
+                "model",
+                "is empty: name the model the actor runs on".into(),
+            ));
+        }
+        let side = match a.side.to_ascii_lowercase().as_str() {
+            "" => Side::None,
+            "left" => Side::Left,
+            "right" => Side::Right,
+            other => {
+                return Err(bad(
+                    "side",
+                    format!("{other:?} is not a side (\"left\", \"right\" or empty)"),
+                ));
+            }
+        };
+        let mirror = match a.mirror.trim() {
+            "" => None,
+            m => Some(MirrorPlane::parse(m).map_err(|e| bad("mirror", e.to_string()))?),
+        };
+        let options = options(
+            "Actor",
+            (a.beta != 0.0).then_some(a.beta),
+            a.filter,
+            a.refine,
+            a.skinning,
+        )
+        .map_err(|e| bad("options", e.to_string()))?;
+        Ok(ActorSpec {
+            name: a.name.clone(),
+            model: a.model.clone(),
+            side,
+            mirror,
+            performer: if a.performer.is_empty() {
+                a.name.clone()
+            } else {
+                a.performer.clone()
+            },
+            options,
+            retarget: a.retarget.clone(),
+        })
+    }
+}
+
+/// 1 to [`ACTOR_NAME_MAX`] characters of `[A-Za-z0-9_-]`.
+fn check_name(name: &str) -> Result<(), String> {
+    if name.is_empty() || name.len() > ACTOR_NAME_MAX {
+        return Err(format!(
+            "{name:?} has {} characters, expected 1 to {ACTOR_NAME_MAX}",
+            name.len()
+        ));
+    }
+    match name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '-'))
+    {
+        Some(c) => Err(format!(
+            "{name:?} holds {c:?}; only A-Z a-z 0-9 _ - are allowed"
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A request's actors, checked: each one, names unique, and the request's own model and
+/// options unset beside them.
+fn actors(r: &v1::OpenRoomRequest) -> Result<Vec<ActorSpec>, SpecError> {
+    if r.actors.is_empty() {
+        return Ok(Vec::new());
+    }
+    let beside = [
+        ("model", !r.model.is_empty()),
+        ("beta", r.beta != 0.0),
+        ("filter", r.filter.is_some()),
+        ("retarget", r.retarget.is_some()),
+        ("refine", r.refine.is_some()),
+        ("skinning", r.skinning != 0),
+    ];
+    if let Some((field, _)) = beside.iter().find(|(_, set)| *set) {
+        return Err(SpecError::ActorsAndRoomField(field));
+    }
+    let mut out: Vec<ActorSpec> = Vec::with_capacity(r.actors.len());
+    for (i, a) in r.actors.iter().enumerate() {
+        let actor = ActorSpec::from_wire(i, a)?;
+        if let Some(j) = out.iter().position(|b| b.name == actor.name) {
+            return Err(SpecError::Actor {
+                actor: format!("{:?}", actor.name),
+                field: "name",
+                message: format!("actors {j} and {i} share it; names are unique in a room"),
+            });
+        }
+        out.push(actor);
+    }
+    Ok(out)
 }
 
 /// Why a wire message does not describe a room that can be opened: names the field.
@@ -160,6 +324,19 @@ pub enum SpecError {
     /// A registry entry's token digest is not a SHA-256.
     #[error("token digest has {0} bytes, a SHA-256 has 32")]
     TokenDigest(usize),
+    /// An actor's field is wrong (issue 38).
+    #[error("actor {actor}: {field}: {message}")]
+    Actor {
+        /// The actor's name (quoted), or `#index` when it has none.
+        actor: String,
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// A request lists actors and also sets a field each actor has its own of.
+    #[error("OpenRoomRequest.{0} is set beside actors: with actors, each actor has its own {0}")]
+    ActorsAndRoomField(&'static str),
 }
 
 /// The wire's filter, refinement and skinning of a room in `message_type`, checked.
@@ -214,6 +391,7 @@ impl RoomSpec {
                 r.skinning,
             )?,
             retarget: r.retarget.clone(),
+            actors: actors(r)?,
             ..RoomSpec::default()
         })
     }
@@ -268,6 +446,8 @@ impl RoomSpec {
                 entry: Box::new(entry.clone()),
                 revision,
             },
+            // The registry carries one-actor rooms only until issue 38's rooms run.
+            actors: Vec::new(),
         })
     }
 }
@@ -302,6 +482,7 @@ pub fn room_settings(s: RoomSettings<'_>) -> v1::OpenRoomRequest {
         retarget: s.retarget.cloned(),
         refine: s.refine.map(v1::Refine::from),
         skinning: v1::Skinning::from(s.skinning) as i32,
+        actors: Vec::new(),
     }
 }
 
@@ -371,6 +552,105 @@ mod tests {
         assert_eq!(
             RoomSpec::from_request(&bad_refine).unwrap_err().to_string(),
             "refine: iterations must be 1 to 32, got 0"
+        );
+    }
+
+    fn actor(name: &str, model: &str) -> v1::Actor {
+        v1::Actor {
+            name: name.into(),
+            model: model.into(),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn actors_are_checked_naming_the_actor_and_the_field() {
+        let two = v1::OpenRoomRequest {
+            room: "performer".into(),
+            actors: vec![
+                v1::Actor {
+                    side: "right".into(),
+                    performer: "ana".into(),
+                    beta: 2.5,
+                    ..actor("right", "hand")
+                },
+                v1::Actor {
+                    side: "Left".into(),
+                    mirror: "x".into(),
+                    performer: "ana".into(),
+                    ..actor("left", "hand")
+                },
+            ],
+            ..Default::default()
+        };
+        let spec = RoomSpec::from_request(&two).unwrap();
+        assert_eq!(spec.actors.len(), 2);
+        let (r, l) = (&spec.actors[0], &spec.actors[1]);
+        assert_eq!(
+            (r.side, r.mirror, r.options.beta),
+            (Side::Right, None, Some(2.5))
+        );
+        assert_eq!(
+            (l.side, l.mirror, l.options.beta),
+            (Side::Left, Some(MirrorPlane::X), None)
+        );
+        assert_eq!((r.performer.as_str(), l.performer.as_str()), ("ana", "ana"));
+        // A one-actor room of today has no actors; an actor without a performer is its own.
+        assert!(
+            RoomSpec::from_request(&v1::OpenRoomRequest::default())
+                .unwrap()
+                .actors
+                .is_empty()
+        );
+        let alone = v1::OpenRoomRequest {
+            actors: vec![actor("prop", "m")],
+            ..Default::default()
+        };
+        assert_eq!(
+            RoomSpec::from_request(&alone).unwrap().actors[0].performer,
+            "prop"
+        );
+
+        let with = |f: &dyn Fn(&mut v1::OpenRoomRequest)| {
+            let mut r = two.clone();
+            f(&mut r);
+            RoomSpec::from_request(&r).unwrap_err().to_string()
+        };
+        assert_eq!(
+            with(&|r| r.actors[1].side = "middle".into()),
+            "actor \"left\": side: \"middle\" is not a side (\"left\", \"right\" or empty)"
+        );
+        assert_eq!(
+            with(&|r| r.actors[1].name = "right".into()),
+            "actor \"right\": name: actors 0 and 1 share it; names are unique in a room"
+        );
+        assert!(
+            with(&|r| r.actors[0].name = String::new()).starts_with("actor #0: name: \"\" has 0"),
+        );
+        assert!(with(&|r| r.actors[0].name = "a b".into()).contains("holds ' '"));
+        assert!(with(&|r| r.actors[0].name = "x".repeat(33)).contains("expected 1 to 32"));
+        assert_eq!(
+            with(&|r| r.actors[1].model = String::new()),
+            "actor \"left\": model: is empty: name the model the actor runs on"
+        );
+        assert!(
+            with(&|r| r.actors[1].mirror = "0,0,0".into()).starts_with("actor \"left\": mirror: ")
+        );
+        assert!(
+            with(&|r| r.actors[0].performer = "a/b".into())
+                .starts_with("actor \"right\": performer: ")
+        );
+        assert_eq!(
+            with(&|r| r.actors[0].skinning = 9),
+            "actor \"right\": options: Actor.skinning: 9 is not a Skinning (0 unspecified, 1 lbs, 2 dqs)"
+        );
+        assert_eq!(
+            with(&|r| r.model = "hand".into()),
+            "OpenRoomRequest.model is set beside actors: with actors, each actor has its own model"
+        );
+        assert_eq!(
+            with(&|r| r.beta = 1.0),
+            "OpenRoomRequest.beta is set beside actors: with actors, each actor has its own beta"
         );
     }
 

@@ -17,6 +17,8 @@ pub struct Limits {
     /// Most control frames per second a room accepts (bursts of a quarter second's worth);
     /// frames over it are refused with RESOURCE_EXHAUSTED and change nothing.
     pub publish_hz: f64,
+    /// Most actors a room may hold (`OpenRoomRequest.actors`, issue 38).
+    pub actors_per_room: usize,
     /// TCP connections, per client address and in total, on each listener's count together
     /// ([`admission`]).
     pub connections: admission::Caps,
@@ -33,6 +35,9 @@ impl Default for Limits {
             subscribers_per_room: 512,
             // Twice the fastest mocap rigs we expect (120 Hz).
             publish_hz: 240.0,
+            // Two performers' hands and bodies with room to spare; each actor costs a
+            // prediction per frame.
+            actors_per_room: 8,
             // A classroom behind one NAT address stays well inside these; one client opening
             // sockets in a loop does not.
             connections: admission::Caps {

@@ -197,6 +197,8 @@ impl Crease for CreaseService {
             retarget: room.pipeline().capture().map(|c| c.wire().clone()),
             refine: room.refinement().map(v1::Refine::from),
             skinning: v1::Skinning::from(room.skinning()) as i32,
+            // Rooms of several actors (issue 38) are refused at open until they run.
+            actors: Vec::new(),
         }))
     }
 

@@ -88,6 +88,29 @@ pub enum OpenRoomError {
     /// A relay asked of a server in no cluster (a server bug).
     #[error("room {0:?}: a relay needs a cluster")]
     NoCluster(String),
+    /// More actors than a room may hold (`--max-actors`).
+    #[error("actors: {count} listed, a room holds at most {limit} (--max-actors)")]
+    TooManyActors {
+        /// Actors asked for.
+        count: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// An actor names a model this server does not have.
+    #[error("actor {actor:?}: model: no model {model:?}")]
+    NoActorModel {
+        /// The actor.
+        actor: String,
+        /// The model it names.
+        model: String,
+    },
+    /// A room of several actors, checked, that this server cannot run yet (issue 38's
+    /// pipeline is not built): open one room per actor meanwhile.
+    #[error(
+        "room {0:?}: rooms of several actors (OpenRoomRequest.actors) are checked but not yet \
+         run by this server; open one room per actor"
+    )]
+    ActorsNotServed(String),
 }
 
 impl From<cluster::RegistryError> for OpenRoomError {
@@ -239,6 +262,29 @@ impl AppState {
         self.table().get(id).cloned()
     }
 
+    /// What is wrong with a room of actors: too many, a model this server lacks, or (all
+    /// well) that such rooms are not run yet.
+    fn check_actors(&self, spec: &RoomSpec) -> OpenRoomError {
+        let limit = self.config.limits.actors_per_room;
+        if spec.actors.len() > limit {
+            return OpenRoomError::TooManyActors {
+                count: spec.actors.len(),
+                limit,
+            };
+        }
+        if let Some(a) = spec
+            .actors
+            .iter()
+            .find(|a| self.models.get(&a.model).is_none())
+        {
+            return OpenRoomError::NoActorModel {
+                actor: a.name.clone(),
+                model: a.model.clone(),
+            };
+        }
+        OpenRoomError::ActorsNotServed(spec.id.clone())
+    }
+
     fn host(self: &Arc<Self>) -> Arc<dyn cluster::Host> {
         Arc::clone(self) as Arc<dyn cluster::Host>
     }
@@ -254,6 +300,9 @@ impl AppState {
     /// [`OpenRoomError`]: no such model, options or retarget that do not check out, a bad id
     /// or beta, the id taken (here or in the cluster), the limit, the registry.
     pub async fn open_room(self: &Arc<Self>, spec: RoomSpec) -> Result<Arc<Room>, OpenRoomError> {
+        if !spec.actors.is_empty() {
+            return Err(self.check_actors(&spec));
+        }
         let cluster = match (&spec.placement, self.cluster()) {
             (Placement::Local, _) | (Placement::Shared, None) => None,
             (Placement::Relay { .. }, None) => return Err(OpenRoomError::NoCluster(spec.id)),

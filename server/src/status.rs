@@ -42,7 +42,11 @@ pub fn publish_http(e: &PublishError) -> StatusCode {
 pub fn open(e: &OpenRoomError) -> Status {
     let m = e.to_string();
     match e {
-        OpenRoomError::NoModel(_) | OpenRoomError::NoRoom(_) => Status::not_found(m),
+        OpenRoomError::NoModel(_)
+        | OpenRoomError::NoRoom(_)
+        | OpenRoomError::NoActorModel { .. } => Status::not_found(m),
+        OpenRoomError::TooManyActors { .. } => Status::invalid_argument(m),
+        OpenRoomError::ActorsNotServed(_) => Status::unimplemented(m),
         OpenRoomError::Spec(SpecError::TokenDigest(_)) => Status::internal(m),
         OpenRoomError::Spec(_) | OpenRoomError::Capture(_) => Status::invalid_argument(m),
         OpenRoomError::Room(RoomError::BadId(_)) => Status::invalid_argument(format!("room: {m}")),

@@ -1011,3 +1011,85 @@ async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
         .into_inner();
     assert_eq!(room.published, ok, "{room:?}");
 }
+
+/// Issue 38's rooms of actors, as far as they are built: the request is checked (the actor
+/// and field named, the cap, the models), and a room that checks out is refused as not yet run,
+/// leaving no room behind; a one-actor room opens as it always did.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rooms_of_actors_are_checked_and_refused_until_they_run() {
+    let model = model();
+    let running = serve_tube(
+        &model,
+        Limits {
+            actors_per_room: 2,
+            ..Limits::default()
+        },
+    )
+    .await;
+    let url = format!("http://{}", running.grpc);
+    let mut client = CreaseClient::connect(url).await.unwrap();
+    let actor = |name: &str, model: &str, side: &str| v1::Actor {
+        name: name.into(),
+        model: model.into(),
+        side: side.into(),
+        mirror: if side == "left" {
+            "x".into()
+        } else {
+            String::new()
+        },
+        ..Default::default()
+    };
+    let open = |actors: Vec<v1::Actor>| {
+        authed(
+            v1::OpenRoomRequest {
+                room: "performer".into(),
+                actors,
+                ..Default::default()
+            },
+            ADMIN,
+        )
+    };
+    let both = vec![
+        actor("right", "tube", "right"),
+        actor("left", "tube", "left"),
+    ];
+
+    let err = client.open_room(open(both.clone())).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::Unimplemented, "{err}");
+    assert!(err.message().contains("open one room per actor"), "{err}");
+
+    let mut three = both.clone();
+    three.push(actor("extra", "tube", ""));
+    let err = client.open_room(open(three)).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::InvalidArgument, "{err}");
+    assert_eq!(
+        err.message(),
+        "actors: 3 listed, a room holds at most 2 (--max-actors)"
+    );
+
+    let mut unknown = both.clone();
+    unknown[1].model = "horse".into();
+    let err = client.open_room(open(unknown)).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::NotFound, "{err}");
+    assert_eq!(err.message(), "actor \"left\": model: no model \"horse\"");
+
+    let mut sideways = both.clone();
+    sideways[0].side = "up".into();
+    let err = client.open_room(open(sideways)).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::InvalidArgument, "{err}");
+    assert!(
+        err.message().starts_with("actor \"right\": side: \"up\""),
+        "{err}"
+    );
+
+    // Nothing was left open, and the one-actor room of the same id opens as before.
+    let single = authed(
+        v1::OpenRoomRequest {
+            room: "performer".into(),
+            model: "tube".into(),
+            ..Default::default()
+        },
+        ADMIN,
+    );
+    client.open_room(single).await.unwrap();
+}

@@ -211,6 +211,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         retarget,
         refine: args.refine.map(v1::Refine::from),
         skinning: super::common::skinning_wire(args.skinning),
+        actors: Vec::new(),
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
