@@ -3,7 +3,7 @@
 //! an `Arc` of theirs. Each model carries the SHA-256 of its serialised form, which names it
 //! across replicas (`crate::cluster`).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock, RwLock};
 
@@ -11,7 +11,7 @@ use crease_core::codec::palette::PaletteHeader;
 use crease_core::codec::spatial_order;
 use crease_core::glam::Vec3;
 use crease_core::mesh::subdivision::LoopSubdivision;
-use crease_core::model::TrainedModel;
+use crease_core::model::{MirrorPlane, ModelError, TrainedModel};
 use crease_core::runtime::skin::{BonePalette, skin_lbs};
 use crease_proto::{Level, PaletteParts, model_info, palette_topology_message, v1};
 use prost::Message as _;
@@ -236,6 +236,9 @@ pub enum RegistryError {
 #[derive(Debug, Default)]
 pub struct ModelRegistry {
     models: RwLock<BTreeMap<String, Arc<LoadedModel>>>,
+    /// Mirrored variants (issue 38: a left-hand actor on a right-hand model), built on first
+    /// need and kept while their model is: by model name and plane. Not listed.
+    mirrored: RwLock<HashMap<(String, String), Arc<LoadedModel>>>,
 }
 
 /// SHA-256 of `bytes`, lowercase hex.
@@ -275,9 +278,49 @@ impl ModelRegistry {
         Ok(registry)
     }
 
-    /// Adds (or replaces) a model under `name`.
+    /// Adds (or replaces) a model under `name` (and forgets its mirrored variants).
     pub fn insert(&self, name: &str, model: TrainedModel) -> Arc<LoadedModel> {
-        let loaded = Arc::new(LoadedModel {
+        let loaded = Self::loaded(name, model);
+        self.write().insert(name.to_owned(), Arc::clone(&loaded));
+        (self.mirrored.write().unwrap_or_else(|e| e.into_inner()))
+            .retain(|(model, _), _| model != name);
+        loaded
+    }
+
+    /// The model named `name` mirrored across `plane` (`TrainedModel::mirrored`), built on the
+    /// first call and shared after. Named `name~mirror-PLANE` in its `ModelInfo` and streams;
+    /// never listed. Blocking (a copy of the model, and its detail layer's subdivision): call
+    /// it on the blocking pool.
+    ///
+    /// # Errors
+    /// `None` inside when there is no such model; the mirror's [`ModelError`] otherwise.
+    pub fn mirrored(
+        &self,
+        name: &str,
+        plane: &MirrorPlane,
+    ) -> Option<Result<Arc<LoadedModel>, ModelError>> {
+        let key = (name.to_owned(), plane.to_string());
+        let cached = |r: &Self| {
+            (r.mirrored.read().unwrap_or_else(|e| e.into_inner()))
+                .get(&key)
+                .cloned()
+        };
+        if let Some(m) = cached(self) {
+            return Some(Ok(m));
+        }
+        let original = self.get(name)?;
+        let model = match original.model.mirrored(plane) {
+            Ok(m) => m,
+            Err(e) => return Some(Err(e)),
+        };
+        let loaded = Self::loaded(&format!("{name}~mirror-{plane}"), model);
+        let mut map = self.mirrored.write().unwrap_or_else(|e| e.into_inner());
+        // Two first calls at once: both built it, the first one in is shared.
+        Some(Ok(Arc::clone(map.entry(key).or_insert(loaded))))
+    }
+
+    fn loaded(name: &str, model: TrainedModel) -> Arc<LoadedModel> {
+        Arc::new(LoadedModel {
             name: name.to_owned(),
             info: model_info(name, &model),
             pose_bounds: pose_bounds(&model),
@@ -286,9 +329,7 @@ impl ModelRegistry {
             detail_spatial: OnceLock::new(),
             palette: [OnceLock::new(), OnceLock::new()],
             model: Arc::new(model),
-        });
-        self.write().insert(name.to_owned(), Arc::clone(&loaded));
-        loaded
+        })
     }
 
     fn write(&self) -> std::sync::RwLockWriteGuard<'_, BTreeMap<String, Arc<LoadedModel>>> {

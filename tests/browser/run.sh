@@ -48,8 +48,7 @@ echo "== npm ci (web/, tests/browser/)"
 (cd web && npm ci --no-audit --no-fund)
 (cd tests/browser && npm ci --no-audit --no-fund)
 
-echo "== build (crease-server, crease)"
-cargo build --release --locked -p crease-demo -p crease-cli
+build_binaries
 
 token="browser-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 admin="admin-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"

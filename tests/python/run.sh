@@ -47,8 +47,7 @@ fi
 "$venv/bin/python" -m pip freeze --disable-pip-version-check | tr '\n' ' '
 echo
 
-echo "== build (crease-server, crease)"
-cargo build --release --locked -p crease-demo -p crease-cli
+build_binaries
 
 start_demo_server
 

@@ -177,6 +177,19 @@ impl MirrorPlane {
     }
 }
 
+/// `x`, `y` or `z` for the axis planes, else the normal `nx,ny,nz`: what
+/// [`MirrorPlane::parse`] reads back (a room's `Actor.mirror`, a mirrored model's name).
+impl std::fmt::Display for MirrorPlane {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.normal.to_array() {
+            [1.0, 0.0, 0.0] => f.write_str("x"),
+            [0.0, 1.0, 0.0] => f.write_str("y"),
+            [0.0, 0.0, 1.0] => f.write_str("z"),
+            [x, y, z] => write!(f, "{x},{y},{z}"),
+        }
+    }
+}
+
 impl std::str::FromStr for MirrorPlane {
     type Err = MirrorPlaneError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
@@ -513,6 +526,26 @@ mod tests {
             MirrorPlane::parse("nan,0,1"),
             Err(MirrorPlaneError::Normal(_))
         ));
+    }
+
+    #[test]
+    fn planes_print_as_they_parse() {
+        for text in [
+            "x",
+            "y",
+            "z",
+            "0.6,0.8,0",
+            "-0.26726124,0.5345225,0.80178374",
+        ] {
+            let plane = MirrorPlane::parse(text).unwrap();
+            let back = MirrorPlane::parse(&plane.to_string()).unwrap();
+            assert!(
+                (back.normal() - plane.normal()).length() < 1e-6,
+                "{text}: {back:?}"
+            );
+        }
+        assert_eq!(MirrorPlane::parse("0,2,0").unwrap().to_string(), "y");
+        assert_eq!(MirrorPlane::parse("-1,0,0").unwrap().to_string(), "-1,0,0");
     }
 
     #[test]
