@@ -9,6 +9,8 @@
 //! - `crease-proto`'s sources never name the predictor that runs frames (`Predictor`,
 //!   `FrameContext`) or the glTF writer (`gltf_export`): exporting and re-predicting takes is
 //!   the server's and the command line's business, not the contract's.
+//! - In the server's library, only the gRPC service and `server::status` name tonic's
+//!   `Status`: below the transports errors are typed.
 //!
 //! The message names are read from `proto/crease/v1/*.proto`; the sources are scanned as
 //! tokens (`source_scan`), comments, strings and unit-test modules dropped.
@@ -257,6 +259,32 @@ fn only_crease_proto_and_the_transport_modules_construct_wire_messages() {
             "{file} builds no wire message any more: remove it from KNOWN ({why})"
         );
     }
+}
+
+/// ARCHITECTURE.md's "no `tonic::Status` below the transports" (issue 37): in the server's
+/// library sources only the gRPC service and the one status table (`server::status`) name
+/// tonic's `Status`; everything else returns typed errors that the table maps.
+#[test]
+fn only_grpc_and_the_status_table_name_tonic_status() {
+    const ALLOWED: [&str; 2] = ["server/src/grpc.rs", "server/src/status.rs"];
+    let root = repo();
+    let mut files = Vec::new();
+    rust_files(&root.join("server/src"), &mut files);
+    files.sort();
+    let mut found = Vec::new();
+    for f in files {
+        let rel = relative(&root, &f);
+        let toks = drop_test_modules(tokens(&std::fs::read_to_string(&f).unwrap()));
+        let ident = |name: &str| toks.iter().any(|t| matches!(t, Tok::Ident(n) if n == name));
+        if ident("tonic") && ident("Status") && !ALLOWED.contains(&rel.as_str()) {
+            found.push(rel);
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "tonic::Status named below the transports (return a typed error and map it in \
+         server/src/status.rs): {found:?}"
+    );
 }
 
 #[test]

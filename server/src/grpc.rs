@@ -357,14 +357,14 @@ impl Crease for CreaseService {
     }
 }
 
-/// `stream`, holding `permit` (a stream slot) until it is dropped.
+/// `stream`, holding `permit` (a stream slot) until it is dropped, its error as a status.
 fn holding<T: Send + 'static>(
     permit: Permit,
-    stream: impl Stream<Item = Result<T, Status>> + Send + 'static,
+    stream: impl Stream<Item = Result<T, crate::stream::StreamError>> + Send + 'static,
 ) -> BoxStream<T> {
     Box::pin(tokio_stream::StreamExt::map(stream, move |item| {
         let _held = &permit;
-        item
+        item.map_err(|e| status::stream(&e))
     }))
 }
 

@@ -1,8 +1,9 @@
 //! How each typed error of the library reads on the wire, once per transport: its gRPC status
-//! (`tonic::Status`, for [`crate::grpc`] and the mesh streams of [`crate::stream`]) and its
+//! (`tonic::Status`, for [`crate::grpc`], whose mesh streams end in a [`StreamError`]) and its
 //! HTTP status (for [`crate::http`] and the WebSocket upgrade, [`crate::ws`]). Nothing below
 //! the transports builds a status: the library returns [`OpenRoomError`], [`PublishError`],
-//! [`TakeOpError`] and the like, and this is the one place that says what each becomes.
+//! [`StreamError`], [`TakeOpError`] and the like, and this is the one place that says what
+//! each becomes.
 
 use axum::http::StatusCode;
 use tonic::Status;
@@ -11,6 +12,7 @@ use crate::ingest::PublishError;
 use crate::pipeline::BuildError;
 use crate::room::{ChannelRefused, RoomError};
 use crate::state::OpenRoomError;
+use crate::stream::StreamError;
 use crate::take_service::TakeOpError;
 use crate::takes::TakeError;
 use crease_proto::errors::{ErrorCode, batch_error_status, batch_status};
@@ -27,6 +29,16 @@ pub fn batch(e: &PublishError, index: usize) -> Status {
     match e {
         PublishError::Wire(w) => batch_status(index, w),
         e => batch_error_status(index, e.code(), None, &e.to_string()),
+    }
+}
+
+/// gRPC: why a mesh stream ended early: a palette header the model cannot give is the
+/// request's precondition, a refused batch frame its batch status, the rest a server bug.
+pub fn stream(e: &StreamError) -> Status {
+    match e {
+        StreamError::PaletteHeader(m) => Status::failed_precondition(m.clone()),
+        StreamError::Internal { .. } => Status::internal(e.to_string()),
+        StreamError::Batch { index, error } => batch(error, *index),
     }
 }
 

@@ -10,45 +10,76 @@
 //! the first time a subscriber needs it). A batch runs its frames through a private room, in
 //! order, with a bounded response buffer; a refused frame ends it with a status naming the
 //! frame by index in its details (`crate::status::batch`, whatever the refusal).
+//!
+//! A stream that ends early ends with a typed [`StreamError`]; the transports turn it into
+//! their status (`crate::status::stream`).
 
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::ingest::{self, PublishError};
+use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
+use crate::state::AppState;
 use crease_proto::{Level, TopologyParts, frame_message, topology_message, v1};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
-use tonic::Status;
-
-use crate::ingest;
-use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
-use crate::state::AppState;
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;
 
+/// Why a mesh stream ended early.
+#[derive(Debug, thiserror::Error)]
+pub enum StreamError {
+    /// The model's palette header at the stream's level cannot be built.
+    #[error("{0}")]
+    PaletteHeader(String),
+    /// Encoding a frame or the index buffer failed, or its blocking task died: a server bug.
+    #[error("{what}: {message}")]
+    Internal {
+        /// What was being built.
+        what: &'static str,
+        /// The failure.
+        message: String,
+    },
+    /// A batch's frame `index` was refused.
+    #[error("frame {index}: {error}")]
+    Batch {
+        /// The frame's index in the batch.
+        index: usize,
+        /// Why.
+        error: PublishError,
+    },
+}
+
+/// A [`StreamError::Internal`] of `what` from any error.
+fn internal<E: std::fmt::Display>(what: &'static str) -> impl Fn(E) -> StreamError {
+    move |e| StreamError::Internal {
+        what,
+        message: e.to_string(),
+    }
+}
+
 /// The first message of a mesh stream on `channel`: a vertex stream's topology, or a palette
 /// stream's header (built once per model and level on the blocking pool, then shared).
-async fn first_message(room: &Arc<Room>, channel: Channel) -> Result<v1::MeshFrame, Status> {
+async fn first_message(room: &Arc<Room>, channel: Channel) -> Result<v1::MeshFrame, StreamError> {
     match channel.encoding {
         Encoding::Vertices => topology(room, channel.level),
         Encoding::Palette => {
             let (model, level) = (Arc::clone(&room.model), channel.level);
             tokio::task::spawn_blocking(move || model.palette_topology(level))
                 .await
-                .map_err(|e| Status::internal(format!("palette header: {e}")))?
-                .map_err(Status::failed_precondition)
+                .map_err(internal("palette header"))?
+                .map_err(StreamError::PaletteHeader)
         }
     }
 }
 
 /// The first message of a vertex stream.
-fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
+fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, StreamError> {
     let p = room.pipeline();
-    let indices = p
-        .encoded_indices(level)
-        .map_err(|e| Status::internal(format!("index buffer: {e}")))?;
+    let indices = p.encoded_indices(level).map_err(internal("index buffer"))?;
     Ok(topology_message(TopologyParts {
         model: &room.model.name,
         level,
@@ -63,16 +94,19 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, Status> {
 /// The bytes of `update` for a subscriber whose last received codec frame is `last_sent`
 /// (updated): shared with the other subscribers, not copied. A keyframe the subscriber needs
 /// is encoded on the blocking pool.
-async fn bytes_for(update: &Arc<MeshUpdate>, last_sent: &mut Option<u32>) -> Result<Bytes, Status> {
+async fn bytes_for(
+    update: &Arc<MeshUpdate>,
+    last_sent: &mut Option<u32>,
+) -> Result<Bytes, StreamError> {
     let bytes = if update.fits(*last_sent) {
         update.frame_for(*last_sent)
     } else {
         let (u, last) = (Arc::clone(update), *last_sent);
         tokio::task::spawn_blocking(move || u.frame_for(last))
             .await
-            .map_err(|e| Status::internal(format!("encoding: {e}")))?
+            .map_err(internal("encoding"))?
     }
-    .map_err(|e| Status::internal(format!("encoding: {e}")))?;
+    .map_err(internal("encoding"))?;
     *last_sent = Some(update.codec_seq());
     Ok(bytes)
 }
@@ -84,7 +118,7 @@ pub fn subscribe(
     room: Arc<Room>,
     channel: Channel,
     sub: Subscription,
-) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
+) -> impl Stream<Item = Result<v1::MeshFrame, StreamError>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
     let receiver_gone = tx.clone();
     let closing = state.closing();
@@ -150,7 +184,7 @@ pub fn batch(
     room: Room,
     level: Level,
     frames: Vec<v1::ControlFrame>,
-) -> impl Stream<Item = Result<v1::MeshFrame, Status>> + Send + 'static {
+) -> impl Stream<Item = Result<v1::MeshFrame, StreamError>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
     let room = Arc::new(room);
     tokio::spawn(async move {
@@ -169,8 +203,8 @@ pub fn batch(
             let outcome = ingest::process(Arc::clone(&room), frame, Instant::now()).await;
             let latency = match outcome {
                 Ok(p) => p.latency_us,
-                Err(e) => {
-                    let _ = tx.send(Err(crate::status::batch(&e, k))).await;
+                Err(error) => {
+                    let _ = tx.send(Err(StreamError::Batch { index: k, error })).await;
                     return;
                 }
             };

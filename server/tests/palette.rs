@@ -49,6 +49,19 @@ fn model_ref() -> TrainedModel {
     common::model()
 }
 
+/// At both levels the palette stream was quantised (some error) and its bound is not vacuous
+/// (the worst error is a real fraction of it); `compare_encodings` checked it holds.
+fn assert_bounds_bite(r: &common::palette_check::PaletteReport) {
+    for li in 0..2 {
+        assert!(r.palette_error[li] > 0.0, "level {li}: no error at all");
+        assert!(
+            r.worst_ratio[li] > 1e-3,
+            "level {li}: worst error / bound {}",
+            r.worst_ratio[li]
+        );
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn palette_streams_match_vertex_streams_at_both_levels() {
     let model = tube_with_posed_detail();
@@ -59,15 +72,7 @@ async fn palette_streams_match_vertex_streams_at_both_levels() {
     let url = format!("http://{}", running.grpc);
     let r = compare_encodings(&url, ADMIN, "tube", &model, frames).await;
     eprintln!("{r:#?}");
-    for li in 0..2 {
-        // Quantised: some error, and the bound is not vacuous.
-        assert!(r.palette_error[li] > 0.0, "level {li}: no error at all");
-        assert!(
-            r.worst_ratio[li] > 1e-3,
-            "level {li}: worst error / bound {}",
-            r.worst_ratio[li]
-        );
-    }
+    assert_bounds_bite(&r);
 }
 
 /// The WebSocket sends a palette header the model encoded once: every subscriber gets the
@@ -178,12 +183,5 @@ async fn a_mirrored_model_streams_palettes_that_match_its_vertices() {
     let url = format!("http://{}", running.grpc);
     let r = compare_encodings(&url, ADMIN, "tube-left", &model, frames).await;
     eprintln!("{r:#?}");
-    for li in 0..2 {
-        assert!(r.palette_error[li] > 0.0, "level {li}: no error at all");
-        assert!(
-            r.worst_ratio[li] > 1e-3,
-            "level {li}: worst error / bound {}",
-            r.worst_ratio[li]
-        );
-    }
+    assert_bounds_bite(&r);
 }
