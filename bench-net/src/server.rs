@@ -10,10 +10,10 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use crease_proto::v1;
 use tokio::time::Instant;
 
 use super::args::BenchNetArgs;
+use crease_remote::client::list_models;
 use crease_remote::connect;
 
 /// How long the spawned server may take to load its model and listen: the horse loads in
@@ -159,7 +159,7 @@ pub(super) async fn spawn_server_with(
             );
         }
         if let Ok(mut client) = connect(&url, None).await
-            && client.list_models(v1::ListModelsRequest {}).await.is_ok()
+            && list_models(&mut client).await.is_ok()
         {
             break;
         }

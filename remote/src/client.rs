@@ -51,6 +51,18 @@ pub async fn connect(server: &str, ca: Option<&Path>) -> anyhow::Result<CreaseCl
     Ok(CreaseClient::new(channel).max_decoding_message_size(MAX_RESPONSE_BYTES))
 }
 
+/// The models the server hosts (`ListModels`).
+///
+/// # Errors
+/// The server's refusal or an unreachable server.
+pub async fn list_models(client: &mut CreaseClient<Channel>) -> anyhow::Result<Vec<v1::ModelInfo>> {
+    client
+        .list_models(v1::ListModelsRequest {})
+        .await
+        .map(|r| r.into_inner().models)
+        .map_err(|s| anyhow::anyhow!("listing the models: {}", s.message()))
+}
+
 /// The server's description of `room` (its model, settings and counters).
 ///
 /// # Errors
