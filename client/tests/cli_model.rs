@@ -37,53 +37,44 @@ fn model_mirror_writes_the_mirrored_model() {
         model.mirrored(&MirrorPlane::parse("z").unwrap()).unwrap()
     );
     // Independently of the library: z negated, each triangle's winding reversed.
-    for (p, q) in model
-        .rig
-        .rest
-        .positions
-        .iter()
-        .zip(&written.rig.rest.positions)
-    {
-        assert_eq!(*q, Vec3::new(p.x, p.y, -p.z));
-    }
-    for (t, u) in model
-        .rig
-        .rest
-        .triangles
-        .iter()
-        .zip(&written.rig.rest.triangles)
-    {
-        assert_eq!(*u, [t[0], t[2], t[1]]);
-    }
+    let rest = &model.rig.rest;
+    let negated: Vec<Vec3> = (rest.positions.iter())
+        .map(|p| Vec3::new(p.x, p.y, -p.z))
+        .collect();
+    let reversed: Vec<[u32; 3]> = rest.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect();
+    assert_eq!(written.rig.rest.positions, negated);
+    assert_eq!(written.rig.rest.triangles, reversed);
+}
+
+/// `crease model mirror ARGS`'s stderr, after checking that it failed.
+fn refused(args: &[&std::ffi::OsStr]) -> String {
+    let out = crease()
+        .args(["model", "mirror"])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "{args:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 #[test]
 fn model_mirror_names_a_bad_plane_and_a_missing_file() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("right.crease");
+    let out = dir.path().join("x.crease");
     crease_testkit::model::model().save(&input).unwrap();
-    let out = crease()
-        .args(["model", "mirror"])
-        .arg(&input)
-        .args(["--plane", "0,0,0", "--out"])
-        .arg(dir.path().join("x.crease"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let stderr = refused(&[
+        input.as_os_str(),
+        "--plane".as_ref(),
+        "0,0,0".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
     assert!(
         stderr.contains("--plane") && stderr.contains("zero"),
         "stderr: {stderr}"
     );
     let missing = dir.path().join("nowhere.crease");
-    let out = crease()
-        .args(["model", "mirror"])
-        .arg(&missing)
-        .args(["--out"])
-        .arg(dir.path().join("x.crease"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let stderr = refused(&[missing.as_os_str(), "--out".as_ref(), out.as_os_str()]);
     assert!(stderr.contains("nowhere.crease"), "stderr: {stderr}");
 }

@@ -9,23 +9,19 @@
 //!   "Files kept whole" section names it.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
+mod source_scan;
+
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use serde_json::Value;
+use source_scan::{repo, rust_files};
 
 /// The external crates `crease-core` must never reach (ARCHITECTURE.md, "Rules").
 const CORE_NEVER: [&str; 4] = ["tokio", "tonic", "axum", "prost"];
 /// Longest library source file the house allows without a stated reason.
 const MAX_LINES: usize = 1000;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("client/ sits in the workspace root")
-        .to_path_buf()
-}
 
 fn architecture() -> String {
     let path = repo().join("ARCHITECTURE.md");
@@ -288,21 +284,6 @@ fn core_stays_free_of_async_and_the_wire() {
     // The check can see: the server does reach all four.
     let server = reachable(meta, "crease-server");
     assert!(CORE_NEVER.iter().all(|c| server.contains(*c)), "{server:?}");
-}
-
-/// Every `.rs` file below `dir`.
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for e in entries {
-        let path = e.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            out.push(path);
-        }
-    }
 }
 
 #[test]

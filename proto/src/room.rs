@@ -159,17 +159,6 @@ pub enum Side {
     Right,
 }
 
-impl Side {
-    /// The wire's spelling: `""`, `"left"`, `"right"`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Side::None => "",
-            Side::Left => "left",
-            Side::Right => "right",
-        }
-    }
-}
-
 /// One actor of a room (`v1::Actor`), checked: a name unique in its room, its model, side,
 /// mirror plane, performer and options.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -206,9 +195,9 @@ impl ActorSpec {
             field,
             message,
         };
-        check_name(&a.name).map_err(|m| bad("name", m))?;
+        check_identifier(&a.name, ACTOR_NAME_MAX).map_err(|m| bad("name", m))?;
         if !a.performer.is_empty() {
-            check_name(&a.performer).map_err(|m| bad("performer", m))?;
+            check_identifier(&a.performer, ACTOR_NAME_MAX).map_err(|m| bad("performer", m))?;
         }
         if a.model.is_empty() {
             return Err(bad(
@@ -255,11 +244,16 @@ impl ActorSpec {
     }
 }
 
-/// 1 to [`ACTOR_NAME_MAX`] characters of `[A-Za-z0-9_-]`.
-fn check_name(name: &str) -> Result<(), String> {
-    if name.is_empty() || name.len() > ACTOR_NAME_MAX {
+/// The server's one rule for the names it keeps (room and take ids, actor and performer names):
+/// 1 to `max` characters of `[A-Za-z0-9_-]`, so a name is also a plain file name. The error
+/// says what is wrong with `name`.
+///
+/// # Errors
+/// The length, or the first character outside the set.
+pub fn check_identifier(name: &str, max: usize) -> Result<(), String> {
+    if name.is_empty() || name.len() > max {
         return Err(format!(
-            "{name:?} has {} characters, expected 1 to {ACTOR_NAME_MAX}",
+            "{name:?} has {} characters, expected 1 to {max}",
             name.len()
         ));
     }

@@ -300,12 +300,10 @@ impl ModelRegistry {
         plane: &MirrorPlane,
     ) -> Option<Result<Arc<LoadedModel>, ModelError>> {
         let key = (name.to_owned(), plane.to_string());
-        let cached = |r: &Self| {
-            (r.mirrored.read().unwrap_or_else(|e| e.into_inner()))
-                .get(&key)
-                .cloned()
-        };
-        if let Some(m) = cached(self) {
+        let cached = (self.mirrored.read().unwrap_or_else(|e| e.into_inner()))
+            .get(&key)
+            .cloned();
+        if let Some(m) = cached {
             return Some(Ok(m));
         }
         let original = self.get(name)?;

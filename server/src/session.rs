@@ -50,12 +50,9 @@ pub struct Session {
     subscribers: Arc<AtomicUsize>,
 }
 
-/// Whether `id` is a valid room id.
+/// Whether `id` is a valid room id: 1-64 characters of `[A-Za-z0-9_-]`.
 pub fn valid_room_id(id: &str) -> bool {
-    (1..=64).contains(&id.len())
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    crease_proto::room::check_identifier(id, 64).is_ok()
 }
 
 /// A random 128-bit token, hex.

@@ -17,14 +17,15 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use crate::ingest::{self, PublishError};
-use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
-use crate::state::AppState;
 use crease_proto::{Level, TopologyParts, frame_message, topology_message, v1};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
+
+use crate::ingest::{self, PublishError};
+use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
+use crate::state::AppState;
 
 /// Frames buffered per mesh stream: one in flight, one ready.
 const BUFFER: usize = 2;

@@ -85,10 +85,7 @@ pub enum TakeError {
 /// Whether `id` can name a take: 1-160 characters of `[A-Za-z0-9_-]` (a room id, a stamp and a
 /// counter), so it is a plain file name.
 pub fn valid_take_id(id: &str) -> bool {
-    (1..=160).contains(&id.len())
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    crease_proto::room::check_identifier(id, 160).is_ok()
 }
 
 /// `secs` after the Unix epoch as `YYYYMMDDTHHMMSSZ` (UTC; the proleptic Gregorian calendar,

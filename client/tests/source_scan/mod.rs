@@ -1,7 +1,7 @@
-//! What the house-rule tests share (`module_cycles.rs`, `wire_shapes.rs`, `layouts.rs`): the
-//! workspace's members and files, and a source scanner: Rust
-//! source as tokens, with comments, strings and char literals dropped, and the `#[cfg(test)]`
-//! module blocks taken out. A text scan, no parser: enough to follow paths and braces.
+//! What the house-rule tests share (`house_rules.rs`, `module_cycles.rs`, `wire_shapes.rs`,
+//! `layouts.rs`): the workspace's members and files, and a source scanner: Rust source as
+//! tokens, with comments, strings and char literals dropped, and the `#[cfg(test)]` module
+//! blocks taken out. A text scan, no parser: enough to follow paths and braces.
 #![allow(dead_code)] // each test binary uses its own part
 
 use std::path::{Path, PathBuf};
