@@ -21,6 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Encoded mesh frames are made once per room and sent to every subscriber: as `Bytes`
         // each message shares them instead of copying.
         .bytes(".crease.v1.Frame.data")
+        .bytes(".crease.v1.ActorFrame.data")
         // A palette header (several MB at the detail level) is made once per room and level.
         .bytes(".crease.v1.PaletteTopology")
         .bytes(".crease.v1.SubdivisionStep")

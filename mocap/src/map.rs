@@ -139,6 +139,16 @@ impl MarkerMap {
         Self::parse(path, &text)
     }
 
+    /// The capture markers the map reads (its `[markers]` sources), each once: what a
+    /// publisher must send a room that retargets through it.
+    pub fn marker_names(&self) -> std::collections::BTreeSet<String> {
+        self.markers
+            .values()
+            .flat_map(Source::terms)
+            .map(|(m, _)| m)
+            .collect()
+    }
+
     /// Resolves names against `recording` and the model's control point names (in model order).
     pub fn bind(
         &self,

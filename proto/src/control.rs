@@ -192,6 +192,19 @@ pub fn control_frame_flat(
     }
 }
 
+/// Actor `actor`'s part of a control frame of a room of several actors: `frame`'s points (or
+/// markers) and masks, moved, not copied (its room, sequence number and time belong to the
+/// frame that carries the part).
+pub fn actor_controls(actor: &str, frame: v1::ControlFrame) -> v1::ActorControls {
+    v1::ActorControls {
+        actor: actor.to_owned(),
+        positions: frame.positions,
+        valid: frame.valid,
+        markers: frame.markers,
+        markers_valid: frame.markers_valid,
+    }
+}
+
 /// A control frame for the wire: `positions` flattened to `x, y, z` (a point that is not
 /// finite is sent as zeros; mark it invalid), and the validity mask, left empty when every
 /// point is valid (which the server reads as "all valid").

@@ -131,6 +131,19 @@ pub struct AckParts {
     pub confidence: f32,
 }
 
+/// Actor `actor`'s part of a published frame's ack (a room of several actors): whether it was
+/// missing from the frame and `held` its pose, and its figures (`server_latency_us` unused).
+pub fn actor_ack(actor: &str, held: bool, p: AckParts) -> v1::ActorAck {
+    v1::ActorAck {
+        actor: actor.to_owned(),
+        held,
+        held_controls: p.held_controls,
+        control_residual: p.control_residual,
+        control_residual_capture: p.control_residual_capture,
+        confidence: p.confidence,
+    }
+}
+
 /// The ack of frame `seq`, published.
 pub fn ok_ack(seq: u64, p: AckParts) -> v1::PublishAck {
     v1::PublishAck {

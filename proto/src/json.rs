@@ -234,6 +234,27 @@ pub struct RoomDocument {
     /// the viewer asks for vertex frames); absent in LBS rooms.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skinning: Option<String>,
+    /// A room of several actors (issue 38): each actor, in the room's order (the fields above
+    /// then describe the first). Absent in a one-actor room.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub actors: Vec<ActorDocument>,
+}
+
+/// One actor of a room of several in a [`RoomDocument`]: its name, side and performer, and the
+/// document of its model (its control points' names as the actor's model has them: mirrored
+/// models swap sides).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ActorDocument {
+    /// The actor's name (`ActorFrame.actor` indexes the room's actors in this order).
+    pub name: String,
+    /// `left`, `right`, or absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub side: Option<String>,
+    /// The performer it belongs to.
+    pub performer: String,
+    /// Its model, beta, capture and control points.
+    #[serde(flatten)]
+    pub room: RoomDocument,
 }
 
 /// A retargeting room's capture in a [`RoomDocument`] (`v1::Retarget`'s markers and units).
@@ -303,6 +324,7 @@ impl RoomDocument {
             model: info.name.clone(),
             room: room.to_owned(),
             skinning: None,
+            actors: Vec::new(),
         }
     }
 }

@@ -158,6 +158,55 @@ pub fn frame_message(
     }
 }
 
+/// Names the actor of a stream's first message (a `Topology` or a `PaletteTopology`) in a room
+/// of several actors (issue 38): its name, its index (`ActorFrame.actor`) and how many first
+/// messages the stream sends. Other messages are left as they are.
+pub fn name_actor(message: &mut v1::MeshFrame, actor: &str, index: usize, count: usize) {
+    let (name, i, n) = match &mut message.body {
+        Some(v1::mesh_frame::Body::Topology(t)) => {
+            (&mut t.actor, &mut t.actor_index, &mut t.actor_count)
+        }
+        Some(v1::mesh_frame::Body::PaletteTopology(p)) => {
+            (&mut p.actor, &mut p.actor_index, &mut p.actor_count)
+        }
+        _ => return,
+    };
+    actor.clone_into(name);
+    *i = index as u32;
+    *n = count as u32;
+}
+
+/// Actor `index`'s part of a room of several actors' frame: its encoded frame (shared, not
+/// copied), and whether it `held` its pose (missing from the control frame).
+pub fn actor_frame(index: usize, data: Bytes, held: bool) -> v1::ActorFrame {
+    v1::ActorFrame {
+        actor: index as u32,
+        data,
+        held,
+    }
+}
+
+/// A room of several actors' frame: every actor's encoded frame of one instant (`data` shared,
+/// not copied), in the room's actor order, under one sequence number and capture time.
+pub fn actors_frame_message(
+    seq: u64,
+    capture_time_us: i64,
+    server_latency_us: u32,
+    skipped: u32,
+    actors: Vec<v1::ActorFrame>,
+) -> v1::MeshFrame {
+    v1::MeshFrame {
+        body: Some(v1::mesh_frame::Body::Frame(v1::Frame {
+            seq,
+            capture_time_us,
+            server_latency_us,
+            data: Bytes::new(),
+            skipped,
+            actors,
+        })),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

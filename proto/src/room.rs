@@ -159,6 +159,17 @@ pub enum Side {
     Right,
 }
 
+impl Side {
+    /// Its name on the wire: `left`, `right`, or empty.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Side::None => "",
+            Side::Left => "left",
+            Side::Right => "right",
+        }
+    }
+}
+
 /// One actor of a room (`v1::Actor`), checked: a name unique in its room, its model, side,
 /// mirror plane, performer and options.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -177,6 +188,39 @@ pub struct ActorSpec {
     pub options: RoomOptions,
     /// A retargeting actor's map and markers, as sent.
     pub retarget: Option<v1::Retarget>,
+}
+
+impl ActorSpec {
+    /// What `RoomInfo.actors` lists of this actor: [`ActorSpec::running`], and its `model` as
+    /// the actor uses it (mirrored: its control points' names swapped).
+    pub fn info(&self, beta: f32, skinning: Skinning, model: v1::ModelInfo) -> v1::ActorInfo {
+        v1::ActorInfo {
+            actor: Some(self.running(beta, skinning)),
+            model: Some(model),
+        }
+    }
+
+    /// The actor as it runs: this spec with the `beta` and `skinning` in use (what
+    /// `ActorInfo.actor` and a take's header carry). A performer of its own is left empty.
+    pub fn running(&self, beta: f32, skinning: Skinning) -> v1::Actor {
+        let o = &self.options;
+        v1::Actor {
+            name: self.name.clone(),
+            model: self.model.clone(),
+            side: self.side.as_str().to_owned(),
+            mirror: self.mirror.map(|m| m.to_string()).unwrap_or_default(),
+            performer: if self.performer == self.name {
+                String::new()
+            } else {
+                self.performer.clone()
+            },
+            beta,
+            filter: o.filter.map(v1::MarkerFilter::from),
+            retarget: self.retarget.clone(),
+            refine: o.refine.map(v1::Refine::from),
+            skinning: v1::Skinning::from(skinning) as i32,
+        }
+    }
 }
 
 /// The longest actor or performer name.

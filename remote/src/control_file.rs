@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use crease_core::glam::Vec3;
 
 /// One frame of control points with its validity mask.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ControlFrame {
     /// Positions (occluded ones are NaN).
     pub positions: Vec<Vec3>,

@@ -223,8 +223,12 @@ impl StreamReader {
 /// A room's mesh stream: the message it started with, then its frames.
 #[derive(Debug)]
 pub struct Subscription {
-    /// The stream's first message: a topology, or a palette header.
+    /// The stream's first message: a topology, or a palette header (a room of several
+    /// actors': the first actor's).
     pub first: v1::MeshFrame,
+    /// A room of several actors (issue 38): every actor's first message, in the room's actor
+    /// order (`ActorFrame.actor` indexes them); empty in a one-actor room.
+    pub actors: Vec<v1::MeshFrame>,
     stream: tonic::Streaming<v1::MeshFrame>,
 }
 
@@ -261,6 +265,36 @@ impl Subscription {
     /// A first message that does not decode.
     pub fn stream_reader(&self) -> anyhow::Result<StreamReader> {
         StreamReader::new(&self.first)
+    }
+
+    /// A reader per actor of a room of several actors' vertex stream (one, of `first`, in a
+    /// one-actor room): decode `ActorFrame.data` of actor `i` with reader `i`.
+    ///
+    /// # Errors
+    /// A topology that does not decode, or a palette stream.
+    pub fn readers(&self) -> anyhow::Result<Vec<MeshReader>> {
+        if self.actors.is_empty() {
+            return Ok(vec![self.reader()?]);
+        }
+        self.actors
+            .iter()
+            .map(|m| match &m.body {
+                Some(v1::mesh_frame::Body::Topology(t)) => MeshReader::new(t),
+                _ => bail!("not a vertex stream: an actor's first message is not a topology"),
+            })
+            .collect()
+    }
+
+    /// The actors' names of a room of several actors (empty in a one-actor room).
+    pub fn actor_names(&self) -> Vec<String> {
+        self.actors
+            .iter()
+            .map(|m| match &m.body {
+                Some(v1::mesh_frame::Body::Topology(t)) => t.actor.clone(),
+                Some(v1::mesh_frame::Body::PaletteTopology(t)) => t.actor.clone(),
+                _ => String::new(),
+            })
+            .collect()
     }
 
     /// Vertices per frame, as the stream's first message says.
@@ -328,7 +362,28 @@ pub async fn subscribe_encoded(
     if let Some(what) = expected {
         bail!("room {room:?}: the first message is not {what}");
     }
-    Ok(Subscription { first, stream })
+    // A room of several actors sends one first message per actor (each names its index and
+    // how many there are).
+    let count = match &first.body {
+        Some(v1::mesh_frame::Body::Topology(t)) => t.actor_count,
+        Some(v1::mesh_frame::Body::PaletteTopology(t)) => t.actor_count,
+        _ => 0,
+    };
+    let mut actors = Vec::new();
+    if count > 0 {
+        actors.push(first.clone());
+        for i in 1..count {
+            let next = stream.message().await?.with_context(|| {
+                format!("room {room:?}: the stream ended before actor {i}'s first message")
+            })?;
+            actors.push(next);
+        }
+    }
+    Ok(Subscription {
+        first,
+        actors,
+        stream,
+    })
 }
 
 #[cfg(test)]

@@ -185,6 +185,15 @@ impl Capture {
         }
     }
 
+    /// Checks `frame`'s markers without retargeting them (they are read again by
+    /// [`Capture::read`] before any use).
+    ///
+    /// # Errors
+    /// The frame's [`WireError`] (`read_marker_frame`).
+    pub(crate) fn check(&mut self, frame: &v1::ControlFrame) -> Result<(), WireError> {
+        read_marker_frame(frame, &mut self.markers, &mut self.valid)
+    }
+
     /// Reads `frame`'s markers and retargets them into `controls` / `valid` (model order);
     /// returns the control points left invalid (missing, not estimated, or before the first
     /// registration).

@@ -44,6 +44,13 @@ pub struct MeshUpdate {
     /// The encoder's quantised lanes of this frame, for the on-demand keyframe.
     pub(crate) lanes: Vec<[u16; 4]>,
     pub(crate) key: OnceLock<Result<Bytes, CodecError>>,
+    /// The actor was missing from the control frame and holds its last pose (a room of
+    /// several actors, issue 38).
+    pub held: bool,
+    /// A room of several actors: this is actor 0's frame, and these are the other actors'
+    /// frames of the same instant, in the room's actor order (each a frame of its own actor's
+    /// stream, with its own codec sequence). Empty in a one-actor room.
+    pub(crate) others: Vec<Arc<MeshUpdate>>,
 }
 
 impl MeshUpdate {
@@ -60,6 +67,8 @@ impl MeshUpdate {
             qbox,
             lanes: Vec::new(),
             key: OnceLock::new(),
+            held: false,
+            others: Vec::new(),
         }
     }
 
@@ -90,6 +99,22 @@ impl MeshUpdate {
             FrameKind::Key => header.seq,
             FrameKind::Delta => header.base_seq,
         };
+    }
+
+    /// Actor `i`'s frame of this instant (0: this one).
+    ///
+    /// # Panics
+    /// Past [`MeshUpdate::actor_count`].
+    pub fn actor(self: &Arc<Self>, i: usize) -> &Arc<MeshUpdate> {
+        match i {
+            0 => self,
+            i => &self.others[i - 1],
+        }
+    }
+
+    /// How many actors' frames this holds (1 in a one-actor room).
+    pub fn actor_count(&self) -> usize {
+        1 + self.others.len()
     }
 
     /// This frame's codec sequence number (what a subscriber passes back as `last_sent`).
@@ -171,6 +196,8 @@ impl FramePool {
         // Give back this slot's old frame, then reuse its buffer if nobody holds any of it.
         u.frame = Bytes::new();
         u.key.take();
+        u.others.clear();
+        u.held = false;
         if !u.buffer.try_reclaim(encoded.len()) {
             self.fresh += 1;
             // Room for a few frames of this size: the buffer is split per frame and reclaimed

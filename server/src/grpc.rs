@@ -197,8 +197,7 @@ impl Crease for CreaseService {
             retarget: room.pipeline().capture().map(|c| c.wire().clone()),
             refine: room.refinement().map(v1::Refine::from),
             skinning: v1::Skinning::from(room.skinning()) as i32,
-            // Rooms of several actors (issue 38) are refused at open until they run.
-            actors: Vec::new(),
+            actors: room.actors().iter().filter_map(|a| a.info()).collect(),
         }))
     }
 

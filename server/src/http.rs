@@ -14,9 +14,10 @@ use axum::http::{StatusCode, header};
 use axum::response::IntoResponse;
 use axum::routing::get;
 
-use crease_proto::json::{RoomDocument, RoomList, RoomOwner, TakeList, TakeSummary};
+use crease_proto::json::{ActorDocument, RoomDocument, RoomList, RoomOwner, TakeList, TakeSummary};
 
 use crate::ingest::PublishError;
+use crate::room::Actor;
 use crate::state::AppState;
 use crate::status;
 
@@ -91,17 +92,32 @@ async fn room_info(
         Ok(room) => room,
         Err(e) => return (status::publish_http(&e), format!("{e}\n")).into_response(),
     };
-    axum::Json(
+    let document = |a: &Actor| {
+        let p = a.pipeline();
         RoomDocument::new(
             &room.id,
-            &room.model.info,
-            room.beta(),
-            room.has_detail(),
-            room.pipeline().capture().map(|c| c.wire()),
+            &a.model.info,
+            p.beta(),
+            p.has_detail(),
+            p.capture().map(|c| c.wire()),
         )
-        .with_skinning(room.skinning()),
-    )
-    .into_response()
+        .with_skinning(p.skinning())
+    };
+    let mut doc = document(&room.actors()[0]);
+    doc.has_detail = room.has_detail();
+    doc.actors = room
+        .actors()
+        .iter()
+        .filter_map(|a| {
+            a.spec().map(|spec| ActorDocument {
+                name: spec.name.clone(),
+                side: Some(spec.side.as_str().to_owned()).filter(|s| !s.is_empty()),
+                performer: spec.performer.clone(),
+                room: document(a),
+            })
+        })
+        .collect();
+    axum::Json(doc).into_response()
 }
 
 async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {

@@ -13,12 +13,12 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use crease_proto::errors::{AckParts, ErrorCode, error_ack, frame_error, ok_ack};
+use crease_proto::errors::{AckParts, ErrorCode, actor_ack, error_ack, frame_error, ok_ack};
 use crease_proto::{WireError, v1};
 use futures_util::future::BoxFuture;
 
 use crate::cluster::{self, LookupError};
-use crate::pipeline::{PipelineError, Published};
+use crate::pipeline::{ActorPublished, PipelineError, Published};
 use crate::room::Room;
 use crate::session::{Publisher, Refusal};
 use crate::state::AppState;
@@ -80,6 +80,13 @@ impl From<PipelineError> for PublishError {
             e @ (PipelineError::Codec(_)
             | PipelineError::Palette(_)
             | PipelineError::Panicked(_)) => PublishError::Internal(e.to_string()),
+            PipelineError::Actor { actor, error } => match PublishError::from(*error) {
+                PublishError::Predict(m) => PublishError::Predict(format!("actor {actor:?}: {m}")),
+                PublishError::Internal(m) => {
+                    PublishError::Internal(format!("actor {actor:?}: {m}"))
+                }
+                other => other,
+            },
         }
     }
 }
@@ -189,7 +196,7 @@ async fn publish_to(
     received: Instant,
 ) -> Result<Published, PublishError> {
     let relays = room.relays();
-    let hz = state.config().limits.publish_hz;
+    let hz = room_hz(state, &room);
     enter(&room, Publisher::Token(token), (!relays).then_some(hz))?;
     if !relays {
         return process(room, frame, received).await;
@@ -208,8 +215,31 @@ async fn publish_to(
             detail: false,
             control_rms_capture: ack.control_residual_capture,
             confidence: ack.confidence,
+            actors: ack
+                .actors
+                .iter()
+                .map(|a| ActorPublished {
+                    name: a.actor.as_str().into(),
+                    held: a.held,
+                    published: Published {
+                        held: a.held_controls,
+                        latency_us: 0,
+                        control_rms: a.control_residual,
+                        detail: false,
+                        control_rms_capture: a.control_residual_capture,
+                        confidence: a.confidence,
+                        actors: Vec::new(),
+                    },
+                })
+                .collect(),
         }),
     }
+}
+
+/// The frames per second `room` accepts: the server's limit over its actors (a frame of `n`
+/// actors counts `n` times: the pipeline's work is per actor).
+fn room_hz(state: &AppState, room: &Room) -> f64 {
+    state.config().limits.publish_hz / room.actors().len() as f64
 }
 
 /// `room`'s session entered by `who` (the rate `hz` applied when given).
@@ -249,9 +279,8 @@ pub(crate) async fn publish_forwarded(
     frame: v1::ControlFrame,
 ) -> Result<Published, PublishError> {
     let received = Instant::now();
-    let hz = state.config().limits.publish_hz;
     let done = match state.room(&frame.room) {
-        Some(room) => match enter(&room, Publisher::Forwarded, Some(hz)) {
+        Some(room) => match enter(&room, Publisher::Forwarded, Some(room_hz(state, &room))) {
             Ok(()) => process(room, frame, received).await,
             Err(e) => Err(e),
         },
@@ -278,19 +307,29 @@ pub(crate) async fn process(
     }
 }
 
+/// What an ack reports of `p`.
+fn ack_parts(p: &Published) -> AckParts {
+    AckParts {
+        server_latency_us: p.latency_us,
+        held_controls: p.held,
+        control_residual: p.control_rms,
+        control_residual_capture: p.control_rms_capture,
+        confidence: p.confidence,
+    }
+}
+
 /// The ack of frame `seq`'s outcome.
 pub fn ack(seq: u64, outcome: &Result<Published, PublishError>) -> v1::PublishAck {
     match outcome {
-        Ok(p) => ok_ack(
-            seq,
-            AckParts {
-                server_latency_us: p.latency_us,
-                held_controls: p.held,
-                control_residual: p.control_rms,
-                control_residual_capture: p.control_rms_capture,
-                confidence: p.confidence,
-            },
-        ),
+        Ok(p) => {
+            let mut ack = ok_ack(seq, ack_parts(p));
+            ack.actors = p
+                .actors
+                .iter()
+                .map(|a| actor_ack(&a.name, a.held, ack_parts(&a.published)))
+                .collect();
+            ack
+        }
         Err(e) => error_ack(seq, e.frame_error()),
     }
 }
@@ -373,6 +412,7 @@ mod tests {
                 detail: false,
                 control_rms_capture: 2.5,
                 confidence: 0.5,
+                actors: Vec::new(),
             }),
         );
         assert_eq!(ok.control_residual_capture, 2.5);

@@ -45,7 +45,7 @@ pub use crease_proto::room::{RoomOptions, StreamSettings};
 
 use crate::capture::{Capture, CaptureSpec};
 use crate::fanout::{Channel, Fanout};
-use crate::frames::FramePool;
+use crate::frames::{FramePool, MeshUpdate};
 use crate::registry::LoadedModel;
 use crate::takes::Recorder;
 
@@ -53,8 +53,9 @@ use crate::takes::Recorder;
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
 const BOX_MARGIN: f32 = 0.25;
 
-/// What publishing one frame did.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// What publishing one frame did (in a room of several actors: summed over its actors, the
+/// worst residual and confidence, and each actor's part in `actors`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct Published {
     /// Control points held (invalid or occluded).
     pub held: u32,
@@ -72,6 +73,20 @@ pub struct Published {
     /// How far the frame lies from the model's training examples
     /// (`FrameContext::confidence`).
     pub confidence: f32,
+    /// A room of several actors: each actor's part, in the room's actor order. Empty in a
+    /// one-actor room.
+    pub actors: Vec<ActorPublished>,
+}
+
+/// One actor's part of a [`Published`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ActorPublished {
+    /// The actor's name.
+    pub name: Arc<str>,
+    /// The actor was missing from the frame and held its last pose.
+    pub held: bool,
+    /// Its frame (its own `actors` empty).
+    pub published: Published,
 }
 
 /// Why a frame was not published (the room is unchanged but for the encoders' state).
@@ -92,6 +107,32 @@ pub enum PipelineError {
     /// The pipeline panicked on this frame (a server bug; the room goes on).
     #[error("the pipeline panicked: {0}")]
     Panicked(String),
+    /// A room of several actors: actor `actor`'s pipeline refused the frame (a wire error
+    /// names the actor in its field instead: [`PipelineError::in_actor`]).
+    #[error("actor {actor:?}: {error}")]
+    Actor {
+        /// The actor's name.
+        actor: String,
+        /// Why.
+        error: Box<PipelineError>,
+    },
+}
+
+impl PipelineError {
+    /// This error as actor `actor`'s: a wire error's field becomes
+    /// `actors["NAME"].FIELD`, anything else is wrapped in [`PipelineError::Actor`].
+    pub(crate) fn in_actor(self, actor: &str) -> PipelineError {
+        match self {
+            PipelineError::Wire(mut e) => {
+                e.field = format!("actors[{actor:?}].{}", e.field);
+                PipelineError::Wire(e)
+            }
+            error => PipelineError::Actor {
+                actor: actor.to_owned(),
+                error: Box::new(error),
+            },
+        }
+    }
 }
 
 /// Errors of building a pipeline.
@@ -117,11 +158,16 @@ struct State {
     lanes: Vec<[u16; 4]>,
     /// The frame pools, per channel.
     pools: [FramePool; Channel::COUNT],
-    /// Whether a channel holds a frame of the current pose (else it was cleared).
-    live: [bool; Channel::COUNT],
-    /// A level's mesh in the streamed order, and a frame's encoded bytes (reused per frame).
+    /// A level's mesh in the streamed order (reused per frame).
     streamed: Vec<Vec3>,
-    encoded: Vec<u8>,
+    /// Each channel's encoded frame of the last run, and its header until it is handed to the
+    /// pool ([`Pipeline::frames`]); buffers reused per frame.
+    encoded: [Vec<u8>; Channel::COUNT],
+    ready: [Option<FrameHeader>; Channel::COUNT],
+    /// Whether the last run held the last pose (the actor was missing from the frame).
+    held: bool,
+    /// Where [`Pipeline::check`] reads a frame it only checks.
+    scratch: (Vec<Vec3>, Vec<bool>),
     /// The last detail kernel vector (palette detail frames).
     xi: Vec<f32>,
     /// A retargeting room's capture state (issue 19), and the frame's retargeted points.
@@ -176,29 +222,45 @@ pub(crate) fn frame_vertices(model: &TrainedModel, channel: Channel) -> usize {
     }
 }
 
-/// Hands the frame just encoded on `channel` (its bytes in `state.encoded`, its lanes in the
-/// channel's encoder) to the fan-out through the channel's pool.
-fn hand_over(
-    state: &mut State,
-    channel: Channel,
-    header: &FrameHeader,
-    fanout: &dyn Fanout,
-    stamp: impl Fn(&mut crate::frames::MeshUpdate),
-) {
-    let encoder = &state.encoders[channel.index()];
-    let update =
-        state.pools[channel.index()].fill(*encoder.qbox(), &state.encoded, encoder.lanes(), |u| {
-            stamp(u);
-            u.set_codec_header(header);
-        });
-    fanout.publish(channel, update);
-    state.live[channel.index()] = true;
+/// What a room's frame computes, decided once per frame from who watches (module docs) and
+/// the same for every actor of the room ([`Demand::of`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Demand {
+    /// The skinned base mesh and its vertex frame.
+    pub base_vertices: bool,
+    /// The detail layer's synthesis and its vertex frame.
+    pub detail_vertices: bool,
+    /// The detail palette frame (`xi`).
+    pub detail_palette: bool,
+    /// Channels whose next frame is a keyframe (a networked fan-out's far end lost one).
+    pub keyframe: [bool; Channel::COUNT],
 }
 
-/// Drops `channel`'s frame once the pipeline stops computing it (module docs).
-fn clear(fanout: &dyn Fanout, live: &mut [bool; Channel::COUNT], channel: Channel) {
-    if std::mem::take(&mut live[channel.index()]) {
-        fanout.clear(channel);
+impl Demand {
+    /// What `fanout`'s subscribers ask for, where the room's models have a detail layer
+    /// (`has_detail`); asks the fan-out once for keyframes (it clears the request).
+    pub(crate) fn of(fanout: &dyn Fanout, has_detail: bool) -> Demand {
+        let watched = |level, encoding| fanout.interest(Channel::new(level, encoding));
+        let detail_vertices = has_detail && watched(Level::Detail, Encoding::Vertices);
+        let detail_palette = has_detail && watched(Level::Detail, Encoding::Palette);
+        let base_vertices = watched(Level::Base, Encoding::Vertices)
+            || !(watched(Level::Base, Encoding::Palette) || detail_palette);
+        Demand {
+            base_vertices,
+            detail_vertices,
+            detail_palette,
+            keyframe: Channel::ALL.map(|c| fanout.wants_keyframe(c)),
+        }
+    }
+
+    /// Whether `channel` is computed this frame (the base palette always is).
+    pub(crate) fn computes(&self, channel: Channel) -> bool {
+        match (channel.level, channel.encoding) {
+            (Level::Base, Encoding::Palette) => true,
+            (Level::Detail, Encoding::Palette) => self.detail_palette,
+            (Level::Base, Encoding::Vertices) => self.base_vertices,
+            (Level::Detail, Encoding::Vertices) => self.detail_vertices,
+        }
     }
 }
 
@@ -290,9 +352,11 @@ impl Pipeline {
                 valid: vec![true; n],
                 encoders: [base, detail, base_palette, detail_palette],
                 pools: std::array::from_fn(|_| FramePool::default()),
-                live: [false; Channel::COUNT],
                 streamed: Vec::new(),
-                encoded: Vec::new(),
+                encoded: std::array::from_fn(|_| Vec::new()),
+                ready: [None; Channel::COUNT],
+                held: false,
+                scratch: (vec![Vec3::ZERO; n], vec![true; n]),
                 xi: Vec::new(),
                 lanes: Vec::new(),
                 capture: None,
@@ -436,21 +500,174 @@ impl Pipeline {
             .clone()
     }
 
-    /// Filters, predicts and encodes one control frame, and hands each level's frame to
-    /// `fanout` (detail only while it has interest). Blocking: run it on the blocking pool. A
-    /// bad frame changes nothing.
+    /// Checks `frame` against this actor's model without changing anything: what
+    /// [`Pipeline::run`] would refuse before predicting (a room of several actors checks
+    /// every actor's part before any runs, so a bad frame changes nothing).
+    ///
+    /// # Errors
+    /// The frame's [`WireError`] (count, non-finite valid point, mask length, markers).
+    pub(crate) fn check(&self, frame: &v1::ControlFrame) -> Result<(), WireError> {
+        let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let state = &mut *guard;
+        match &mut state.capture {
+            Some(capture) => capture.check(frame),
+            None => {
+                let (controls, valid) = &mut state.scratch;
+                read_control_frame(frame, controls, valid).map(|_| ())
+            }
+        }
+    }
+
+    /// Filters, predicts and encodes one control frame into each channel `demand` asks for,
+    /// ready for [`Pipeline::frames`]; `None`: the actor was missing from its room's frame and
+    /// holds its last pose (its controls as they were, the filter not stepped). Blocking: run
+    /// it on the blocking pool. A bad frame changes nothing.
     ///
     /// # Errors
     /// [`PipelineError`]: the frame's [`WireError`] (count, non-finite valid point, mask
     /// length), the predictor's, the encoder's.
-    pub fn process(
+    pub(crate) fn run(
         &self,
-        frame: &v1::ControlFrame,
+        frame: Option<&v1::ControlFrame>,
         received: Instant,
-        fanout: &dyn Fanout,
+        demand: &Demand,
     ) -> Result<Published, PipelineError> {
         let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
         let state = &mut *guard;
+        state.ready = [None; Channel::COUNT];
+        let held = match frame {
+            Some(frame) => {
+                let held = self.read(state, frame, received)?;
+                state.held = false;
+                held
+            }
+            None => {
+                state.held = true;
+                state.valid.iter().filter(|v| !**v).count()
+            }
+        };
+        self.predictor
+            .predict_transforms(&mut state.ctx, &state.controls, Some(&state.valid))?;
+        let detail_vertices = self.has_detail() && demand.detail_vertices;
+        let detail_palette = self.has_detail() && demand.detail_palette;
+        let base_vertices = demand.base_vertices;
+        // A held actor has no new targets: no residual.
+        let valid: &[bool] = if frame.is_some() { &state.valid } else { &[] };
+        let targets = &state.targets;
+        let target = |i: usize| match (&state.capture, frame) {
+            (Some(_), _) => targets[i],
+            (None, Some(frame)) => Vec3::from_slice(&frame.positions[3 * i..3 * i + 3]),
+            (None, None) => Vec3::ZERO,
+        };
+        let controls = &self.model.model.controls;
+        let control_rms = if base_vertices || detail_vertices {
+            self.predictor.skin(&mut state.ctx)?;
+            let predicted = state.ctx.positions();
+            control_residual(controls, |v| predicted[v], target, valid)
+        } else {
+            // Only the control vertices are skinned (a palette-only room skins nothing else).
+            let ctx = &state.ctx;
+            control_residual(
+                controls,
+                |v| self.predictor.skin_vertex(ctx, v),
+                target,
+                valid,
+            )
+        };
+        // In the capture's units: model units divided by the capture-to-model scale.
+        let control_rms_capture = state
+            .capture
+            .as_ref()
+            .and_then(Capture::scale)
+            .filter(|s| *s > 0.0)
+            .map_or(0.0, |s| control_rms / s);
+        // The palette frames: the bones (always), and `xi` while the detail channel is watched.
+        for level in Level::ALL {
+            let channel = Channel::palette(level);
+            let xi: &[f32] = match level {
+                Level::Base => &[],
+                Level::Detail if detail_palette => {
+                    let xi = self.predictor.predict_detail_xi(&mut state.ctx)?;
+                    state.xi.clear();
+                    state.xi.extend_from_slice(xi);
+                    &state.xi
+                }
+                Level::Detail => continue,
+            };
+            let qbox = &self.qboxes[channel.index()];
+            palette_lanes(state.ctx.transforms(), xi, qbox, &mut state.lanes)?;
+            let encoder = &mut state.encoders[channel.index()];
+            if demand.keyframe[channel.index()] {
+                encoder.force_keyframe();
+            }
+            let lanes = &state.lanes;
+            let header = encoder.encode_lanes(
+                |l| l.extend_from_slice(lanes),
+                &mut state.encoded[channel.index()],
+            )?;
+            state.ready[channel.index()] = Some(header);
+        }
+        // The vertex frames.
+        let encode = |state: &mut State, level: Level, detail: bool| -> Result<(), CodecError> {
+            let channel = Channel::vertices(level);
+            let order = self.vertex_order(level);
+            let mesh = if detail {
+                state.ctx.detail_positions()
+            } else {
+                state.ctx.positions()
+            };
+            state.streamed.clear();
+            if order.is_empty() {
+                state.streamed.extend_from_slice(mesh);
+            } else {
+                state
+                    .streamed
+                    .extend(order.iter().map(|&m| mesh[m as usize]));
+            }
+            let encoder = &mut state.encoders[channel.index()];
+            if demand.keyframe[channel.index()] {
+                encoder.force_keyframe();
+            }
+            let header =
+                encoder.encode(&state.streamed, None, &mut state.encoded[channel.index()])?;
+            state.ready[channel.index()] = Some(header);
+            Ok(())
+        };
+        if base_vertices {
+            encode(state, Level::Base, false)?;
+        }
+        let mut detail = detail_palette;
+        if detail_vertices && self.predictor.predict_detail(&mut state.ctx).is_ok() {
+            encode(state, Level::Detail, true)?;
+            detail = true;
+        }
+        if let (Some(take), Some(frame)) = (&mut state.take, frame) {
+            take.record(
+                frame,
+                received,
+                state.ctx.controls(),
+                state.ctx.transforms(),
+            );
+        }
+        Ok(Published {
+            held: held as u32,
+            latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
+            control_rms,
+            detail,
+            control_rms_capture,
+            confidence: state.ctx.confidence(),
+            actors: Vec::new(),
+        })
+    }
+
+    /// Reads `frame` into the controls (a retargeting room's markers retargeted to them) and
+    /// steps the filter; returns the control points held.
+    fn read(
+        &self,
+        state: &mut State,
+        frame: &v1::ControlFrame,
+        received: Instant,
+    ) -> Result<usize, WireError> {
         let held = match &mut state.capture {
             Some(capture) => {
                 let held = capture.read(frame, &mut state.controls, &mut state.valid)?;
@@ -485,130 +702,30 @@ impl Pipeline {
                 }
             }
         }
-        self.predictor
-            .predict_transforms(&mut state.ctx, &state.controls, Some(&state.valid))?;
-        let watched = |level, encoding| fanout.interest(Channel::new(level, encoding));
-        let detail_vertices = self.has_detail() && watched(Level::Detail, Encoding::Vertices);
-        let detail_palette = self.has_detail() && watched(Level::Detail, Encoding::Palette);
-        let base_vertices = watched(Level::Base, Encoding::Vertices)
-            || !(watched(Level::Base, Encoding::Palette) || detail_palette);
-        let targets = &state.targets;
-        let target = |i: usize| match state.capture {
-            Some(_) => targets[i],
-            None => Vec3::from_slice(&frame.positions[3 * i..3 * i + 3]),
-        };
-        let control_rms = if base_vertices || detail_vertices {
-            self.predictor.skin(&mut state.ctx)?;
-            let predicted = state.ctx.positions();
-            control_residual(
-                &self.model.model.controls,
-                |v| predicted[v],
-                target,
-                &state.valid,
-            )
-        } else {
-            // Only the control vertices are skinned (a palette-only room skins nothing else).
-            let ctx = &state.ctx;
-            control_residual(
-                &self.model.model.controls,
-                |v| self.predictor.skin_vertex(ctx, v),
-                target,
-                &state.valid,
-            )
-        };
-        // In the capture's units: model units divided by the capture-to-model scale.
-        let control_rms_capture = state
-            .capture
-            .as_ref()
-            .and_then(Capture::scale)
-            .filter(|s| *s > 0.0)
-            .map_or(0.0, |s| control_rms / s);
-        let stamp = |u: &mut crate::frames::MeshUpdate| {
-            u.seq = frame.seq;
-            u.capture_time_us = frame.capture_time_us;
-            u.received = received;
-        };
-        // The palette frames: the bones (always), and `xi` while the detail channel is watched.
-        for level in Level::ALL {
-            let channel = Channel::palette(level);
-            let xi: &[f32] = match level {
-                Level::Base => &[],
-                Level::Detail if detail_palette => {
-                    let xi = self.predictor.predict_detail_xi(&mut state.ctx)?;
-                    state.xi.clear();
-                    state.xi.extend_from_slice(xi);
-                    &state.xi
-                }
-                Level::Detail => {
-                    clear(fanout, &mut state.live, channel);
-                    continue;
-                }
-            };
-            let qbox = &self.qboxes[channel.index()];
-            palette_lanes(state.ctx.transforms(), xi, qbox, &mut state.lanes)?;
-            let encoder = &mut state.encoders[channel.index()];
-            if fanout.wants_keyframe(channel) {
-                encoder.force_keyframe();
-            }
-            let lanes = &state.lanes;
-            let header =
-                encoder.encode_lanes(|l| l.extend_from_slice(lanes), &mut state.encoded)?;
-            hand_over(state, channel, &header, fanout, stamp);
+        Ok(held)
+    }
+
+    /// Hands each channel the last [`Pipeline::run`] encoded to its pool, once: `out[c]` is
+    /// channel `c`'s frame to publish, `None` where it was not computed. `stamp` fills in the
+    /// room's part (sequence number, times, the other actors' frames); the frame's `held` is
+    /// this actor's.
+    pub(crate) fn frames(
+        &self,
+        out: &mut [Option<Arc<MeshUpdate>>; Channel::COUNT],
+        stamp: impl Fn(Channel, &mut MeshUpdate),
+    ) {
+        let mut guard = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        let state = &mut *guard;
+        for channel in Channel::ALL {
+            let i = channel.index();
+            out[i] = state.ready[i].take().map(|header| {
+                let encoder = &state.encoders[i];
+                state.pools[i].fill(*encoder.qbox(), &state.encoded[i], encoder.lanes(), |u| {
+                    stamp(channel, u);
+                    u.held = state.held;
+                    u.set_codec_header(&header);
+                })
+            });
         }
-        // The vertex frames.
-        let send = |state: &mut State, level: Level, detail: bool| -> Result<(), CodecError> {
-            let channel = Channel::vertices(level);
-            let order = self.vertex_order(level);
-            let mesh = if detail {
-                state.ctx.detail_positions()
-            } else {
-                state.ctx.positions()
-            };
-            state.streamed.clear();
-            if order.is_empty() {
-                state.streamed.extend_from_slice(mesh);
-            } else {
-                state
-                    .streamed
-                    .extend(order.iter().map(|&m| mesh[m as usize]));
-            }
-            let encoder = &mut state.encoders[channel.index()];
-            if fanout.wants_keyframe(channel) {
-                encoder.force_keyframe();
-            }
-            let header = encoder.encode(&state.streamed, None, &mut state.encoded)?;
-            hand_over(state, channel, &header, fanout, stamp);
-            Ok(())
-        };
-        if base_vertices {
-            send(state, Level::Base, false)?;
-        }
-        let mut detail = detail_palette;
-        if detail_vertices && self.predictor.predict_detail(&mut state.ctx).is_ok() {
-            send(state, Level::Detail, true)?;
-            detail = true;
-        }
-        if !base_vertices {
-            clear(fanout, &mut state.live, Channel::vertices(Level::Base));
-        }
-        if !detail_vertices {
-            clear(fanout, &mut state.live, Channel::vertices(Level::Detail));
-        }
-        if let Some(take) = &mut state.take {
-            take.record(
-                frame,
-                received,
-                state.ctx.controls(),
-                state.ctx.transforms(),
-            );
-        }
-        Ok(Published {
-            held: held as u32,
-            latency_us: received.elapsed().as_micros().min(u32::MAX as u128) as u32,
-            control_rms,
-            detail,
-            control_rms_capture,
-            confidence: state.ctx.confidence(),
-        })
     }
 }

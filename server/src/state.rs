@@ -21,8 +21,8 @@ use crate::config::Config;
 use crate::fanout::Fanout;
 use crate::metrics::Metrics;
 use crate::pipeline::{RoomOptions, StreamSettings};
-use crate::registry::{LoadedModel, ModelRegistry};
-use crate::room::{Room, RoomError};
+use crate::registry::ModelRegistry;
+use crate::room::{ActorParts, Room, RoomError};
 use crate::takes::{TakeError, Takes};
 
 /// What the services share: the models and the open rooms (module docs).
@@ -104,13 +104,25 @@ pub enum OpenRoomError {
         /// The model it names.
         model: String,
     },
-    /// A room of several actors, checked, that this server cannot run yet (issue 38's
-    /// pipeline is not built): open one room per actor meanwhile.
+    /// A room of several actors in a cluster: its registry entry, relays and adoption do not
+    /// carry actors yet (issue 38).
     #[error(
-        "room {0:?}: rooms of several actors (OpenRoomRequest.actors) are checked but not yet \
-         run by this server; open one room per actor"
+        "room {0:?}: rooms of several actors (OpenRoomRequest.actors) do not run in a cluster \
+         yet; open it on a server outside the cluster, or one room per actor"
     )]
     ActorsNotServed(String),
+    /// Actor `actor`'s part of the room could not be made: its mirror, its retarget.
+    #[error("actor {actor:?}: {error}")]
+    Actor {
+        /// The actor.
+        actor: String,
+        /// Why.
+        error: Box<OpenRoomError>,
+    },
+    /// An actor's model could not be mirrored (a model that does not mirror: a server-side
+    /// matter, reported as the model's).
+    #[error("mirror: {0}")]
+    Mirror(String),
 }
 
 impl From<cluster::RegistryError> for OpenRoomError {
@@ -262,27 +274,75 @@ impl AppState {
         self.table().get(id).cloned()
     }
 
-    /// What is wrong with a room of actors: too many, a model this server lacks, or (all
-    /// well) that such rooms are not run yet.
-    fn check_actors(&self, spec: &RoomSpec) -> OpenRoomError {
+    /// The actors of a room opened with actors, resolved: within the cap, each actor's model
+    /// (mirrored on the blocking pool where it asks: `ModelRegistry::mirrored`) and its
+    /// retarget. Not in a cluster yet ([`OpenRoomError::ActorsNotServed`]).
+    ///
+    /// # Errors
+    /// Too many actors, a model this server lacks, a mirror or retarget that fails (naming
+    /// the actor), a cluster.
+    async fn actor_parts(
+        self: &Arc<Self>,
+        spec: &RoomSpec,
+        maps: Option<std::path::PathBuf>,
+    ) -> Result<Vec<ActorParts>, OpenRoomError> {
         let limit = self.config.limits.actors_per_room;
         if spec.actors.len() > limit {
-            return OpenRoomError::TooManyActors {
+            return Err(OpenRoomError::TooManyActors {
                 count: spec.actors.len(),
                 limit,
-            };
+            });
         }
         if let Some(a) = spec
             .actors
             .iter()
             .find(|a| self.models.get(&a.model).is_none())
         {
-            return OpenRoomError::NoActorModel {
+            return Err(OpenRoomError::NoActorModel {
                 actor: a.name.clone(),
                 model: a.model.clone(),
-            };
+            });
         }
-        OpenRoomError::ActorsNotServed(spec.id.clone())
+        if self.cluster().is_some() && spec.placement != Placement::Local {
+            return Err(OpenRoomError::ActorsNotServed(spec.id.clone()));
+        }
+        let mut parts = Vec::with_capacity(spec.actors.len());
+        for a in &spec.actors {
+            let in_actor = |error: OpenRoomError| OpenRoomError::Actor {
+                actor: a.name.clone(),
+                error: Box::new(error),
+            };
+            let model = match a.mirror {
+                None => self.models.get(&a.model),
+                Some(plane) => {
+                    let (state, name) = (Arc::clone(self), a.model.clone());
+                    tokio::task::spawn_blocking(move || state.models.mirrored(&name, &plane))
+                        .await
+                        .map_err(|e| in_actor(OpenRoomError::Mirror(e.to_string())))?
+                        .transpose()
+                        .map_err(|e| in_actor(OpenRoomError::Mirror(e.to_string())))?
+                }
+            }
+            .ok_or_else(|| OpenRoomError::NoActorModel {
+                actor: a.name.clone(),
+                model: a.model.clone(),
+            })?;
+            let capture = match a.retarget.clone() {
+                Some(wire) => Some(Arc::new(
+                    CaptureSpec::build(wire, maps.clone(), Arc::clone(&model))
+                        .await
+                        .map_err(|e| in_actor(e.into()))?,
+                )),
+                None => None,
+            };
+            parts.push(ActorParts {
+                spec: Some(a.clone()),
+                model,
+                options: a.options,
+                capture,
+            });
+        }
+        Ok(parts)
     }
 
     fn host(self: &Arc<Self>) -> Arc<dyn cluster::Host> {
@@ -300,8 +360,11 @@ impl AppState {
     /// [`OpenRoomError`]: no such model, options or retarget that do not check out, a bad id
     /// or beta, the id taken (here or in the cluster), the limit, the registry.
     pub async fn open_room(self: &Arc<Self>, spec: RoomSpec) -> Result<Arc<Room>, OpenRoomError> {
+        let settings = spec.stream.unwrap_or(self.config.stream);
         if !spec.actors.is_empty() {
-            return Err(self.check_actors(&spec));
+            let parts = self.actor_parts(&spec, self.config.maps.clone()).await?;
+            let room = build(&spec, parts, settings, None).await?;
+            return self.insert(room);
         }
         let cluster = match (&spec.placement, self.cluster()) {
             (Placement::Local, _) | (Placement::Shared, None) => None,
@@ -329,9 +392,14 @@ impl AppState {
             )),
             None => None,
         };
-        let settings = spec.stream.unwrap_or(self.config.stream);
+        let parts = vec![ActorParts {
+            spec: None,
+            model,
+            options: spec.options,
+            capture,
+        }];
         let Some(cluster) = cluster else {
-            let room = build(&spec, model, settings, capture, None).await?;
+            let room = build(&spec, parts, settings, None).await?;
             return self.insert(room);
         };
         let (entry, owner, revision) = match &spec.placement {
@@ -345,9 +413,9 @@ impl AppState {
                 (Default::default(), true, 0)
             }
         };
-        let (link, rx) = cluster.new_link(&spec.id, &model, entry, owner, revision);
+        let (link, rx) = cluster.new_link(&spec.id, &parts[0].model, entry, owner, revision);
         let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
-        let room = build(&spec, model, settings, capture, Some(fanout)).await?;
+        let room = build(&spec, parts, settings, Some(fanout)).await?;
         if owner {
             cluster.register(&room, settings, &link).await?;
         }
@@ -379,7 +447,13 @@ impl AppState {
             placement: Placement::Local,
             ..RoomSpec::default()
         };
-        build(&spec, model, StreamSettings::full(), None, None).await
+        let parts = vec![ActorParts {
+            spec: None,
+            model,
+            options,
+            capture: None,
+        }];
+        build(&spec, parts, StreamSettings::full(), None).await
     }
 
     /// Closes room `id`: in a cluster, in the whole cluster (every replica's watch then
@@ -433,19 +507,15 @@ impl AppState {
     }
 }
 
-/// Builds the room `spec` describes on `model` (the pipeline on the blocking pool), with its
-/// retarget, token and privacy: the one constructor of every room.
+/// Builds the room `spec` describes on its actors' `parts` (the pipelines on the blocking
+/// pool), with its token and privacy: the one constructor of every room.
 async fn build(
     spec: &RoomSpec,
-    model: Arc<LoadedModel>,
+    parts: Vec<ActorParts>,
     settings: StreamSettings,
-    capture: Option<Arc<CaptureSpec>>,
     fanout: Option<Arc<dyn Fanout>>,
 ) -> Result<Room, OpenRoomError> {
-    let mut room = Room::build(&spec.id, model, spec.options, settings, fanout).await?;
-    if let Some(capture) = capture {
-        room = room.with_capture(capture);
-    }
+    let mut room = Room::build(&spec.id, parts, settings, fanout).await?;
     room = match &spec.token {
         RoomToken::Random => room,
         RoomToken::Fixed(token) => room.with_token(token),

@@ -59,6 +59,7 @@ pub fn open(e: &OpenRoomError) -> Status {
         | OpenRoomError::NoActorModel { .. } => Status::not_found(m),
         OpenRoomError::TooManyActors { .. } => Status::invalid_argument(m),
         OpenRoomError::ActorsNotServed(_) => Status::unimplemented(m),
+        OpenRoomError::Actor { error, .. } => Status::new(open(error).code(), m),
         OpenRoomError::Spec(SpecError::TokenDigest(_)) => Status::internal(m),
         OpenRoomError::Spec(_) | OpenRoomError::Capture(_) => Status::invalid_argument(m),
         OpenRoomError::Room(RoomError::BadId(_)) => Status::invalid_argument(format!("room: {m}")),
@@ -74,6 +75,7 @@ pub fn open(e: &OpenRoomError) -> Status {
         OpenRoomError::Exists(_) | OpenRoomError::ExistsInCluster(_) => Status::already_exists(m),
         OpenRoomError::Limit(_) | OpenRoomError::Install(_) => Status::resource_exhausted(m),
         OpenRoomError::Registry(_) | OpenRoomError::ModelUnavailable(_) => Status::unavailable(m),
+        OpenRoomError::Mirror(_) => Status::failed_precondition(m),
     }
 }
 
@@ -94,7 +96,8 @@ pub fn take_error(e: &TakeError) -> Status {
         TakeError::NoFolder
         | TakeError::Recording { .. }
         | TakeError::NotRecording(_)
-        | TakeError::Elsewhere { .. } => Status::failed_precondition(m),
+        | TakeError::Elsewhere { .. }
+        | TakeError::Actors(_) => Status::failed_precondition(m),
         TakeError::NoTake(_) => Status::not_found(m),
         TakeError::Name(_) => Status::invalid_argument(m),
         TakeError::Io { .. } | TakeError::File { .. } => Status::internal(m),

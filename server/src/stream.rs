@@ -17,13 +17,17 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use crease_proto::{Level, TopologyParts, frame_message, topology_message, v1};
+use crease_proto::{
+    Level, TopologyParts, actor_frame, actors_frame_message, frame_message, name_actor,
+    topology_message, v1,
+};
 use prost::bytes::Bytes;
 use tokio::sync::mpsc;
 use tokio_stream::Stream;
 use tokio_stream::wrappers::ReceiverStream;
 
 use crate::ingest::{self, PublishError};
+use crate::pipeline::Pipeline;
 use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
 use crate::state::AppState;
 
@@ -62,27 +66,40 @@ fn internal<E: std::fmt::Display>(what: &'static str) -> impl Fn(E) -> StreamErr
     }
 }
 
-/// The first message of a mesh stream on `channel`: a vertex stream's topology, or a palette
-/// stream's header (built once per model and level on the blocking pool, then shared).
-async fn first_message(room: &Arc<Room>, channel: Channel) -> Result<v1::MeshFrame, StreamError> {
-    match channel.encoding {
-        Encoding::Vertices => topology(room, channel.level),
-        Encoding::Palette => {
-            let (model, level) = (Arc::clone(&room.model), channel.level);
-            tokio::task::spawn_blocking(move || model.palette_topology(level))
-                .await
-                .map_err(internal("palette header"))?
-                .map_err(StreamError::PaletteHeader)
+/// The first messages of a mesh stream on `channel`: a vertex stream's topology, or a palette
+/// stream's header (built once per model and level on the blocking pool, then shared); in a
+/// room of several actors one per actor, named (`crease_proto::name_actor`).
+async fn first_messages(
+    room: &Arc<Room>,
+    channel: Channel,
+) -> Result<Vec<v1::MeshFrame>, StreamError> {
+    let actors = room.actors();
+    let mut messages = Vec::with_capacity(actors.len());
+    for (i, actor) in actors.iter().enumerate() {
+        let mut message = match channel.encoding {
+            Encoding::Vertices => topology(actor.pipeline(), &actor.model.name, channel.level)?,
+            Encoding::Palette => {
+                let (model, level) = (Arc::clone(&actor.model), channel.level);
+                tokio::task::spawn_blocking(move || model.palette_topology(level))
+                    .await
+                    .map_err(internal("palette header"))?
+                    .map_err(StreamError::PaletteHeader)?
+            }
+        };
+        if room.has_actors() {
+            name_actor(&mut message, actor.name(), i, actors.len());
         }
+        messages.push(message);
     }
+    Ok(messages)
 }
 
-/// The first message of a vertex stream.
-fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, StreamError> {
-    let p = room.pipeline();
+/// The first message of a vertex stream of `pipeline`'s frames on model `model`.
+fn topology(pipeline: &Pipeline, model: &str, level: Level) -> Result<v1::MeshFrame, StreamError> {
+    let p = pipeline;
     let indices = p.encoded_indices(level).map_err(internal("index buffer"))?;
     Ok(topology_message(TopologyParts {
-        model: &room.model.name,
+        model,
         level,
         vertex_count: p.vertex_count(level),
         triangle_count: p.triangles(level).len(),
@@ -90,6 +107,40 @@ fn topology(room: &Room, level: Level) -> Result<v1::MeshFrame, StreamError> {
         qbox: p.qbox(level),
         vertex_order: p.vertex_order(level),
     }))
+}
+
+/// The message of `update` for a subscriber whose last received codec frames (one per actor)
+/// are `last_sent` (updated): one frame's data in a one-actor room, every actor's in a room of
+/// several (`named`).
+async fn frame_for(
+    update: &Arc<MeshUpdate>,
+    last_sent: &mut [Option<u32>],
+    named: bool,
+    latency: u32,
+    skipped: u32,
+) -> Result<v1::MeshFrame, StreamError> {
+    if !named {
+        let data = bytes_for(update, &mut last_sent[0]).await?;
+        return Ok(frame_message(
+            update.seq,
+            update.capture_time_us,
+            latency,
+            skipped,
+            data,
+        ));
+    }
+    let mut actors = Vec::with_capacity(update.actor_count());
+    for (i, last) in last_sent.iter_mut().enumerate().take(update.actor_count()) {
+        let frame = update.actor(i);
+        actors.push(actor_frame(i, bytes_for(frame, last).await?, frame.held));
+    }
+    Ok(actors_frame_message(
+        update.seq,
+        update.capture_time_us,
+        latency,
+        skipped,
+        actors,
+    ))
 }
 
 /// The bytes of `update` for a subscriber whose last received codec frame is `last_sent`
@@ -112,6 +163,16 @@ async fn bytes_for(
     Ok(bytes)
 }
 
+/// The encoded frame bytes a frame message carries (every actor's).
+fn frame_bytes(msg: &v1::MeshFrame) -> usize {
+    match &msg.body {
+        Some(v1::mesh_frame::Body::Frame(f)) => {
+            f.data.len() + f.actors.iter().map(|a| a.data.len()).sum::<usize>()
+        }
+        _ => 0,
+    }
+}
+
 /// The live stream of a room's `channel` through `sub`, a subscription taken from the room
 /// (module docs).
 pub fn subscribe(
@@ -129,13 +190,22 @@ pub fn subscribe(
         // the subscriber slot would be given back at once).
         let mut sub = sub;
         let metrics = state.metrics();
-        let first = first_message(&room, channel).await;
-        let failed = first.is_err();
-        if tx.send(first).await.is_err() || failed {
-            return;
+        match first_messages(&room, channel).await {
+            Ok(messages) => {
+                for m in messages {
+                    if tx.send(Ok(m)).await.is_err() {
+                        return;
+                    }
+                }
+            }
+            Err(e) => {
+                let _ = tx.send(Err(e)).await;
+                return;
+            }
         }
+        let named = room.has_actors();
         let mut last_seq: Option<u64> = None;
-        let mut last_sent: Option<u32> = None;
+        let mut last_sent = vec![None; room.actors().len()];
         let rx = &mut sub.frames.rx;
         // The current frame first (if any), then every change.
         rx.mark_changed();
@@ -145,17 +215,16 @@ pub fn subscribe(
             };
             let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
             last_seq = Some(update.seq);
-            let data = match bytes_for(&update, &mut last_sent).await {
-                Ok(data) => data,
+            let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
+            let msg = match frame_for(&update, &mut last_sent, named, latency, skipped).await {
+                Ok(msg) => msg,
                 Err(e) => {
                     let _ = tx.send(Err(e)).await;
                     return;
                 }
             };
-            let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
-            metrics.bytes_out.inc_by(data.len() as u64);
+            metrics.bytes_out.inc_by(frame_bytes(&msg) as u64);
             metrics.frames_out.inc();
-            let msg = frame_message(update.seq, update.capture_time_us, latency, skipped, data);
             // The frame goes back to its pool once sent, not while this task waits.
             drop(update);
             if tx.send(Ok(msg)).await.is_err() {
@@ -189,7 +258,7 @@ pub fn batch(
     let (tx, rx) = mpsc::channel(BUFFER);
     let room = Arc::new(room);
     tokio::spawn(async move {
-        let first = topology(&room, level);
+        let first = topology(room.pipeline(), &room.model.name, level);
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
             return;

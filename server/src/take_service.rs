@@ -83,6 +83,9 @@ pub async fn start(
     name: String,
 ) -> Result<v1::TakeInfo, TakeOpError> {
     let room = local_room(state, id).await?;
+    if room.has_actors() {
+        return Err(TakeError::Actors(room.id.clone()).into());
+    }
     if let Some(take) = room.pipeline().take_id() {
         return Err(TakeError::Recording {
             room: room.id.clone(),

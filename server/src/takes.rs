@@ -47,6 +47,9 @@ pub enum TakeError {
         /// Its take.
         take: String,
     },
+    /// A room of several actors: its takes are not recorded yet (issue 38).
+    #[error("room {0:?} is a room of actors: its takes are not recorded yet")]
+    Actors(String),
     /// The room records nothing.
     #[error("room {0:?} is not recording")]
     NotRecording(String),

@@ -210,12 +210,20 @@ async fn session(
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {
-                // A palette header is sent as the model encoded it (once, with the header, on
-                // the blocking pool: `first_message`); the rest is small and encoded here.
+                // A one-actor room's palette header is sent as the model encoded it (once, with
+                // the header, on the blocking pool: `first_messages`); an actor's header (it
+                // names the actor; megabytes at the detail level) is encoded on the blocking
+                // pool; the rest is small and encoded here.
                 let bytes = match &msg.body {
-                    Some(v1::mesh_frame::Body::PaletteTopology(_)) => model
+                    Some(v1::mesh_frame::Body::PaletteTopology(p)) if p.actor_count == 0 => model
                         .palette_topology_encoded(channel.level)
                         .unwrap_or_else(|_| msg.encode_to_vec().into()),
+                    Some(v1::mesh_frame::Body::PaletteTopology(_)) => {
+                        match tokio::task::spawn_blocking(move || msg.encode_to_vec()).await {
+                            Ok(bytes) => bytes.into(),
+                            Err(_) => break,
+                        }
+                    }
                     _ => msg.encode_to_vec().into(),
                 };
                 if out.send(Message::Binary(bytes)).await.is_err() {

@@ -1016,7 +1016,7 @@ async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
 /// and field named, the cap, the models), and a room that checks out is refused as not yet run,
 /// leaving no room behind; a one-actor room opens as it always did.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn rooms_of_actors_are_checked_and_refused_until_they_run() {
+async fn rooms_of_actors_are_checked_before_they_open() {
     let model = model();
     let running = serve_tube(
         &model,
@@ -1054,10 +1054,6 @@ async fn rooms_of_actors_are_checked_and_refused_until_they_run() {
         actor("left", "tube", "left"),
     ];
 
-    let err = client.open_room(open(both.clone())).await.unwrap_err();
-    assert_eq!(err.code(), tonic::Code::Unimplemented, "{err}");
-    assert!(err.message().contains("open one room per actor"), "{err}");
-
     let mut three = both.clone();
     three.push(actor("extra", "tube", ""));
     let err = client.open_room(open(three)).await.unwrap_err();
@@ -1082,14 +1078,8 @@ async fn rooms_of_actors_are_checked_and_refused_until_they_run() {
         "{err}"
     );
 
-    // Nothing was left open, and the one-actor room of the same id opens as before.
-    let single = authed(
-        v1::OpenRoomRequest {
-            room: "performer".into(),
-            model: "tube".into(),
-            ..Default::default()
-        },
-        ADMIN,
-    );
-    client.open_room(single).await.unwrap();
+    // Nothing was left open: the room of the same id opens, once.
+    client.open_room(open(both.clone())).await.unwrap();
+    let err = client.open_room(open(both)).await.unwrap_err();
+    assert_eq!(err.code(), tonic::Code::AlreadyExists, "{err}");
 }

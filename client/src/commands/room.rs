@@ -21,7 +21,7 @@ pub struct RoomArgs {
 #[derive(Clone, Debug, clap::Subcommand)]
 pub enum RoomAction {
     /// Open a room on a model; prints the publish token.
-    Open(OpenArgs),
+    Open(Box<OpenArgs>),
     /// Show a room's model, settings and counters.
     Info(InfoArgs),
     /// Close a room (its subscribers' streams end).
@@ -50,8 +50,16 @@ pub struct OpenArgs {
     #[arg(long)]
     pub room: String,
     /// The model the room runs (`crease-server --models` names models by file stem).
-    #[arg(long)]
-    pub model: String,
+    #[arg(long, required_unless_present = "actors", conflicts_with = "actors")]
+    pub model: Option<String>,
+    /// A room of several actors (issue 38: both hands of a performer, several performers):
+    /// a TOML file of `[[actor]]` tables, each with `name`, `model` and optionally `side`
+    /// (left/right), `mirror` (x, y, z or nx,ny,nz: a left hand on a right-hand model),
+    /// `performer` and `map` (a marker map, relative to the file; needs --markers-from,
+    /// --markers or --webxr). --beta, --filter, --mocap, --refine and --skinning apply to
+    /// every actor. E.g. bench/mocap/art-hands-glove13.toml.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["map", "map_name"])]
+    pub actors: Option<PathBuf>,
     /// Translation-solve beta (FKY08 eq. 11): about 3 for keyframing UIs, 0.3 for noisy mocap
     /// (HZY11 Fig. 11). Default: the model's.
     #[arg(long)]
@@ -201,29 +209,85 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
     {
         bail!("--beta must be a positive number, got {b}");
     }
-    let retarget = retarget_spec(args)?;
+    let (retarget, actors) = match &args.actors {
+        Some(path) => (None, actors_spec(path, args)?),
+        None => (retarget_spec(args)?, Vec::new()),
+    };
+    let mut actors_wire = actors;
+    for a in &mut actors_wire {
+        a.beta = beta.unwrap_or(0.0);
+        a.filter = filter.map(v1::MarkerFilter::from);
+        a.refine = args.refine.map(v1::Refine::from);
+        a.skinning = super::common::skinning_wire(args.skinning);
+    }
+    let with_actors = !actors_wire.is_empty();
+    let model = args.model.clone().unwrap_or_default();
     let mut client = args.server.connect().await?;
-    let request = v1::OpenRoomRequest {
-        room: args.room.clone(),
-        model: args.model.clone(),
-        beta: beta.unwrap_or(0.0),
-        filter: filter.map(v1::MarkerFilter::from),
-        retarget,
-        refine: args.refine.map(v1::Refine::from),
-        skinning: super::common::skinning_wire(args.skinning),
-        actors: Vec::new(),
+    let request = if with_actors {
+        v1::OpenRoomRequest {
+            room: args.room.clone(),
+            actors: actors_wire,
+            ..Default::default()
+        }
+    } else {
+        v1::OpenRoomRequest {
+            room: args.room.clone(),
+            model: model.clone(),
+            beta: beta.unwrap_or(0.0),
+            filter: filter.map(v1::MarkerFilter::from),
+            retarget,
+            refine: args.refine.map(v1::Refine::from),
+            skinning: super::common::skinning_wire(args.skinning),
+            actors: Vec::new(),
+        }
     };
     let opened = client
         .open_room(authorized(request, &args.admin.admin_token)?)
         .await
         .map_err(|s| anyhow::anyhow!("{}", s.message()))
-        .with_context(|| format!("opening room {:?} on model {:?}", args.room, args.model))?
+        .with_context(|| match &args.actors {
+            Some(path) => format!(
+                "opening room {:?} of the actors of {}",
+                args.room,
+                path.display()
+            ),
+            None => format!("opening room {:?} on model {model:?}", args.room),
+        })?
         .into_inner();
     let room = get_room(&mut client, &opened.room).await?;
+    if with_actors {
+        for info in &room.actors {
+            let (Some(a), Some(m)) = (&info.actor, &info.model) else {
+                continue;
+            };
+            eprintln!(
+                "room {:?}: actor {:?}{} on model {:?}: beta {}, filter {}, refinement {}, skinning {}{}",
+                room.room,
+                a.name,
+                if a.side.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", a.side)
+                },
+                m.name,
+                a.beta,
+                print_filter(a.filter.as_ref()),
+                print_refinement(a.refine.as_ref()),
+                print_skinning(a.skinning),
+                a.retarget.as_ref().map_or(String::new(), |r| format!(
+                    ", retargets {} markers ({})",
+                    r.markers.len(),
+                    r.units
+                ))
+            );
+        }
+        println!("{}", opened.publish_token);
+        return Ok(());
+    }
     eprintln!(
         "opened room {:?} on model {:?}: beta {}, filter {}, refinement {}, skinning {}{}",
         room.room,
-        args.model,
+        model,
         room.beta,
         print_filter(room.filter.as_ref()),
         print_refinement(room.refine.as_ref()),
@@ -237,6 +301,103 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
     // The token alone on stdout, for scripts: TOKEN=$(crease room open ...).
     println!("{}", opened.publish_token);
     Ok(())
+}
+
+/// One `[[actor]]` of an `--actors` file.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ActorEntry {
+    name: String,
+    model: String,
+    #[serde(default)]
+    side: String,
+    #[serde(default)]
+    mirror: String,
+    #[serde(default)]
+    performer: String,
+    /// A marker map, relative to the actors file.
+    map: Option<PathBuf>,
+}
+
+/// An `--actors` file.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ActorsFile {
+    actor: Vec<ActorEntry>,
+}
+
+/// The actors of `--actors FILE`, each retargeting through its map the capture markers of
+/// `--markers` / `--markers-from` / `--webxr` that the map reads (in the capture's order).
+/// Options are left to the caller; the server checks names, sides and mirrors.
+fn actors_spec(path: &std::path::Path, args: &OpenArgs) -> anyhow::Result<Vec<v1::Actor>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("--actors {}", path.display()))?;
+    let file: ActorsFile =
+        toml::from_str(&text).with_context(|| format!("--actors {}", path.display()))?;
+    if file.actor.is_empty() {
+        bail!("--actors {}: no [[actor]] table", path.display());
+    }
+    let capture = capture_markers(args)?;
+    let dir = path.parent().unwrap_or(std::path::Path::new("."));
+    file.actor
+        .into_iter()
+        .map(|e| {
+            let retarget = match (&e.map, &capture) {
+                (None, _) => None,
+                (Some(map), None) => bail!(
+                    "--actors {}: actor {:?} retargets through {}: give the capture's markers (--markers-from RECORDING, --markers or --webxr)",
+                    path.display(),
+                    e.name,
+                    map.display()
+                ),
+                (Some(map), Some((markers, units))) => {
+                    let map_path = dir.join(map);
+                    let map_toml = std::fs::read_to_string(&map_path).with_context(|| {
+                        format!("--actors {}: actor {:?}: map {}", path.display(), e.name, map_path.display())
+                    })?;
+                    let used = crease_mocap::map::MarkerMap::parse(&map_path, &map_toml)?.marker_names();
+                    Some(v1::Retarget {
+                        map_toml,
+                        map_name: String::new(),
+                        // A C3D label may carry a subject prefix (`Subject:RHAN`).
+                        markers: markers
+                            .iter()
+                            .filter(|m| {
+                                used.contains(*m)
+                                    || m.rsplit(':').next().is_some_and(|s| used.contains(s))
+                            })
+                            .cloned()
+                            .collect(),
+                        units: units.clone(),
+                    })
+                }
+            };
+            Ok(v1::Actor {
+                name: e.name,
+                model: e.model,
+                side: e.side,
+                mirror: e.mirror,
+                performer: e.performer,
+                retarget,
+                ..Default::default()
+            })
+        })
+        .collect()
+}
+
+/// The capture's marker names and units from `--markers` / `--markers-from` / `--webxr`, if
+/// given.
+fn capture_markers(args: &OpenArgs) -> anyhow::Result<Option<(Vec<String>, String)>> {
+    Ok(match (&args.markers, &args.markers_from) {
+        _ if args.webxr => Some((crease_hand::joint_map::capture_markers(), "m".to_owned())),
+        (Some(m), _) => Some((m.clone(), args.units.clone())),
+        (None, Some(path)) => {
+            let r = crease_mocap::Recording::read(path)
+                .with_context(|| format!("--markers-from {}", path.display()))?;
+            Some((r.names, r.units))
+        }
+        (None, None) => None,
+    })
 }
 
 /// The room's `Retarget` from `--map` / `--map-name` and `--markers` / `--markers-from`.
@@ -257,16 +418,7 @@ fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
         }
         None => String::new(),
     };
-    let (markers, units) = match (&args.markers, &args.markers_from) {
-        _ if args.webxr => (crease_hand::joint_map::capture_markers(), "m".to_owned()),
-        (Some(m), _) => (m.clone(), args.units.clone()),
-        (None, Some(path)) => {
-            let r = crease_mocap::Recording::read(path)
-                .with_context(|| format!("--markers-from {}", path.display()))?;
-            (r.names, r.units)
-        }
-        (None, None) => unreachable!("checked above"),
-    };
+    let (markers, units) = capture_markers(args)?.context("the capture's markers")?;
     Ok(Some(v1::Retarget {
         map_toml,
         map_name: args.map_name.clone().unwrap_or_default(),

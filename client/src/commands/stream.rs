@@ -16,12 +16,13 @@ use anyhow::{Context, bail};
 use crease_core::mesh::Mesh;
 use crease_hand::render::{View, contact_sheet};
 use crease_mocap::RetargetStats;
+use crease_proto::control::actor_controls;
 use crease_proto::errors::ErrorCode;
 use crease_proto::{control_frame, v1};
 use serde::Serialize;
 
 use super::retarget::{ModelControls, RecordingArgs, Retargeted, parse_rate};
-use crease_remote::control_file::read_control_frames;
+use crease_remote::control_file::{ControlFrame, read_control_frames};
 use crease_remote::mesh_stream::{self, MeshReader, Subscription};
 use crease_remote::publish::{PublishOptions, SentLog, Sink, publish};
 use crease_remote::{get_room, percentile, unix_us};
@@ -118,6 +119,19 @@ struct Report {
     retarget: Option<RetargetStats>,
     meshes: Option<MeshCheck>,
     strip: Option<String>,
+    /// A room of several actors: each actor's residuals.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    actors: Vec<ActorReport>,
+}
+
+/// One actor's part of a [`Report`] (a room of several actors).
+#[derive(Debug, Default, Serialize)]
+struct ActorReport {
+    name: String,
+    control_residual_rms_model: f64,
+    control_residual_rms_recording_units: f64,
+    /// Frames the actor was missing from (none, from a recording).
+    held_frames: u64,
 }
 
 /// What `--check` saw on the subscription.
@@ -141,8 +155,34 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
         .clone()
         .context("the server sent a room without a model")?;
     let n = model.control_points.len();
-    let prepared = match &args.frames {
-        Some(path) => Retargeted {
+    // A room of several actors (issue 38): each actor retargets the recording's markers its
+    // map reads; a frame carries every actor's.
+    let actors: Vec<(String, v1::Retarget)> = room
+        .actors
+        .iter()
+        .filter_map(|i| i.actor.as_ref())
+        .map(|a| match &a.retarget {
+            Some(rt) => Ok((a.name.clone(), rt.clone())),
+            None => bail!(
+                "room {:?}: actor {:?} takes control points, not markers: crease stream drives rooms of actors from a recording through each actor's map (crease room open --actors FILE --markers-from RECORDING)",
+                args.room,
+                a.name
+            ),
+        })
+        .collect::<anyhow::Result<_>>()?;
+    if !actors.is_empty() && args.frames.is_some() {
+        bail!(
+            "--frames: room {:?} is a room of actors: stream a recording (--c3d or --tsv) into it",
+            args.room
+        );
+    }
+    let mut parts: Vec<Vec<ControlFrame>> = Vec::new();
+    for (_, rt) in actors.iter().skip(1) {
+        parts.push(args.recording.raw_markers(&rt.markers, args.rate)?.frames);
+    }
+    let prepared = match (&args.frames, actors.first()) {
+        (_, Some((_, rt))) => args.recording.raw_markers(&rt.markers, args.rate)?,
+        (Some(path), None) => Retargeted {
             frames: read_control_frames(path, n).with_context(|| {
                 format!(
                     "{}: frames for model {:?} ({n} control points)",
@@ -155,7 +195,7 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             units: "model units".into(),
             stats: None,
         },
-        None => match &room.retarget {
+        (None, None) => match &room.retarget {
             // The room retargets: it gets the raw markers (issue 19).
             Some(rt) => args.recording.raw_markers(&rt.markers, args.rate)?,
             None => {
@@ -164,16 +204,16 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             }
         },
     };
-    let raw_markers = room.retarget.is_some() && args.frames.is_none();
+    let raw_markers = (room.retarget.is_some() || !actors.is_empty()) && args.frames.is_none();
     if prepared.frames.is_empty() {
         bail!("nothing to send: no frames");
     }
-    let frames = Arc::new(prepared.frames);
-    let total = if args.repeat {
-        u64::MAX
-    } else {
-        frames.len() as u64
-    };
+    // Actor 0's frames first, then the others'; every actor's frame `i` goes out together.
+    parts.insert(0, prepared.frames);
+    let pass = parts.iter().map(Vec::len).min().unwrap_or(0);
+    let names: Vec<String> = actors.iter().map(|(n, _)| n.clone()).collect();
+    let frames = Arc::new(parts);
+    let total = if args.repeat { u64::MAX } else { pass as u64 };
     let rate = prepared.rate;
     let start_us = unix_us();
 
@@ -181,12 +221,12 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let want_check = args.check || args.strip.is_some();
     let checker = if want_check {
         let sub = mesh_stream::subscribe(&mut client, &args.room, v1::Level::Base).await?;
-        let reader = sub.reader()?;
+        let reader = sub.readers()?;
         let plan = CheckPlan {
             start_us,
             last_seq: total.saturating_sub(1),
             // The strip covers the first pass (with --loop the stream never ends).
-            pass: frames.len() as u64,
+            pass: pass as u64,
             rate,
             strip_every: args.strip.is_some().then_some(args.strip_every),
             // Give up on a silent stream after three frame periods, at least 5 s.
@@ -205,19 +245,39 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let source = {
         let frames = Arc::clone(&frames);
         let sent_at = Arc::clone(&sent_at);
+        let names = names.clone();
         move |mut sink: Sink| async move {
             let (mut invalid_points, mut invalid_frames) = (0u64, 0u64);
             let mut ticker = tokio::time::interval(period);
             ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
             for seq in 0..total {
                 ticker.tick().await;
-                let f = &frames[(seq % frames.len() as u64) as usize];
-                let mut frame = control_frame(&room_id, seq, unix_us(), &f.positions, &f.valid);
-                if raw_markers {
-                    frame.markers = std::mem::take(&mut frame.positions);
-                    frame.markers_valid = std::mem::take(&mut frame.valid);
-                }
-                let invalid = f.valid.iter().filter(|v| !**v).count() as u64;
+                let i = (seq % pass as u64) as usize;
+                let now = unix_us();
+                let wire = |f: &ControlFrame| {
+                    let mut frame = control_frame(&room_id, seq, now, &f.positions, &f.valid);
+                    if raw_markers {
+                        frame.markers = std::mem::take(&mut frame.positions);
+                        frame.markers_valid = std::mem::take(&mut frame.valid);
+                    }
+                    frame
+                };
+                let frame = if names.is_empty() {
+                    wire(&frames[0][i])
+                } else {
+                    let mut frame = wire(&ControlFrame::default());
+                    frame.actors = names
+                        .iter()
+                        .zip(frames.iter())
+                        .map(|(name, part)| actor_controls(name, wire(&part[i])))
+                        .collect();
+                    frame
+                };
+                let invalid = frames
+                    .iter()
+                    .take(names.len().max(1))
+                    .map(|part| part[i].valid.iter().filter(|v| !**v).count() as u64)
+                    .sum::<u64>();
                 invalid_points += invalid;
                 invalid_frames += u64::from(invalid > 0);
                 sent_at.record(seq, Instant::now(), None);
@@ -238,6 +298,8 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
     let mut round_trips = Vec::new();
     let mut residual_sq = 0.0f64;
     let mut capture_sq = 0.0f64;
+    // Per actor: squared residuals (model units, capture units) and frames it was held.
+    let mut actor_sums = vec![(0.0f64, 0.0f64, 0u64); names.len()];
     let mut on_ack = |ack: v1::PublishAck| {
         if let Some(at) = sent_at.take(ack.seq) {
             round_trips.push(at.elapsed().as_micros() as u64);
@@ -265,6 +327,11 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
                 latencies.push(ack.server_latency_us);
                 residual_sq += f64::from(ack.control_residual).powi(2);
                 capture_sq += f64::from(ack.control_residual_capture).powi(2);
+                for (sums, a) in actor_sums.iter_mut().zip(&ack.actors) {
+                    sums.0 += f64::from(a.control_residual).powi(2);
+                    sums.1 += f64::from(a.control_residual_capture).powi(2);
+                    sums.2 += u64::from(a.held);
+                }
             }
         }
         ControlFlow::Continue(())
@@ -320,6 +387,27 @@ async fn stream(args: &StreamArgs) -> anyhow::Result<()> {
             .control_residual_rms_recording_units
             .map_or(String::new(), |r| format!(" = {r:.2} {}", prepared.units))
     );
+    let acked = report.acknowledged.max(1) as f64;
+    report.actors = names
+        .iter()
+        .zip(&actor_sums)
+        .map(|(name, (model, capture, held))| ActorReport {
+            name: name.clone(),
+            control_residual_rms_model: (model / acked).sqrt(),
+            control_residual_rms_recording_units: (capture / acked).sqrt(),
+            held_frames: *held,
+        })
+        .collect();
+    for a in &report.actors {
+        println!(
+            "actor {:?}: control residual RMS {:.3e} model units = {:.2} {}; held in {} frames",
+            a.name,
+            a.control_residual_rms_model,
+            a.control_residual_rms_recording_units,
+            prepared.units,
+            a.held_frames
+        );
+    }
     if let Some(checker) = checker {
         let mut check = checker.await.context("the mesh checker stopped")?;
         println!(
@@ -384,7 +472,11 @@ struct CheckPlan {
 
 /// Decodes every mesh of the subscription until the last frame sent, checking each is finite
 /// and keeping the strip's pictures.
-async fn check_meshes(mut sub: Subscription, mut reader: MeshReader, plan: CheckPlan) -> MeshCheck {
+async fn check_meshes(
+    mut sub: Subscription,
+    mut readers: Vec<MeshReader>,
+    plan: CheckPlan,
+) -> MeshCheck {
     let CheckPlan {
         start_us,
         last_seq,
@@ -393,7 +485,7 @@ async fn check_meshes(mut sub: Subscription, mut reader: MeshReader, plan: Check
         strip_every,
         patience,
     } = plan;
-    let triangles = reader.topology().model_triangles();
+    let triangles = readers[0].topology().model_triangles();
     let mut check = MeshCheck::default();
     let mut model_order = Vec::new();
     let mut latencies = Vec::new();
@@ -403,21 +495,37 @@ async fn check_meshes(mut sub: Subscription, mut reader: MeshReader, plan: Check
             Ok(Ok(Some(f))) => f,
             _ => break,
         };
-        // Keep the codec state, count only this run's frames.
-        let decoded = reader.decode(&f.data);
+        // Keep the codec state, count only this run's frames. A room of several actors
+        // sends each actor's frame in `actors` (decoded by that actor's reader).
+        let decoded: Vec<bool> = if f.actors.is_empty() {
+            vec![readers[0].decode(&f.data).is_ok()]
+        } else {
+            f.actors
+                .iter()
+                .map(|a| {
+                    readers
+                        .get_mut(a.actor as usize)
+                        .is_some_and(|r| r.decode(&a.data).is_ok())
+                })
+                .collect()
+        };
         if f.capture_time_us < start_us {
             continue;
         }
         check.received += 1;
         check.skipped += u64::from(f.skipped);
         latencies.push(unix_us() - f.capture_time_us);
-        if decoded.is_err() {
+        if decoded.len() != readers.len() || decoded.contains(&false) {
             check.decode_errors += 1;
             continue;
         }
-        if !reader.streamed().iter().all(|p| p.is_finite()) {
+        if !readers
+            .iter_mut()
+            .all(|r| r.streamed().iter().all(|p| p.is_finite()))
+        {
             check.non_finite += 1;
         }
+        let reader = &mut readers[0];
         if let Some(every) = strip_every {
             let t = f.seq as f64 / rate;
             if t + 0.5 / rate >= next_strip && f.seq < pass {
