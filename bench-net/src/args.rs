@@ -67,6 +67,13 @@ pub struct BenchNetArgs {
     /// Control frames per second, per room.
     #[arg(long, default_value_t = 60.0)]
     pub rate: f64,
+    /// Actors per room (issue 38): 1 opens rooms on the model as always; N opens rooms of N
+    /// actors on it, every odd one mirrored across x (a left hand beside each right), all
+    /// driven by the same control frames (reflected for the mirrored ones), each frame
+    /// carrying every actor's. The server's rate limit counts actors x frames: a spawned server gets
+    /// --max-publish-hz 4 x rate x N (a --server one needs it above rate x N).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub actors: u32,
     /// The measured window, seconds.
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,

@@ -177,7 +177,7 @@ async fn bench(
         }],
         None => vec![server::spawn_server(args).await?],
     };
-    let frames = Arc::new(frames);
+    let frames = Arc::new(load::actor_frames(&frames, args.actors));
     let mut reports = Vec::new();
     for sc in scenarios(args) {
         eprintln!(

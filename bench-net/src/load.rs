@@ -131,8 +131,9 @@ struct Subscribed {
     // Holds the connection for the stream's life.
     _client: CreaseClient<Channel>,
     sub: Subscription,
-    /// The decoder of the subscriber that checks its room's frames.
-    reader: Option<StreamReader>,
+    /// The decoders (one per actor) of the subscriber that checks its room's frames.
+    readers: Vec<StreamReader>,
+    /// Vertices per frame, every actor's.
     vertices: usize,
 }
 
@@ -148,19 +149,17 @@ async fn subscribe(
 ) -> anyhow::Result<Subscribed> {
     let mut client = connect(&url, None).await?;
     let sub = mesh_stream::subscribe_encoded(&mut client, &room, level, encoding).await?;
-    let reader = if check {
-        Some(
-            sub.stream_reader()
-                .with_context(|| format!("room {room:?}: first message"))?,
-        )
+    let readers = if check {
+        sub.stream_readers()
+            .with_context(|| format!("room {room:?}: first message"))?
     } else {
-        None
+        Vec::new()
     };
     Ok(Subscribed {
         _client: client,
-        vertices: sub.vertex_count(),
+        vertices: sub.vertex_count() * sub.actors.len().max(1),
         sub,
-        reader,
+        readers,
     })
 }
 
@@ -178,9 +177,19 @@ async fn read_frames(mut sub: Subscribed, window: Window) -> anyhow::Result<Subs
         };
         let now = Instant::now();
         let now_us = unix_us();
-        if let Some(reader) = &mut sub.reader {
-            match reader.decode(&f.data) {
-                Ok(_) => stats.decoded += 1,
+        if !sub.readers.is_empty() {
+            let decoded = if f.actors.is_empty() {
+                sub.readers[0].decode(&f.data)
+            } else {
+                f.actors
+                    .iter()
+                    .try_for_each(|a| match sub.readers.get_mut(a.actor as usize) {
+                        Some(r) => r.decode(&a.data),
+                        None => bail!("actor {} of {}", a.actor, sub.readers.len()),
+                    })
+            };
+            match decoded {
+                Ok(()) => stats.decoded += 1,
                 Err(e) => {
                     stats.decode_errors += 1;
                     stats
@@ -196,8 +205,10 @@ async fn read_frames(mut sub: Subscribed, window: Window) -> anyhow::Result<Subs
         stats.skipped += u64::from(f.skipped);
         let client_us = (now_us - f.capture_time_us).clamp(0, i64::from(u32::MAX)) as u32;
         stats.latency.push((f.seq, f.server_latency_us, client_us));
-        let len = f.data.len() as u64;
-        match parse_frame(&f.data).map(|(h, _)| h.kind) {
+        // A room of several actors: every actor's bytes; a keyframe when actor 0's is one.
+        let len = (f.data.len() + f.actors.iter().map(|a| a.data.len()).sum::<usize>()) as u64;
+        let first = f.actors.first().map_or(&f.data, |a| &a.data);
+        match parse_frame(first).map(|(h, _)| h.kind) {
             Ok(FrameKind::Key) => stats.key = (stats.key.0 + 1, stats.key.1 + len),
             Ok(FrameKind::Delta) => stats.delta = (stats.delta.0 + 1, stats.delta.1 + len),
             Err(e) => bail!("frame {}: not a codec frame: {e}", f.seq),
@@ -220,6 +231,36 @@ async fn metric(http: std::net::SocketAddr, name: &str) -> Option<f64> {
         .and_then(|v| v.trim().parse().ok())
 }
 
+/// Actor `k`'s name in a room of several actors (`--actors`).
+fn actor_name(k: u32) -> String {
+    format!("a{k}")
+}
+
+/// `frames` as frames of a room of `actors` actors (`--actors`): each frame's points as every
+/// actor's part, reflected across x for the odd (mirrored) ones. One actor: `frames` as they are.
+pub(super) fn actor_frames(frames: &[v1::ControlFrame], actors: u32) -> Vec<v1::ControlFrame> {
+    if actors <= 1 {
+        return frames.to_vec();
+    }
+    frames
+        .iter()
+        .map(|f| {
+            let parts = (0..actors)
+                .map(|k| {
+                    let mut part = f.clone();
+                    if k % 2 == 1 {
+                        part.positions
+                            .chunks_exact_mut(3)
+                            .for_each(|p| p[0] = -p[0]);
+                    }
+                    crease_proto::control::actor_controls(&actor_name(k), part)
+                })
+                .collect();
+            crease_proto::control::with_actors(f.clone(), parts)
+        })
+        .collect()
+}
+
 /// The owner's NATS bytes so far (cluster scenarios).
 const NATS_BYTES: &str = "crease_cluster_nats_bytes_out_total";
 
@@ -237,12 +278,22 @@ pub(super) async fn run_scenario(
     let mut rooms = Vec::with_capacity(sc.rooms);
     for k in 0..sc.rooms {
         let id = format!("bench-{tag}-{}-{k}", sc.name);
-        let open = v1::OpenRoomRequest {
-            room: id.clone(),
-            model: target.model.clone(),
-            beta: 0.0,
-            filter: None,
-            ..Default::default()
+        let open = if args.actors > 1 {
+            v1::OpenRoomRequest {
+                room: id.clone(),
+                actors: (0..args.actors)
+                    .map(|k| crease_proto::room::actor(&actor_name(k), &target.model, k % 2 == 1))
+                    .collect(),
+                ..Default::default()
+            }
+        } else {
+            v1::OpenRoomRequest {
+                room: id.clone(),
+                model: target.model.clone(),
+                beta: 0.0,
+                filter: None,
+                ..Default::default()
+            }
         };
         let opened = admin
             .open_room(authorized(open, &target.admin_token)?)

@@ -87,7 +87,16 @@ fn free_address(held: &mut Vec<std::net::TcpListener>) -> anyhow::Result<std::ne
 
 /// Spawns `crease-server` on the model and waits until it answers.
 pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> {
-    spawn_server_with(args, &[], &random_token()).await
+    // The rate limit counts actors x frames (issue 38): room for every actor at the bench's
+    // rate, with the default's headroom.
+    let hz = (args.rate * f64::from(args.actors) * 4.0).max(240.0);
+    let extra = [
+        "--max-publish-hz".to_owned(),
+        hz.to_string(),
+        "--max-actors".to_owned(),
+        args.actors.max(8).to_string(),
+    ];
+    spawn_server_with(args, &extra, &random_token()).await
 }
 
 /// [`spawn_server`] with `extra` arguments (a cluster's `--nats`, a soak's limits) and admin

@@ -39,6 +39,20 @@ impl DemoAnimation {
     /// [`DemoError::Hand`] if the hand cannot be built or a control point is not one of its
     /// vertices.
     pub fn new(model: &TrainedModel) -> Result<Self, DemoError> {
+        Self::of_poses(model, &NamedPose::ALL)
+    }
+
+    /// The animation of `model`'s control points through `poses` in a loop (as [`Self::new`]
+    /// does through every named pose), on the base sweep hand.
+    ///
+    /// # Errors
+    /// As [`Self::new`]; also with no poses.
+    pub fn of_poses(model: &TrainedModel, poses: &[NamedPose]) -> Result<Self, DemoError> {
+        if poses.is_empty() {
+            return Err(DemoError::Hand(
+                "an animation needs at least one pose".into(),
+            ));
+        }
         let rig = HandRig::build(Resolution::Base).map_err(|e| DemoError::Hand(e.to_string()))?;
         let n = rig.vertex_count();
         if let Some(c) = model.controls.iter().find(|c| c.vertex as usize >= n) {
@@ -47,8 +61,8 @@ impl DemoAnimation {
                 c.name, c.vertex
             )));
         }
-        // Flat first: the loop starts and ends at the rest pose.
-        let cycle: Vec<HandPose> = NamedPose::ALL.iter().map(|&p| HandPose::named(p)).collect();
+        // The first pose first: the loop starts and ends there (the rest pose for `new`).
+        let cycle: Vec<HandPose> = poses.iter().map(|&p| HandPose::named(p)).collect();
         let per_pose = ((HOLD_S + BLEND_S) * SAMPLES_PER_S).round() as usize;
         let hold = (HOLD_S * SAMPLES_PER_S).round() as usize;
         let mut scratch = RigScratch::new();
@@ -92,6 +106,30 @@ impl DemoAnimation {
     }
 }
 
+/// What [`drive`] plays into one actor of a room: the actor's name (`None`: a room opened
+/// without actors, the frame's own fields), its animation, and whether its model is mirrored
+/// across x (a left hand on the right-hand model: its control points are reflected too).
+#[derive(Clone, Debug)]
+pub struct ActorAnimation {
+    /// The actor, in a room of several actors.
+    pub actor: Option<String>,
+    /// Its loop.
+    pub animation: DemoAnimation,
+    /// Whether the actor's model is the demo model mirrored across x.
+    pub mirrored: bool,
+}
+
+impl ActorAnimation {
+    /// A one-actor room's animation.
+    pub fn single(animation: DemoAnimation) -> Vec<ActorAnimation> {
+        vec![ActorAnimation {
+            actor: None,
+            animation,
+            mirrored: false,
+        }]
+    }
+}
+
 /// How long the animation pauses after someone else published into the demo room (an animator
 /// dragging a control point in the viewer), so the two do not fight over the hand.
 const YIELD_S: f64 = 3.0;
@@ -101,7 +139,12 @@ const YIELD_S: f64 = 3.0;
 /// (metrics, acks, latency), one at a time; a tick missed while a frame was still being
 /// predicted is skipped, not queued. When another publisher's frames arrive, the animation
 /// pauses until none came for `YIELD_S` seconds, and resumes where it left off.
-pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimation, rate_hz: f64) {
+pub async fn drive(
+    state: Arc<AppState>,
+    room: Arc<Room>,
+    animations: Vec<ActorAnimation>,
+    rate_hz: f64,
+) {
     let period = Duration::from_secs_f64(1.0 / rate_hz.clamp(1.0, 1000.0));
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
@@ -133,17 +176,44 @@ pub async fn drive(state: Arc<AppState>, room: Arc<Room>, animation: DemoAnimati
         }
         t += now.duration_since(last_tick).as_secs_f64();
         last_tick = now;
-        animation.controls_at(t, &mut positions);
-        let frame = crease_proto::control::control_frame_flat(
-            &room.id,
-            seq,
-            now_us(),
-            std::mem::take(&mut positions),
-        );
+        let frame = frame_at(&room.id, seq, t, &animations, &mut positions);
         let outcome = crease_server::ingest::publish(&state, Some(&token), frame).await;
         ours = room.published();
         if let Err(e) = outcome {
             tracing::warn!(code = e.code().wire(), message = %e, "demo frame refused");
+        }
+    }
+}
+
+/// The control frame of animation time `t` into room `room`: one actor's points in the
+/// frame's own fields, or every actor's in `actors` (reflected across x for mirrored ones).
+fn frame_at(
+    room: &str,
+    seq: u64,
+    t: f64,
+    animations: &[ActorAnimation],
+    positions: &mut Vec<f32>,
+) -> crease_proto::v1::ControlFrame {
+    use crease_proto::control::{actor_controls, control_frame_flat, with_actors};
+    let now = now_us();
+    let mut points = |a: &ActorAnimation| {
+        a.animation.controls_at(t, positions);
+        if a.mirrored {
+            positions.chunks_exact_mut(3).for_each(|p| p[0] = -p[0]);
+        }
+        std::mem::take(positions)
+    };
+    match animations {
+        [single] if single.actor.is_none() => control_frame_flat(room, seq, now, points(single)),
+        _ => {
+            let parts = animations
+                .iter()
+                .map(|a| {
+                    let part = control_frame_flat(room, seq, now, points(a));
+                    actor_controls(a.actor.as_deref().unwrap_or_default(), part)
+                })
+                .collect();
+            with_actors(control_frame_flat(room, seq, now, Vec::new()), parts)
         }
     }
 }

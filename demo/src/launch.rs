@@ -8,13 +8,17 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use crease_proto::room::{Placement, RoomOptions, RoomSpec, RoomToken};
+use crease_core::model::MirrorPlane;
+use crease_proto::room::{ActorSpec, Placement, RoomOptions, RoomSpec, RoomToken, Side};
 use crease_server::registry::{ModelRegistry, RegistryError};
 use crease_server::{AppState, OpenRoomError, Running};
 
-use crate::animation::{DemoAnimation, drive};
+use crate::animation::{ActorAnimation, DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
-use crate::{DEMO_BETA, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, WEBXR_MAP};
+use crate::{
+    DEMO_BETA, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM,
+    PERFORMER_LEFT_POSES, WEBXR_MAP,
+};
 
 /// Everything `crease-server` is told: what to serve and how.
 #[derive(Clone, Debug)]
@@ -91,6 +95,9 @@ pub enum LaunchError {
     /// The demo room could not be opened.
     #[error("the demo room: {0}")]
     Room(#[from] OpenRoomError),
+    /// The room of two actors could not be opened.
+    #[error("the demo's room of actors {DEMO_PERFORMER_ROOM:?}: {0}")]
+    Performer(String),
     /// The WebXR room could not be opened (its joint map does not bind to the demo model).
     #[error("the demo's WebXR room {DEMO_HANDS_ROOM:?}: {0}")]
     Hands(String),
@@ -202,13 +209,14 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
         let cache = config.cache.clone().unwrap_or_else(default_cache_dir);
         let say = Arc::clone(&progress);
         // Training and sampling the animation take seconds: the blocking pool, not the executor.
-        let (model, animation) = tokio::task::spawn_blocking(move || {
+        let (model, animation, left) = tokio::task::spawn_blocking(move || {
             let model = demo_model(&cache, &mut |line| say(&format!("demo: {line}")))?;
             let animation = DemoAnimation::new(&model)?;
-            Ok::<_, DemoError>((model, animation))
+            let left = DemoAnimation::of_poses(&model, &PERFORMER_LEFT_POSES)?;
+            Ok::<_, DemoError>((model, animation, left))
         })
         .await??;
-        Some((models.insert(DEMO_MODEL, model), animation))
+        Some((models.insert(DEMO_MODEL, model), animation, left))
     } else {
         None
     };
@@ -242,7 +250,7 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
         crease_server::join_cluster(&state, options).await?;
     }
     let mut demo_token = None;
-    if let Some((model, animation)) = demo {
+    if let Some((model, animation, left)) = demo {
         // Keyframe mode: the control points are followed closely (HZY11 Fig. 11: beta ~3).
         // The demo's rooms are this replica's alone, in a cluster too.
         let spec = RoomSpec {
@@ -261,11 +269,38 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
         };
         let room = state.open_room(spec).await?;
         let token = room.token().unwrap_or_default().to_owned();
-        tokio::spawn(drive(Arc::clone(&state), room, animation, config.demo_rate));
+        tokio::spawn(drive(
+            Arc::clone(&state),
+            room,
+            ActorAnimation::single(animation.clone()),
+            config.demo_rate,
+        ));
         state
             .open_room(hands_room(&model, &token))
             .await
             .map_err(|e| LaunchError::Hands(e.to_string()))?;
+        let performer = state
+            .open_room(performer_room(&model, &token))
+            .await
+            .map_err(|e| LaunchError::Performer(e.to_string()))?;
+        let actors = vec![
+            ActorAnimation {
+                actor: Some("right".into()),
+                animation,
+                mirrored: false,
+            },
+            ActorAnimation {
+                actor: Some("left".into()),
+                animation: left,
+                mirrored: true,
+            },
+        ];
+        tokio::spawn(drive(
+            Arc::clone(&state),
+            performer,
+            actors,
+            config.demo_rate,
+        ));
         demo_token = Some(token);
     }
     let running = crease_server::serve(state).await?;
@@ -302,6 +337,33 @@ fn hands_room(model: &crease_server::registry::LoadedModel, token: &str) -> Room
             skinning: None,
         },
         retarget: Some(retarget),
+        token: RoomToken::Fixed(token.to_owned()),
+        placement: Placement::Local,
+        ..RoomSpec::default()
+    }
+}
+
+/// The room of two actors [`DEMO_PERFORMER_ROOM`] on the demo model (issue 38): `right` as
+/// trained, `left` mirrored across x, one performer, keyframe beta, the demo room's `token`.
+fn performer_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
+    let actor = |name: &str, side, mirror| ActorSpec {
+        name: name.into(),
+        model: model.name.clone(),
+        side,
+        mirror,
+        performer: "demo".into(),
+        options: RoomOptions {
+            beta: Some(DEMO_BETA),
+            ..RoomOptions::default()
+        },
+        retarget: None,
+    };
+    RoomSpec {
+        id: DEMO_PERFORMER_ROOM.into(),
+        actors: vec![
+            actor("right", Side::Right, None),
+            actor("left", Side::Left, Some(MirrorPlane::X)),
+        ],
         token: RoomToken::Fixed(token.to_owned()),
         placement: Placement::Local,
         ..RoomSpec::default()

@@ -20,7 +20,7 @@ pub mod animation;
 pub mod hand_model;
 pub mod launch;
 
-pub use animation::{DemoAnimation, drive};
+pub use animation::{ActorAnimation, DemoAnimation, drive};
 pub use hand_model::{DemoError, default_cache_dir, demo_model};
 
 /// The demo model's name (`GetModel`, `OpenRoom`).
@@ -31,6 +31,22 @@ pub const DEMO_ROOM: &str = "demo";
 /// hands" drives (issue 19), through [`WEBXR_MAP`] from the markers of
 /// `crease_hand::webxr::capture_markers`.
 pub const DEMO_HANDS_ROOM: &str = "hands";
+/// The demo's room of two actors (issue 38): both hands of one performer, the demo hand as
+/// trained (`right`) and mirrored across x (`left`), each through its own loop of the named
+/// poses ([`PERFORMER_LEFT_POSES`] for the left), in one stream.
+pub const DEMO_PERFORMER_ROOM: &str = "performer";
+/// The left hand's loop in [`DEMO_PERFORMER_ROOM`]: the named poses in reverse, so the two
+/// hands show different poses at once.
+pub const PERFORMER_LEFT_POSES: [crease_hand::skeleton::NamedPose; 10] = {
+    let all = crease_hand::skeleton::NamedPose::ALL;
+    let mut out = all;
+    let mut i = 0;
+    while i < all.len() {
+        out[i] = all[all.len() - 1 - i];
+        i += 1;
+    }
+    out
+};
 /// The joint map of [`DEMO_HANDS_ROOM`]: WebXR joints onto the demo hand's `back` landmarks
 /// (`bench/mocap/webxr-back.toml`, which says how it was built).
 pub const WEBXR_MAP: &str = include_str!("../../bench/mocap/webxr-back.toml");

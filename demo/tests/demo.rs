@@ -10,7 +10,9 @@ use std::time::{Duration, Instant};
 
 use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
-use crease_demo::{DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_ROOM, DemoAnimation, demo_model};
+use crease_demo::{
+    DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM, DemoAnimation, demo_model,
+};
 use crease_hand::rig::{HandRig, Layers};
 use crease_hand::skeleton::{HandPose, NamedPose};
 use crease_hand::surface::Resolution;
@@ -260,6 +262,72 @@ fn demo_trains_animates_and_serves() {
         assert_eq!(retarget.markers, crease_hand::joint_map::capture_markers());
         assert_eq!(retarget.markers.len(), 75);
         assert_eq!(retarget.units, "m");
+
+        // And the room of two actors (issue 38): one stream with both hands, the left one on
+        // the mirrored model, through different pose loops.
+        let mut sub = client
+            .subscribe(v1::SubscribeRequest {
+                room: DEMO_PERFORMER_ROOM.into(),
+                level: v1::Level::Base as i32,
+                ..Default::default()
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut topologies = Vec::new();
+        for want in [
+            ("right", DEMO_MODEL.to_owned()),
+            ("left", format!("{DEMO_MODEL}~mirror-x")),
+        ] {
+            let Some(v1::mesh_frame::Body::Topology(t)) =
+                sub.message().await.unwrap().unwrap().body
+            else {
+                panic!("no topology for actor {}", want.0);
+            };
+            assert_eq!((t.actor.as_str(), t.model.clone()), (want.0, want.1));
+            topologies.push(crease_proto::read_topology(&t).unwrap());
+        }
+        let mut decoders: Vec<FrameDecoder> = topologies
+            .iter()
+            .map(|t| FrameDecoder::new(t.vertex_count))
+            .collect();
+        let size = (hi - lo).max_element();
+        let mut apart = 0.0f32;
+        for _ in 0..5 {
+            let msg = tokio::time::timeout(Duration::from_secs(5), sub.message())
+                .await
+                .expect("the performer room publishes")
+                .unwrap()
+                .unwrap();
+            let Some(v1::mesh_frame::Body::Frame(f)) = msg.body else {
+                continue;
+            };
+            assert_eq!(f.actors.len(), 2, "both hands in every frame");
+            let mut hands = Vec::new();
+            for (k, a) in f.actors.iter().enumerate() {
+                assert!(!a.held, "the animation drives both hands");
+                decoders[k].decode(&a.data).unwrap();
+                decoders[k].positions(&mut streamed);
+                topologies[k].to_model_order(&streamed, &mut positions);
+                hands.push(positions.clone());
+            }
+            // The left hand is a mirrored hand: reflected back it lies in the pose box.
+            let back: Vec<Vec3> = hands[1].iter().map(|p| Vec3::new(-p.x, p.y, p.z)).collect();
+            assert!(back.iter().all(|p| {
+                p.cmpge(lo - Vec3::splat(margin)).all() && p.cmple(hi + Vec3::splat(margin)).all()
+            }));
+            // ... in another pose than the right hand's (another loop of the poses).
+            let d = hands[0]
+                .iter()
+                .zip(&back)
+                .map(|(a, b)| a.distance(*b))
+                .fold(0.0f32, f32::max);
+            apart = apart.max(d);
+        }
+        assert!(
+            apart > 0.05 * size,
+            "the two hands move through different poses: at most {apart} apart (hand size {size})"
+        );
     });
 
     // The viewer page and readiness over plain HTTP.

@@ -192,6 +192,18 @@ pub fn control_frame_flat(
     }
 }
 
+/// `frame` as a frame of a room of several actors: its room, sequence number and capture
+/// time, and `parts` (its own points and masks dropped).
+pub fn with_actors(frame: v1::ControlFrame, parts: Vec<v1::ActorControls>) -> v1::ControlFrame {
+    v1::ControlFrame {
+        room: frame.room,
+        seq: frame.seq,
+        capture_time_us: frame.capture_time_us,
+        actors: parts,
+        ..Default::default()
+    }
+}
+
 /// Actor `actor`'s part of a control frame of a room of several actors: `frame`'s points (or
 /// markers) and masks, moved, not copied (its room, sequence number and time belong to the
 /// frame that carries the part).

@@ -524,6 +524,21 @@ pub fn room_settings(s: RoomSettings<'_>) -> v1::OpenRoomRequest {
     }
 }
 
+/// An actor `name` on `model`, mirrored across x when `mirrored` (a left hand on a right-hand
+/// model), with the server's default options: what the bench and the demo open rooms of.
+pub fn actor(name: &str, model: &str, mirrored: bool) -> v1::Actor {
+    v1::Actor {
+        name: name.to_owned(),
+        model: model.to_owned(),
+        mirror: if mirrored {
+            "x".to_owned()
+        } else {
+            String::new()
+        },
+        ..Default::default()
+    }
+}
+
 /// A retarget of `markers` (the capture's names, in frame order, in `units`) through the
 /// marker map `map_toml` (the demo's WebXR room).
 pub fn retarget(map_toml: String, markers: Vec<String>, units: String) -> v1::Retarget {

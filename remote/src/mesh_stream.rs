@@ -285,6 +285,18 @@ impl Subscription {
             .collect()
     }
 
+    /// A reader per actor of this stream's frames, whatever its encoding (one, of `first`, in a
+    /// one-actor room).
+    ///
+    /// # Errors
+    /// A first message that does not decode.
+    pub fn stream_readers(&self) -> anyhow::Result<Vec<StreamReader>> {
+        if self.actors.is_empty() {
+            return Ok(vec![self.stream_reader()?]);
+        }
+        self.actors.iter().map(StreamReader::new).collect()
+    }
+
     /// The actors' names of a room of several actors (empty in a one-actor room).
     pub fn actor_names(&self) -> Vec<String> {
         self.actors
