@@ -357,6 +357,7 @@ fn performer_room(model: &crease_server::registry::LoadedModel, token: &str) -> 
             ..RoomOptions::default()
         },
         retarget: None,
+        model_sha256: None,
     };
     RoomSpec {
         id: DEMO_PERFORMER_ROOM.into(),

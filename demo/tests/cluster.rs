@@ -25,6 +25,7 @@ use common::{
     authed, bent, check_decoded, control_frame, http_get, metric, model_with_detail, predicted,
 };
 use crease_core::codec::FrameDecoder;
+use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
@@ -223,8 +224,21 @@ fn angle(seq: u64) -> f32 {
     0.1 + 0.05 * (seq % 20) as f32
 }
 
+/// The second actor's bend in a room of two actors (`duo`): another pose than the first's.
+fn left_angle(seq: u64) -> f32 {
+    angle(seq + 7)
+}
+
+/// The reflection across x = 0 (the `left` actor's mirror plane).
+fn mirror_x(p: Vec3) -> Vec3 {
+    Vec3::new(-p.x, p.y, p.z)
+}
+
 /// Decodes every message of a mesh stream into `seen`, checking each frame (base level)
-/// against the in-process prediction of its control frame.
+/// against the in-process prediction of its control frame. A room of actors (issue 38)
+/// streams one topology per actor and every actor's frame in `Frame.actors`: actor 0 is
+/// checked as a one-actor room's frame, actor 1 (mirrored across x) against the original
+/// model's prediction at [`left_angle`], reflected.
 fn watch(
     model: Arc<TrainedModel>,
     room: &'static str,
@@ -233,24 +247,45 @@ fn watch(
     mut messages: impl futures_util::Stream<Item = v1::MeshFrame> + Unpin + Send + 'static,
 ) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
-        let mut decoder = None::<FrameDecoder>;
+        let mut decoders: Vec<(FrameDecoder, crease_proto::StreamTopology)> = Vec::new();
         while let Some(msg) = messages.next().await {
             match msg.body {
                 Some(v1::mesh_frame::Body::Topology(t)) => {
+                    if t.actor_index == 0 {
+                        decoders.clear();
+                    }
                     let t = crease_proto::read_topology(&t).unwrap();
-                    decoder = Some(FrameDecoder::new(t.vertex_count));
+                    decoders.push((FrameDecoder::new(t.vertex_count), t.clone()));
                     seen.lock().unwrap().topology = Some(t);
                 }
                 Some(v1::mesh_frame::Body::Frame(f)) => {
                     let mut s = seen.lock().unwrap();
-                    let (Some(d), Some(t)) = (decoder.as_mut(), s.topology.clone()) else {
-                        panic!("a frame before the topology");
+                    assert!(!decoders.is_empty(), "a frame before the topology");
+                    let parts: Vec<&[u8]> = if f.actors.is_empty() {
+                        vec![&f.data]
+                    } else {
+                        assert_eq!(f.actors.len(), decoders.len(), "every actor's frame");
+                        f.actors.iter().map(|a| a.data.as_ref()).collect()
                     };
-                    if check {
-                        let want =
-                            predicted(&model, &control_frame(&model, room, f.seq, angle(f.seq)));
-                        check_decoded(d, &t, &f.data, &want);
-                    } else if d.decode(&f.data).is_err() {
+                    let mut failed = false;
+                    for (k, (data, (d, t))) in parts.iter().zip(&mut decoders).enumerate() {
+                        if check {
+                            let bend = if k == 0 {
+                                angle(f.seq)
+                            } else {
+                                left_angle(f.seq)
+                            };
+                            let mut want =
+                                predicted(&model, &control_frame(&model, room, f.seq, bend));
+                            if k == 1 {
+                                want.iter_mut().for_each(|p| *p = mirror_x(*p));
+                            }
+                            check_decoded(d, t, data, &want);
+                        } else if d.decode(data).is_err() {
+                            failed = true;
+                        }
+                    }
+                    if failed {
                         s.decode_errors += 1;
                         continue;
                     }
@@ -391,6 +426,9 @@ struct Publisher {
     model: Arc<TrainedModel>,
     room: &'static str,
     seq: u64,
+    /// A room of two actors (`right`, and `left` mirrored across x): each frame carries both,
+    /// the left one's points reflected, at [`left_angle`].
+    actors: bool,
 }
 
 impl Publisher {
@@ -424,7 +462,14 @@ impl Publisher {
             model: Arc::clone(model),
             room,
             seq: 0,
+            actors: false,
         }
+    }
+
+    /// This publisher as one of a room of two actors (`right`, `left` mirrored across x).
+    fn of_actors(mut self) -> Publisher {
+        self.actors = true;
+        self
     }
 
     /// Sends `n` frames at ~50 Hz.
@@ -432,6 +477,19 @@ impl Publisher {
         for _ in 0..n {
             self.seq += 1;
             let f = control_frame(&self.model, self.room, self.seq, angle(self.seq));
+            let f = if self.actors {
+                let mut left = control_frame(&self.model, "", self.seq, left_angle(self.seq));
+                left.positions
+                    .chunks_exact_mut(3)
+                    .for_each(|p| p[0] = -p[0]);
+                let parts = vec![
+                    crease_proto::control::actor_controls("right", f.clone()),
+                    crease_proto::control::actor_controls("left", left),
+                ];
+                crease_proto::control::with_actors(f, parts)
+            } else {
+                f
+            };
             self.tx.send(f).await.unwrap();
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
@@ -532,6 +590,33 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         .unwrap_err();
     assert_eq!(again.code(), tonic::Code::AlreadyExists, "{again:?}");
 
+    // A room of two actors (issue 38) on A too: the tube as trained and mirrored across x,
+    // both hands of one performer in one stream; listed on B and C with both actors.
+    let duo = v1::OpenRoomRequest {
+        room: "duo".into(),
+        actors: vec![
+            crease_proto::room::actor("right", "tube", false),
+            crease_proto::room::actor("left", "tube", true),
+        ],
+        ..Default::default()
+    };
+    let duo_token = a
+        .client()
+        .await
+        .open_room(authed(duo, ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    for r in [&b, &c] {
+        until(
+            Duration::from_secs(5),
+            "the room of actors listed",
+            || async { r.owner_of("duo").await.as_deref() == Some("A") },
+        )
+        .await;
+    }
+
     // Viewers on A (gRPC), B (gRPC) and C (WebSocket; C fetches the model from the cluster).
     let (on_a, _ta) = grpc_viewer(&a, &model, "r", v1::Level::Base).await;
     let (on_b, _tb) = grpc_viewer(&b, &model, "r", v1::Level::Base).await;
@@ -544,6 +629,44 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
             [&on_a, &on_b, &on_c].iter().all(|s| frames(s) >= 40)
         })
         .await;
+    // The room of actors relayed: both actors' meshes in every frame, on B and on C (which
+    // mirrors the model it fetched), each checked against its own prediction.
+    let (duo_b, _tdb) = grpc_viewer(&b, &model, "duo", v1::Level::Base).await;
+    let (duo_c, _tdc) = grpc_viewer(&c, &model, "duo", v1::Level::Base).await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let mut duo_publisher = Publisher::new(&b, &model, "duo", &duo_token)
+        .await
+        .of_actors();
+    duo_publisher
+        .send_until(
+            Duration::from_secs(10),
+            "20 frames of both actors on B and C",
+            || [&duo_b, &duo_c].iter().all(|s| frames(s) >= 20),
+        )
+        .await;
+    let relayed = c
+        .client()
+        .await
+        .get_room(v1::GetRoomRequest { room: "duo".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    let names: Vec<(String, String)> = relayed
+        .actors
+        .iter()
+        .map(|a| {
+            let actor = a.actor.clone().unwrap();
+            (actor.name, actor.mirror)
+        })
+        .collect();
+    assert_eq!(
+        names,
+        [
+            ("right".to_owned(), String::new()),
+            ("left".to_owned(), "x".to_owned())
+        ],
+        "C's relay runs the registry's actors"
+    );
     // A viewer joining B late, while B relays: its first frame is a keyframe made on B from
     // the lanes B decoded (the owner is not asked), and it matches the prediction.
     let (late_b, _tl) = grpc_viewer(&b, &model, "r", v1::Level::Base).await;
@@ -628,6 +751,32 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
     eprintln!(
         "C's viewer had 20 new frames {} ms after the kill",
         killed.elapsed().as_millis()
+    );
+    // The room of actors is adopted too, and goes on with both actors.
+    until(
+        Duration::from_secs(10),
+        "the room of actors adopted",
+        || async { c.owner_of("duo").await.is_some_and(|o| o != "A") },
+    )
+    .await;
+    let before = (frames(&duo_b), frames(&duo_c));
+    duo_publisher
+        .send_until(
+            Duration::from_secs(10),
+            "both actors on B and C after the adoption",
+            || frames(&duo_b) >= before.0 + 20 && frames(&duo_c) >= before.1 + 20,
+        )
+        .await;
+    eprintln!(
+        "room \"duo\" (two actors) adopted by {}; both viewers had 20 new frames {} ms after the kill",
+        c.owner_of("duo").await.unwrap_or_default(),
+        killed.elapsed().as_millis()
+    );
+    let duo_acks = duo_publisher.finish().await;
+    assert!(
+        duo_acks.iter().filter(|a| a.error.is_none()).count() >= 40,
+        "{:?}",
+        duo_acks.iter().find_map(|a| a.error.as_ref())
     );
 
     // A NATS restart: the replicas reconnect, the room goes on under the same owner.

@@ -24,6 +24,17 @@ pub struct EntryParts<'a> {
     pub lease_ms: u32,
     /// When the owner wrote it, its clock.
     pub renewed_unix_ms: i64,
+    /// A room of several actors: each actor's entry ([`actor_entry`]); empty otherwise.
+    pub actors: &'a [v1::ActorEntry],
+}
+
+/// An actor's registry entry: `actor` as it runs (its retarget resolved) on the model file of
+/// SHA-256 `model_sha256`.
+pub fn actor_entry(actor: v1::Actor, model_sha256: &str) -> v1::ActorEntry {
+    v1::ActorEntry {
+        actor: Some(actor),
+        model_sha256: model_sha256.to_owned(),
+    }
 }
 
 /// A room's registry entry (never the token: its digest), no adoptions yet.
@@ -46,6 +57,7 @@ pub fn room_entry(p: EntryParts<'_>) -> v1::RoomEntry {
         retarget: s.retarget.cloned(),
         refine: s.refine.map(v1::Refine::from),
         skinning: v1::Skinning::from(s.skinning) as i32,
+        actors: p.actors.to_vec(),
     }
 }
 

@@ -188,6 +188,9 @@ pub struct ActorSpec {
     pub options: RoomOptions,
     /// A retargeting actor's map and markers, as sent.
     pub retarget: Option<v1::Retarget>,
+    /// The SHA-256 (hex) of the model file as trained, which a cluster's relay fetches or
+    /// checks (`RoomEntry.actors`); `None` in a request.
+    pub model_sha256: Option<String>,
 }
 
 impl ActorSpec {
@@ -284,6 +287,7 @@ impl ActorSpec {
             },
             options,
             retarget: a.retarget.clone(),
+            model_sha256: None,
         })
     }
 }
@@ -484,8 +488,22 @@ impl RoomSpec {
                 entry: Box::new(entry.clone()),
                 revision,
             },
-            // The registry carries one-actor rooms only until issue 38's rooms run.
-            actors: Vec::new(),
+            actors: entry
+                .actors
+                .iter()
+                .enumerate()
+                .map(|(i, e)| {
+                    let a = e.actor.as_ref().ok_or_else(|| SpecError::Actor {
+                        actor: format!("#{i}"),
+                        field: "actor",
+                        message: "missing from the registry entry".into(),
+                    })?;
+                    Ok(ActorSpec {
+                        model_sha256: Some(e.model_sha256.clone()),
+                        ..ActorSpec::from_wire(i, a)?
+                    })
+                })
+                .collect::<Result<_, SpecError>>()?,
         })
     }
 }

@@ -60,6 +60,8 @@ pub(crate) struct ActorParts {
     pub spec: Option<ActorSpec>,
     /// Its model (mirrored already, where the spec asks).
     pub model: Arc<LoadedModel>,
+    /// The model as trained (`model` unless mirrored).
+    pub source: Arc<LoadedModel>,
     /// Beta, filter, refinement, skinning.
     pub options: RoomOptions,
     /// A retargeting actor's map and markers (issue 19).
@@ -75,6 +77,8 @@ pub struct Actor {
     name: Arc<str>,
     /// Its model (mirrored where the spec asks).
     pub model: Arc<LoadedModel>,
+    /// The model as trained (`model` itself unless mirrored): what a cluster's registry names.
+    source: Arc<LoadedModel>,
     pipeline: Pipeline,
 }
 
@@ -92,6 +96,11 @@ impl Actor {
     /// Its pipeline: its streams' boxes, orders, triangles.
     pub fn pipeline(&self) -> &Pipeline {
         &self.pipeline
+    }
+
+    /// The model as trained: its model, or the one its model mirrors.
+    pub fn source(&self) -> &Arc<LoadedModel> {
+        &self.source
     }
 
     /// The actor as it runs, with its model as it uses it (`RoomInfo.actors`); `None` in a
@@ -213,6 +222,7 @@ impl Room {
                         spec: parts.spec,
                         name,
                         model: parts.model,
+                        source: parts.source,
                         pipeline,
                     })
                 })

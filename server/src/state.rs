@@ -21,7 +21,7 @@ use crate::config::Config;
 use crate::fanout::Fanout;
 use crate::metrics::Metrics;
 use crate::pipeline::{RoomOptions, StreamSettings};
-use crate::registry::ModelRegistry;
+use crate::registry::{LoadedModel, ModelRegistry};
 use crate::room::{ActorParts, Room, RoomError};
 use crate::takes::{TakeError, Takes};
 
@@ -104,13 +104,6 @@ pub enum OpenRoomError {
         /// The model it names.
         model: String,
     },
-    /// A room of several actors in a cluster: its registry entry, relays and adoption do not
-    /// carry actors yet (issue 38).
-    #[error(
-        "room {0:?}: rooms of several actors (OpenRoomRequest.actors) do not run in a cluster \
-         yet; open it on a server outside the cluster, or one room per actor"
-    )]
-    ActorsNotServed(String),
     /// Actor `actor`'s part of the room could not be made: its mirror, its retarget.
     #[error("actor {actor:?}: {error}")]
     Actor {
@@ -275,15 +268,16 @@ impl AppState {
     }
 
     /// The actors of a room opened with actors, resolved: within the cap, each actor's model
-    /// (mirrored on the blocking pool where it asks: `ModelRegistry::mirrored`) and its
-    /// retarget. Not in a cluster yet ([`OpenRoomError::ActorsNotServed`]).
+    /// (for a cluster's relay fetched by its digest, as a one-actor room's is; mirrored on the
+    /// blocking pool where it asks: `ModelRegistry::mirrored`) and its retarget.
     ///
     /// # Errors
-    /// Too many actors, a model this server lacks, a mirror or retarget that fails (naming
-    /// the actor), a cluster.
+    /// Too many actors, a model this server lacks (or cannot have, in a cluster), a mirror or
+    /// retarget that fails (naming the actor).
     async fn actor_parts(
         self: &Arc<Self>,
         spec: &RoomSpec,
+        cluster: Option<&Arc<Cluster>>,
         maps: Option<std::path::PathBuf>,
     ) -> Result<Vec<ActorParts>, OpenRoomError> {
         let limit = self.config.limits.actors_per_room;
@@ -293,27 +287,27 @@ impl AppState {
                 limit,
             });
         }
-        if let Some(a) = spec
-            .actors
-            .iter()
-            .find(|a| self.models.get(&a.model).is_none())
-        {
-            return Err(OpenRoomError::NoActorModel {
-                actor: a.name.clone(),
-                model: a.model.clone(),
-            });
-        }
-        if self.cluster().is_some() && spec.placement != Placement::Local {
-            return Err(OpenRoomError::ActorsNotServed(spec.id.clone()));
-        }
         let mut parts = Vec::with_capacity(spec.actors.len());
         for a in &spec.actors {
             let in_actor = |error: OpenRoomError| OpenRoomError::Actor {
                 actor: a.name.clone(),
                 error: Box::new(error),
             };
+            let source = match (&a.model_sha256, cluster) {
+                (Some(sha256), Some(cluster)) => cluster
+                    .ensure_model(&self.models, &a.model, sha256)
+                    .await
+                    .map_err(|e| in_actor(OpenRoomError::ModelUnavailable(e)))?,
+                _ => self
+                    .models
+                    .get(&a.model)
+                    .ok_or_else(|| OpenRoomError::NoActorModel {
+                        actor: a.name.clone(),
+                        model: a.model.clone(),
+                    })?,
+            };
             let model = match a.mirror {
-                None => self.models.get(&a.model),
+                None => Arc::clone(&source),
                 Some(plane) => {
                     let (state, name) = (Arc::clone(self), a.model.clone());
                     tokio::task::spawn_blocking(move || state.models.mirrored(&name, &plane))
@@ -321,12 +315,12 @@ impl AppState {
                         .map_err(|e| in_actor(OpenRoomError::Mirror(e.to_string())))?
                         .transpose()
                         .map_err(|e| in_actor(OpenRoomError::Mirror(e.to_string())))?
+                        .ok_or_else(|| OpenRoomError::NoActorModel {
+                            actor: a.name.clone(),
+                            model: a.model.clone(),
+                        })?
                 }
-            }
-            .ok_or_else(|| OpenRoomError::NoActorModel {
-                actor: a.name.clone(),
-                model: a.model.clone(),
-            })?;
+            };
             let capture = match a.retarget.clone() {
                 Some(wire) => Some(Arc::new(
                     CaptureSpec::build(wire, maps.clone(), Arc::clone(&model))
@@ -338,6 +332,7 @@ impl AppState {
             parts.push(ActorParts {
                 spec: Some(a.clone()),
                 model,
+                source,
                 options: a.options,
                 capture,
             });
@@ -361,43 +356,21 @@ impl AppState {
     /// or beta, the id taken (here or in the cluster), the limit, the registry.
     pub async fn open_room(self: &Arc<Self>, spec: RoomSpec) -> Result<Arc<Room>, OpenRoomError> {
         let settings = spec.stream.unwrap_or(self.config.stream);
-        if !spec.actors.is_empty() {
-            let parts = self.actor_parts(&spec, self.config.maps.clone()).await?;
-            let room = build(&spec, parts, settings, None).await?;
-            return self.insert(room);
-        }
         let cluster = match (&spec.placement, self.cluster()) {
             (Placement::Local, _) | (Placement::Shared, None) => None,
             (Placement::Relay { .. }, None) => return Err(OpenRoomError::NoCluster(spec.id)),
             (_, Some(cluster)) => Some(Arc::clone(cluster)),
-        };
-        let model = match (&spec.model_sha256, &cluster) {
-            (Some(sha256), Some(cluster)) => cluster
-                .ensure_model(&self.models, &spec.model, sha256)
-                .await
-                .map_err(OpenRoomError::ModelUnavailable)?,
-            _ => self
-                .models
-                .get(&spec.model)
-                .ok_or_else(|| OpenRoomError::NoModel(spec.model.clone()))?,
         };
         // A relay's map is resolved already: it needs no maps folder.
         let maps = match spec.placement {
             Placement::Relay { .. } => None,
             _ => self.config.maps.clone(),
         };
-        let capture = match spec.retarget.clone() {
-            Some(wire) => Some(Arc::new(
-                CaptureSpec::build(wire, maps, Arc::clone(&model)).await?,
-            )),
-            None => None,
+        let parts = if spec.actors.is_empty() {
+            vec![self.single_part(&spec, cluster.as_ref(), maps).await?]
+        } else {
+            self.actor_parts(&spec, cluster.as_ref(), maps).await?
         };
-        let parts = vec![ActorParts {
-            spec: None,
-            model,
-            options: spec.options,
-            capture,
-        }];
         let Some(cluster) = cluster else {
             let room = build(&spec, parts, settings, None).await?;
             return self.insert(room);
@@ -413,7 +386,8 @@ impl AppState {
                 (Default::default(), true, 0)
             }
         };
-        let (link, rx) = cluster.new_link(&spec.id, &parts[0].model, entry, owner, revision);
+        let models: Vec<&LoadedModel> = parts.iter().map(|p| &*p.model).collect();
+        let (link, rx) = cluster.new_link(&spec.id, &models, entry, owner, revision);
         let fanout = Arc::clone(&link) as Arc<dyn Fanout>;
         let room = build(&spec, parts, settings, Some(fanout)).await?;
         if owner {
@@ -424,6 +398,39 @@ impl AppState {
             .map_err(|e| OpenRoomError::Install(Box::new(e)))?;
         cluster.attach(self.host(), &room, link, rx);
         Ok(room)
+    }
+
+    /// The one actor of a room opened without actors: its model (for a cluster's relay
+    /// fetched by its digest) and its retarget.
+    async fn single_part(
+        &self,
+        spec: &RoomSpec,
+        cluster: Option<&Arc<Cluster>>,
+        maps: Option<std::path::PathBuf>,
+    ) -> Result<ActorParts, OpenRoomError> {
+        let model = match (&spec.model_sha256, cluster) {
+            (Some(sha256), Some(cluster)) => cluster
+                .ensure_model(&self.models, &spec.model, sha256)
+                .await
+                .map_err(OpenRoomError::ModelUnavailable)?,
+            _ => self
+                .models
+                .get(&spec.model)
+                .ok_or_else(|| OpenRoomError::NoModel(spec.model.clone()))?,
+        };
+        let capture = match spec.retarget.clone() {
+            Some(wire) => Some(Arc::new(
+                CaptureSpec::build(wire, maps, Arc::clone(&model)).await?,
+            )),
+            None => None,
+        };
+        Ok(ActorParts {
+            spec: None,
+            source: Arc::clone(&model),
+            model,
+            options: spec.options,
+            capture,
+        })
     }
 
     /// A batch's private room (`Synthesize`) on model `model` with `options`, streaming at full
@@ -449,6 +456,7 @@ impl AppState {
         };
         let parts = vec![ActorParts {
             spec: None,
+            source: Arc::clone(&model),
             model,
             options,
             capture: None,

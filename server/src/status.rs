@@ -58,7 +58,6 @@ pub fn open(e: &OpenRoomError) -> Status {
         | OpenRoomError::NoRoom(_)
         | OpenRoomError::NoActorModel { .. } => Status::not_found(m),
         OpenRoomError::TooManyActors { .. } => Status::invalid_argument(m),
-        OpenRoomError::ActorsNotServed(_) => Status::unimplemented(m),
         OpenRoomError::Actor { error, .. } => Status::new(open(error).code(), m),
         OpenRoomError::Spec(SpecError::TokenDigest(_)) => Status::internal(m),
         OpenRoomError::Spec(_) | OpenRoomError::Capture(_) => Status::invalid_argument(m),

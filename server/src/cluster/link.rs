@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use crease_core::codec::{CodecError, FrameDecoder};
 use crease_proto::cluster::interest;
-use crease_proto::{Encoding, Level, frame_message, v1};
+use crease_proto::{Encoding, Level, actor_frame, actors_frame_message, frame_message, v1};
 use futures_util::StreamExt;
 use futures_util::future::BoxFuture;
 use prost::Message as _;
@@ -41,12 +41,13 @@ const INLINE_DECODE_BYTES: usize = 32 << 10;
 /// A relay asks the owner for a keyframe at most this often per level.
 const KEY_REQUEST_EVERY: Duration = Duration::from_millis(200);
 
-/// What a relay keeps per channel: the decoder of the owner's stream (a palette stream is a
-/// codec stream of lanes too) and the pool its frames are republished from.
+/// What a relay keeps per channel: per actor of the room (one in a one-actor room), the
+/// decoder of the owner's stream (a palette stream is a codec stream of lanes too) and the
+/// pool its frames are republished from.
 #[derive(Debug)]
 struct RelayLevel {
-    decoder: FrameDecoder,
-    pool: FramePool,
+    decoders: Vec<FrameDecoder>,
+    pools: Vec<FramePool>,
 }
 
 /// A room's cluster side (module docs).
@@ -90,22 +91,22 @@ pub(crate) enum RelayError {
 }
 
 impl RoomLink {
-    /// The cluster side of room `room`, with `vertices` per channel (its frames' vertex or lane
-    /// vertex count, `crate::pipeline::frame_vertices`), as `owner`
+    /// The cluster side of room `room`, with `vertices` per actor and channel (its frames'
+    /// vertex or lane vertex count, `crate::pipeline::frame_vertices`), as `owner`
     /// or relay, at registry `revision`; its background tasks start with [`RoomLink::start`].
     pub(crate) fn new(
         cluster: &Arc<Cluster>,
         room: &str,
-        vertices: [usize; Channel::COUNT],
+        vertices: &[[usize; Channel::COUNT]],
         entry: v1::RoomEntry,
         owner: bool,
         revision: u64,
     ) -> (Arc<RoomLink>, mpsc::Receiver<(Channel, Arc<MeshUpdate>)>) {
         let (out, rx) = mpsc::channel(OUT_QUEUE);
-        let relay = vertices.map(|n| {
+        let relay = std::array::from_fn(|c| {
             Mutex::new(RelayLevel {
-                decoder: FrameDecoder::new(n),
-                pool: FramePool::default(),
+                decoders: vertices.iter().map(|v| FrameDecoder::new(v[c])).collect(),
+                pools: vertices.iter().map(|_| FramePool::default()).collect(),
             })
         });
         let link = Arc::new(RoomLink {
@@ -286,13 +287,24 @@ impl RoomLink {
                 continue;
             }
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
-            let msg = frame_message(
-                update.seq,
-                update.capture_time_us,
-                latency,
-                0,
-                update.encoded(),
-            );
+            let msg = if update.actor_count() > 1 {
+                // A room of several actors: every actor's frame of the instant in one message.
+                let actors = (0..update.actor_count())
+                    .map(|i| {
+                        let a = update.actor(i);
+                        actor_frame(i, a.encoded(), a.held)
+                    })
+                    .collect();
+                actors_frame_message(update.seq, update.capture_time_us, latency, 0, actors)
+            } else {
+                frame_message(
+                    update.seq,
+                    update.capture_time_us,
+                    latency,
+                    0,
+                    update.encoded(),
+                )
+            };
             drop(update);
             let payload = msg.encode_to_vec();
             metrics.nats_frames_out.inc();
@@ -335,7 +347,10 @@ impl RoomLink {
                     announced[i] = None;
                 } else if !wanted && let Some(task) = relays[i].take() {
                     task.abort();
-                    lock(&self.relay[i]).decoder.reset();
+                    lock(&self.relay[i])
+                        .decoders
+                        .iter_mut()
+                        .for_each(FrameDecoder::reset);
                 }
                 if wanted && local && announced[i].is_none_or(|t| now - t >= ANNOUNCE) {
                     announced[i] = Some(now);
@@ -419,15 +434,56 @@ impl RoomLink {
         let received = Instant::now()
             .checked_sub(Duration::from_micros(u64::from(frame.server_latency_us)))
             .unwrap_or_else(Instant::now);
-        let header = relay.decoder.decode(&frame.data)?;
-        let update = relay
-            .pool
-            .fill(header.qbox, &frame.data, relay.decoder.lanes(), |u| {
-                u.seq = frame.seq;
-                u.capture_time_us = frame.capture_time_us;
-                u.received = received;
+        let stamp = |u: &mut MeshUpdate| {
+            u.seq = frame.seq;
+            u.capture_time_us = frame.capture_time_us;
+            u.received = received;
+        };
+        let update = if frame.actors.is_empty() {
+            let header = relay.decoders[0].decode(&frame.data)?;
+            relay.pools[0].fill(header.qbox, &frame.data, relay.decoders[0].lanes(), |u| {
+                stamp(u);
                 u.set_codec_header(&header);
-            });
+            })
+        } else {
+            // A room of several actors: every actor decoded by its own decoder (all of them,
+            // before anything is fanned out), republished from its own pool; actor 0's frame
+            // carries the others', as the owner's pipeline hands them out.
+            let n = relay.decoders.len();
+            if frame.actors.len() != n
+                || frame
+                    .actors
+                    .iter()
+                    .enumerate()
+                    .any(|(i, a)| a.actor as usize != i)
+            {
+                return Err(RelayError::Message(format!(
+                    "a frame of {} actors, the room has {n}",
+                    frame.actors.len()
+                )));
+            }
+            let mut headers = Vec::with_capacity(n);
+            for (a, decoder) in frame.actors.iter().zip(&mut relay.decoders) {
+                headers.push(decoder.decode(&a.data)?);
+            }
+            let RelayLevel { decoders, pools } = relay;
+            let mut others = Vec::with_capacity(n - 1);
+            for k in 1..n {
+                let (a, h) = (&frame.actors[k], &headers[k]);
+                others.push(pools[k].fill(h.qbox, &a.data, decoders[k].lanes(), |u| {
+                    stamp(u);
+                    u.held = a.held;
+                    u.set_codec_header(h);
+                }));
+            }
+            let (a, h) = (&frame.actors[0], &headers[0]);
+            pools[0].fill(h.qbox, &a.data, decoders[0].lanes(), |u| {
+                stamp(u);
+                u.held = a.held;
+                u.set_codec_header(h);
+                u.others.append(&mut others);
+            })
+        };
         drop(guard);
         self.local.publish(channel, update);
         Ok(())

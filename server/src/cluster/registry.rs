@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use async_nats::jetstream::{self, kv};
-use crease_proto::cluster::{EntryParts, room_entry};
+use crease_proto::cluster::{EntryParts, actor_entry, room_entry};
 use crease_proto::v1;
 use futures_util::StreamExt;
 use prost::Message as _;
@@ -106,6 +106,17 @@ impl Cluster {
         link: &RoomLink,
     ) -> Result<(), RegistryError> {
         let id = room.id.as_str();
+        let actors: Vec<v1::ActorEntry> = room
+            .actors()
+            .iter()
+            .filter_map(|a| {
+                let p = a.pipeline();
+                let mut actor = a.spec()?.running(p.beta(), p.skinning());
+                // Another replica has no maps folder: the map goes in resolved.
+                actor.retarget = p.capture().map(|c| c.resolved().clone());
+                Some(actor_entry(actor, a.source().sha256()))
+            })
+            .collect();
         let entry = room_entry(EntryParts {
             settings: room.settings_parts(true),
             model_sha256: room.model.sha256(),
@@ -114,6 +125,7 @@ impl Cluster {
             stream,
             lease_ms: self.lease.as_millis() as u32,
             renewed_unix_ms: now_unix_ms(),
+            actors: &actors,
         });
         let revision = self
             .rooms_kv

@@ -73,20 +73,23 @@ impl Cluster {
         models::ensure(models, self, name, sha256).await
     }
 
-    /// The cluster side of room `id` on `model`, which becomes the room's fan-out: as
+    /// The cluster side of room `id` on `models` (one per actor), which becomes the room's fan-out: as
     /// `owner` or relay, at registry `revision` with `entry` (a new room's is written whole by
     /// [`Cluster::register`]). [`Cluster::attach`] starts it once the room is in the server's
     /// table.
     pub fn new_link(
         self: &Arc<Self>,
         id: &str,
-        model: &LoadedModel,
+        models: &[&LoadedModel],
         entry: v1::RoomEntry,
         owner: bool,
         revision: u64,
     ) -> (Arc<RoomLink>, LinkFrames) {
-        let vertices = Channel::ALL.map(|c| crate::pipeline::frame_vertices(&model.model, c));
-        RoomLink::new(self, id, vertices, entry, owner, revision)
+        let vertices: Vec<[usize; Channel::COUNT]> = models
+            .iter()
+            .map(|m| Channel::ALL.map(|c| crate::pipeline::frame_vertices(&m.model, c)))
+            .collect();
+        RoomLink::new(self, id, &vertices, entry, owner, revision)
     }
 
     /// Starts the cluster side of `room`, now in `host`'s table.
