@@ -557,6 +557,16 @@ pub fn actor(name: &str, model: &str, mirrored: bool) -> v1::Actor {
     }
 }
 
+/// A room of several actors' settings as the request that would open it again (no token):
+/// its id and its `actors` as they run (what a take's header keeps).
+pub fn actors_room_settings(room: &str, actors: Vec<v1::Actor>) -> v1::OpenRoomRequest {
+    v1::OpenRoomRequest {
+        room: room.to_owned(),
+        actors,
+        ..Default::default()
+    }
+}
+
 /// A retarget of `markers` (the capture's names, in frame order, in `units`) through the
 /// marker map `map_toml` (the demo's WebXR room).
 pub fn retarget(map_toml: String, markers: Vec<String>, units: String) -> v1::Retarget {

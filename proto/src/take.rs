@@ -96,6 +96,52 @@ pub fn fill_frame(
     controls: &[Vec3],
     transforms: &[RigidTransform],
 ) {
+    fill_control_frame(record, frame, received_us);
+    fill_pose(
+        &mut record.controls,
+        &mut record.transforms,
+        controls,
+        transforms,
+    );
+    record.actors.clear();
+}
+
+/// [`fill_frame`] for a room of several actors: the frame (every actor's points, in its
+/// `actors`), then each actor's pose by [`fill_actor_pose`]. Buffers are reused: `actors`
+/// keeps its entries from frame to frame.
+pub fn fill_actors_frame(
+    record: &mut v1::TakeFrame,
+    frame: &v1::ControlFrame,
+    received_us: i64,
+    actors: usize,
+) {
+    fill_control_frame(record, frame, received_us);
+    record.controls.clear();
+    record.transforms.clear();
+    record.actors.resize_with(actors, Default::default);
+}
+
+/// Actor `k`'s pose in a record [`fill_actors_frame`] began.
+///
+/// # Panics
+/// If `k` is not below the actor count given there.
+pub fn fill_actor_pose(
+    record: &mut v1::TakeFrame,
+    k: usize,
+    controls: &[Vec3],
+    transforms: &[RigidTransform],
+) {
+    let pose = &mut record.actors[k];
+    fill_pose(
+        &mut pose.controls,
+        &mut pose.transforms,
+        controls,
+        transforms,
+    );
+}
+
+/// The control frame and arrival time of a record (its pose left as it is).
+fn fill_control_frame(record: &mut v1::TakeFrame, frame: &v1::ControlFrame, received_us: i64) {
     let f = record.frame.get_or_insert_with(Default::default);
     f.room.clear();
     f.seq = frame.seq;
@@ -114,13 +160,29 @@ pub fn fill_frame(
         to.clear();
         to.extend_from_slice(from);
     }
+    // A room of several actors' parts, their buffers reused.
+    f.actors.resize_with(frame.actors.len(), Default::default);
+    for (to, from) in f.actors.iter_mut().zip(&frame.actors) {
+        to.actor.clone_from(&from.actor);
+        to.positions.clone_from(&from.positions);
+        to.valid.clone_from(&from.valid);
+        to.markers.clone_from(&from.markers);
+        to.markers_valid.clone_from(&from.markers_valid);
+    }
     record.received_us = received_us;
-    record.controls.clear();
-    record
-        .controls
-        .extend(controls.iter().flat_map(|c| c.to_array()));
-    record.transforms.clear();
-    record.transforms.extend(transforms.iter().flat_map(|t| {
+}
+
+/// Flat control points and transforms (module docs of the file layout).
+fn fill_pose(
+    to_controls: &mut Vec<f32>,
+    to_transforms: &mut Vec<f32>,
+    controls: &[Vec3],
+    transforms: &[RigidTransform],
+) {
+    to_controls.clear();
+    to_controls.extend(controls.iter().flat_map(|c| c.to_array()));
+    to_transforms.clear();
+    to_transforms.extend(transforms.iter().flat_map(|t| {
         let (q, p) = (t.rotation, t.translation);
         [q.x, q.y, q.z, q.w, p.x, p.y, p.z]
     }));

@@ -24,6 +24,18 @@ pub fn take_header(
         started_unix_us,
         bones: bones as u32,
         controls: controls as u32,
+        actors: Vec::new(),
+    }
+}
+
+/// Actor `actor` of a take of a room of several actors (`TakeHeader.actors`): its model
+/// file's digest as trained, its bones and control points.
+pub fn take_actor(actor: &str, model_sha256: &str, bones: usize, controls: usize) -> v1::TakeActor {
+    v1::TakeActor {
+        actor: actor.to_owned(),
+        model_sha256: model_sha256.to_owned(),
+        bones: bones as u32,
+        controls: controls as u32,
     }
 }
 

@@ -19,8 +19,9 @@
 //! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
 //! executor.
 //!
-//! While the room records a take (`crate::takes`), every frame that predicted is recorded
-//! once it is through: the control frame, the controls used and the bone transforms.
+//! While the room records a take (`crate::takes`), the room records every frame that
+//! predicted once it is through: the control frame, and each actor's controls used and bone
+//! transforms ([`Pipeline::pose`]).
 //!
 //! Frames are handed to the fan-out as [`MeshUpdate`](crate::frames::MeshUpdate)s taken from a small pool per level
 //! (`crate::frames`): after warm-up a frame allocates nothing, even while a slow subscriber
@@ -37,7 +38,7 @@ use crease_core::glam::Vec3;
 use crease_core::model::{ControlPoint, TrainedModel};
 use crease_core::predictor::{FrameContext, PredictError, Predictor, Refinement};
 use crease_core::runtime::filter::{OneEuro, OneEuroParams};
-use crease_core::runtime::skin::Skinning;
+use crease_core::runtime::skin::{RigidTransform, Skinning};
 use crease_proto::{Encoding, Level, WireError, read_control_frame, v1};
 use prost::bytes::Bytes;
 
@@ -47,7 +48,6 @@ use crate::capture::{Capture, CaptureSpec};
 use crate::fanout::{Channel, Fanout};
 use crate::frames::{FramePool, MeshUpdate};
 use crate::registry::LoadedModel;
-use crate::takes::Recorder;
 
 /// Quantisation box margin around the box of the model's training poses, as a fraction of its
 /// largest side: new poses leave it a little (a position outside the box is clamped to it).
@@ -177,8 +177,6 @@ struct State {
     filters: Vec<OneEuro>,
     /// The previous frame's capture time and arrival, for the filter's time step.
     last_time: Option<(i64, Instant)>,
-    /// The take being recorded (`crate::takes`), if any.
-    take: Option<Recorder>,
 }
 
 /// A room's filter, predictor and encoders (module docs).
@@ -363,7 +361,6 @@ impl Pipeline {
                 targets: Vec::new(),
                 filters: filter.map_or_else(Vec::new, |p| vec![OneEuro::new(p); n]),
                 last_time: None,
-                take: None,
             }),
             model,
             indices: [OnceLock::new(), OnceLock::new()],
@@ -383,29 +380,11 @@ impl Pipeline {
         self.capture.as_deref()
     }
 
-    /// Starts recording into `recorder` (`crate::takes`); gives it back when a take runs.
-    pub(crate) fn start_take(&self, recorder: Recorder) -> Result<(), Box<Recorder>> {
-        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        if state.take.is_some() {
-            return Err(Box::new(recorder));
-        }
-        state.take = Some(recorder);
-        Ok(())
-    }
-
-    /// Stops the take, if one runs, and hands it over (to [`Recorder::finish`]).
-    pub(crate) fn stop_take(&self) -> Option<Recorder> {
-        self.state
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take
-            .take()
-    }
-
-    /// The running take's id, if one runs (no summary built).
-    pub fn take_id(&self) -> Option<String> {
+    /// Hands the last frame's pose to `f`: the control points the prediction used and the
+    /// bone transforms it predicted (what a take records, `crate::takes`).
+    pub(crate) fn pose<T>(&self, f: impl FnOnce(&[Vec3], &[RigidTransform]) -> T) -> T {
         let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        state.take.as_ref().map(|t| t.id().to_owned())
+        f(state.ctx.controls(), state.ctx.transforms())
     }
 
     /// The control-point filter.
@@ -640,14 +619,6 @@ impl Pipeline {
         if detail_vertices && self.predictor.predict_detail(&mut state.ctx).is_ok() {
             encode(state, Level::Detail, true)?;
             detail = true;
-        }
-        if let (Some(take), Some(frame)) = (&mut state.take, frame) {
-            take.record(
-                frame,
-                received,
-                state.ctx.controls(),
-                state.ctx.transforms(),
-            );
         }
         Ok(Published {
             held: held as u32,

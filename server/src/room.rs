@@ -33,6 +33,7 @@ use crate::mailbox::{Mailbox, Outcome};
 use crate::pipeline::{Demand, Pipeline, PipelineError};
 use crate::registry::LoadedModel;
 use crate::session::{CountGuard, Session};
+use crate::takes::Recorder;
 
 /// Errors of opening a room.
 #[derive(Debug, thiserror::Error)]
@@ -126,6 +127,8 @@ struct Work {
     /// Each actor's outcome, then its frames per channel.
     results: Vec<Option<Result<Published, PipelineError>>>,
     out: Vec<[Option<Arc<MeshUpdate>>; Channel::COUNT]>,
+    /// The take being recorded (`crate::takes`), if any.
+    take: Option<Recorder>,
 }
 
 /// A live session on one or more actors (module docs).
@@ -263,8 +266,20 @@ impl Room {
     }
 
     /// The room's settings as the request that would open it again: id, model, beta,
-    /// filter, retargeting, refinement, skinning (no token). What a take's header keeps.
+    /// filter, retargeting, refinement, skinning (no token); a room of several actors' id and
+    /// actors as they run. What a take's header keeps.
     pub fn settings(&self) -> v1::OpenRoomRequest {
+        if self.has_actors() {
+            let actors = self
+                .actors
+                .iter()
+                .filter_map(|a| {
+                    let p = &a.pipeline;
+                    a.spec.as_ref().map(|s| s.running(p.beta(), p.skinning()))
+                })
+                .collect();
+            return crease_proto::room::actors_room_settings(&self.id, actors);
+        }
         crease_proto::room::room_settings(self.settings_parts(false))
     }
 
@@ -482,8 +497,71 @@ impl Room {
             p
         };
         self.publish(work, &demand);
+        if let Some(take) = &mut work.take {
+            self.record(take, frame, received);
+        }
         self.published.fetch_add(1, Ordering::Relaxed);
         Ok(published)
+    }
+
+    /// Records the frame just run into `take`: the control frame and every actor's pose.
+    fn record(&self, take: &mut Recorder, frame: &v1::ControlFrame, received: Instant) {
+        if !self.has_actors() {
+            self.actors[0]
+                .pipeline
+                .pose(|controls, transforms| take.record(frame, received, controls, transforms));
+            return;
+        }
+        take.record_actors(frame, received, self.actors.len(), |record| {
+            for (k, actor) in self.actors.iter().enumerate() {
+                actor.pipeline.pose(|controls, transforms| {
+                    crease_proto::take::fill_actor_pose(record, k, controls, transforms);
+                });
+            }
+        });
+    }
+
+    /// Starts recording into `recorder` (`crate::takes`); gives it back when a take runs.
+    pub(crate) fn start_take(&self, recorder: Recorder) -> Result<(), Box<Recorder>> {
+        let mut work = self.work.lock().unwrap_or_else(|e| e.into_inner());
+        if work.take.is_some() {
+            return Err(Box::new(recorder));
+        }
+        work.take = Some(recorder);
+        Ok(())
+    }
+
+    /// Stops the take, if one runs, and hands it over (to [`Recorder::finish`]).
+    pub(crate) fn stop_take(&self) -> Option<Recorder> {
+        self.work
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take
+            .take()
+    }
+
+    /// The running take's id, if one runs (no summary built).
+    pub fn take_id(&self) -> Option<String> {
+        let work = self.work.lock().unwrap_or_else(|e| e.into_inner());
+        work.take.as_ref().map(|t| t.id().to_owned())
+    }
+
+    /// What a take of this room records of its actors (`TakeHeader.actors`): each one's
+    /// model file's digest as trained, bones and control points; empty in a one-actor room.
+    pub fn take_actors(&self) -> Vec<v1::TakeActor> {
+        self.actors
+            .iter()
+            .filter(|a| a.spec.is_some())
+            .map(|a| {
+                let m = &a.model.model;
+                crease_proto::take_info::take_actor(
+                    a.name(),
+                    a.source.sha256(),
+                    m.rig.bone_count,
+                    m.controls.len(),
+                )
+            })
+            .collect()
     }
 
     /// A room of several actors: checks `frame`'s actor list against the room's actors, then

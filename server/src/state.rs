@@ -200,10 +200,7 @@ impl AppState {
 
     /// The ids of the takes rooms of this server record now.
     pub fn recording_takes(&self) -> Vec<String> {
-        self.table()
-            .values()
-            .filter_map(|r| r.pipeline().take_id())
-            .collect()
+        self.table().values().filter_map(|r| r.take_id()).collect()
     }
 
     /// The ids of this server's listed (not private) rooms, in order.

@@ -95,8 +95,7 @@ pub fn take_error(e: &TakeError) -> Status {
         TakeError::NoFolder
         | TakeError::Recording { .. }
         | TakeError::NotRecording(_)
-        | TakeError::Elsewhere { .. }
-        | TakeError::Actors(_) => Status::failed_precondition(m),
+        | TakeError::Elsewhere { .. } => Status::failed_precondition(m),
         TakeError::NoTake(_) => Status::not_found(m),
         TakeError::Name(_) => Status::invalid_argument(m),
         TakeError::Io { .. } | TakeError::File { .. } => Status::internal(m),

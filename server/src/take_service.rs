@@ -83,10 +83,7 @@ pub async fn start(
     name: String,
 ) -> Result<v1::TakeInfo, TakeOpError> {
     let room = local_room(state, id).await?;
-    if room.has_actors() {
-        return Err(TakeError::Actors(room.id.clone()).into());
-    }
-    if let Some(take) = room.pipeline().take_id() {
+    if let Some(take) = room.take_id() {
         return Err(TakeError::Recording {
             room: room.id.clone(),
             take,
@@ -96,16 +93,19 @@ pub async fn start(
     let state = Arc::clone(state);
     blocking(move || {
         let takes = state.takes()?;
-        let m = &room.model;
+        // The first actor's model (a one-actor room's), and in a room of several every
+        // actor's (`TakeHeader.actors`).
+        let m = &room.actors()[0];
         let recorder = takes.start(
             room.settings(),
             &name,
-            m.sha256(),
-            m.model.rig.bone_count,
-            m.model.controls.len(),
+            m.source().sha256(),
+            m.model.model.rig.bone_count,
+            m.model.model.controls.len(),
+            room.take_actors(),
         )?;
         let info = recorder.info();
-        match room.pipeline().start_take(recorder) {
+        match room.start_take(recorder) {
             Ok(()) => {
                 tracing::info!(room = %room.id, take = %info.take, "take started");
                 Ok(info)
@@ -115,7 +115,7 @@ pub async fn start(
                 (*recorder).discard();
                 Err(TakeError::Recording {
                     room: room.id.clone(),
-                    take: room.pipeline().take_id().unwrap_or_default(),
+                    take: room.take_id().unwrap_or_default(),
                 }
                 .into())
             }
@@ -131,7 +131,6 @@ pub async fn start(
 pub async fn stop(state: &Arc<AppState>, id: &str) -> Result<v1::TakeInfo, TakeOpError> {
     let room = local_room(state, id).await?;
     let recorder = room
-        .pipeline()
         .stop_take()
         .ok_or_else(|| TakeError::NotRecording(id.to_owned()))?;
     let info = blocking(move || Ok(recorder.finish()?)).await?;
@@ -177,6 +176,33 @@ fn take_and_model(
     id: &str,
 ) -> Result<(take::Take, Arc<crate::registry::LoadedModel>), TakeOpError> {
     let take = state.takes()?.read(id)?;
+    let header = take.header();
+    if let Some(room) = header.room.as_ref().filter(|r| !r.actors.is_empty()) {
+        // A room of several actors: every actor's model here and as recorded (a mirrored
+        // actor's is its model file mirrored); the take's first actor's model is returned.
+        let mut first = None;
+        for (a, recorded) in room.actors.iter().zip(&header.actors) {
+            let model = state.models().get(&a.model).ok_or_else(|| {
+                TakeOpError::Model(format!(
+                    "take {id:?}: actor {:?} was recorded on model {:?}, which this server has not loaded",
+                    a.name, a.model
+                ))
+            })?;
+            if model.sha256() != recorded.model_sha256 {
+                return Err(TakeOpError::Model(format!(
+                    "take {id:?}: actor {:?}'s model {:?} is not the one recorded (SHA-256 {} here, {} in the take)",
+                    a.name,
+                    a.model,
+                    model.sha256(),
+                    recorded.model_sha256
+                )));
+            }
+            first.get_or_insert(model);
+        }
+        let model =
+            first.ok_or_else(|| TakeOpError::Model(format!("take {id:?}: no actor recorded")))?;
+        return Ok((take, model));
+    }
     let name = take
         .header()
         .room
@@ -203,6 +229,11 @@ pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpErr
     blocking(move || {
         let (take, model) = take_and_model(&state, &id)?;
         let export = |e: &dyn std::fmt::Display| TakeOpError::Model(format!("take {id:?}: {e}"));
+        if !take.header().actors.is_empty() {
+            return Err(export(
+                &"a take of a room of actors: its glTF export (a skinned mesh per actor) is not built yet",
+            ));
+        }
         let transforms = take::all_transforms(&take).map_err(|e| export(&e))?;
         gltf_export::skinned_recording_to_glb(
             &model.model.rig,

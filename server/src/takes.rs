@@ -47,9 +47,6 @@ pub enum TakeError {
         /// Its take.
         take: String,
     },
-    /// A room of several actors: its takes are not recorded yet (issue 38).
-    #[error("room {0:?} is a room of actors: its takes are not recorded yet")]
-    Actors(String),
     /// The room records nothing.
     #[error("room {0:?} is not recording")]
     NotRecording(String),
@@ -166,6 +163,7 @@ impl Takes {
         model_sha256: &str,
         bones: usize,
         controls: usize,
+        actors: Vec<v1::TakeActor>,
     ) -> Result<Recorder, TakeError> {
         if name.len() > 200 {
             return Err(TakeError::Name(name.len()));
@@ -196,7 +194,7 @@ impl Takes {
                 Err(error) => return Err(TakeError::Io { path, error }),
             }
         };
-        let header = take_header(
+        let mut header = take_header(
             &id,
             name,
             room,
@@ -205,6 +203,7 @@ impl Takes {
             bones,
             controls,
         );
+        header.actors = actors;
         let mut file = file;
         let mut head = Vec::new();
         take::write_header(&mut head, &header).expect("a Vec takes every write");
@@ -388,14 +387,40 @@ impl Recorder {
         controls: &[Vec3],
         transforms: &[RigidTransform],
     ) {
+        let received_us = self.received_us(received);
+        take::fill_frame(&mut self.record, frame, received_us, controls, transforms);
+        self.write(received_us);
+    }
+
+    /// Records one predicted frame of a room of `actors` actors: the control frame as it came
+    /// (every actor's part), when it arrived, and each actor's pose, which `poses` fills in
+    /// (`crease_proto::take::fill_actor_pose`, once per actor).
+    pub(crate) fn record_actors(
+        &mut self,
+        frame: &v1::ControlFrame,
+        received: Instant,
+        actors: usize,
+        poses: impl FnOnce(&mut v1::TakeFrame),
+    ) {
+        let received_us = self.received_us(received);
+        take::fill_actors_frame(&mut self.record, frame, received_us, actors);
+        poses(&mut self.record);
+        self.write(received_us);
+    }
+
+    /// Microseconds from the take's start to `received`.
+    fn received_us(&self, received: Instant) -> i64 {
+        received
+            .saturating_duration_since(self.started)
+            .as_micros()
+            .min(i64::MAX as u128) as i64
+    }
+
+    /// Hands the filled record to the writer (dropped, and counted, when it is behind).
+    fn write(&mut self, received_us: i64) {
         let Some(tx) = &self.to_writer else {
             return;
         };
-        let received_us = received
-            .saturating_duration_since(self.started)
-            .as_micros()
-            .min(i64::MAX as u128) as i64;
-        take::fill_frame(&mut self.record, frame, received_us, controls, transforms);
         let mut buf = self.free.try_recv().unwrap_or_default();
         take::encode_record(&self.record, &mut buf);
         match tx.try_send(buf) {
@@ -501,7 +526,7 @@ mod tests {
             model: "m".into(),
             ..Default::default()
         };
-        let mut rec = takes.start(room, "first", "ab12", 1, 1).unwrap();
+        let mut rec = takes.start(room, "first", "ab12", 1, 1, Vec::new()).unwrap();
         let id = rec.id().to_owned();
         let t0 = Instant::now();
         for i in 0..10u64 {
@@ -552,7 +577,7 @@ mod tests {
             room: "r1".into(),
             ..Default::default()
         };
-        let rec = takes.start(room, "again", "ab12", 1, 1).unwrap();
+        let rec = takes.start(room, "again", "ab12", 1, 1, Vec::new()).unwrap();
         assert!(folder.join(format!("{}.take", rec.id())).is_file());
         assert_eq!(rec.finish().unwrap().frames, 0);
     }

@@ -427,3 +427,227 @@ async fn a_room_of_actors_streams_palettes_per_actor_and_refuses_one_actor_frame
         e.message
     );
 }
+
+/// The positions of every actor of every frame `sub` streams, decoded, in model order, by
+/// sequence number, until `last` arrives.
+async fn decoded_until(
+    sub: &mut tonic::Streaming<v1::MeshFrame>,
+    last: u64,
+) -> std::collections::BTreeMap<u64, Vec<(Vec<Vec3>, f32)>> {
+    let mut readers = Vec::new();
+    let mut out = std::collections::BTreeMap::new();
+    loop {
+        match sub.message().await.unwrap().unwrap().body {
+            Some(v1::mesh_frame::Body::Topology(t)) => {
+                let t = crease_proto::read_topology(&t).unwrap();
+                readers.push((FrameDecoder::new(t.vertex_count), t));
+            }
+            Some(v1::mesh_frame::Body::Frame(f)) => {
+                let mut meshes = Vec::new();
+                for (a, (d, t)) in f.actors.iter().zip(&mut readers) {
+                    let h = d.decode(&a.data).unwrap();
+                    let (mut streamed, mut model) = (Vec::new(), Vec::new());
+                    d.positions(&mut streamed);
+                    t.to_model_order(&streamed, &mut model);
+                    meshes.push((model, h.qbox.error_bound().max_element()));
+                }
+                out.insert(f.seq, meshes);
+                if f.seq >= last {
+                    return out;
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_take_of_a_room_of_actors_records_every_actor_and_replays_into_a_fresh_room() {
+    let model = model();
+    let takes = tempfile::tempdir().unwrap();
+    let registry = crease_server::registry::ModelRegistry::default();
+    registry.insert("tube", model.clone());
+    let loopback = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+    let state = crease_server::AppState::new(
+        registry,
+        crease_server::Config {
+            grpc: loopback,
+            http: loopback,
+            admin_token: Some(ADMIN.into()),
+            limits: unthrottled(),
+            takes: Some(takes.path().to_owned()),
+            ..crease_server::Config::default()
+        },
+    );
+    let running = crease_server::serve(state).await.unwrap();
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let open = |room: &str| v1::OpenRoomRequest {
+        room: room.into(),
+        actors: vec![
+            crease_proto::room::actor("right", "tube", false),
+            crease_proto::room::actor("left", "tube", true),
+        ],
+        ..Default::default()
+    };
+    let token = client
+        .open_room(authed(open("performer"), ADMIN))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    let subscribe = |room: &str| v1::SubscribeRequest {
+        room: room.into(),
+        level: v1::Level::Base as i32,
+        ..Default::default()
+    };
+    let mut sub = client
+        .subscribe(subscribe("performer"))
+        .await
+        .unwrap()
+        .into_inner();
+    client
+        .start_take(authed(
+            v1::StartTakeRequest {
+                room: "performer".into(),
+                name: "two hands".into(),
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap();
+    // Ten frames, both hands in different poses; the left one missing from frame 4.
+    let frames: Vec<v1::ControlFrame> = (1..=10u64)
+        .map(|seq| {
+            let mut parts = vec![part(&model, "right", 0.1 * seq as f32)];
+            if seq != 4 {
+                parts.push(part(&model, "left", 1.0 - 0.07 * seq as f32));
+            }
+            frame(seq, parts)
+        })
+        .collect();
+    let publish = |client: &mut CreaseClient<tonic::transport::Channel>,
+                   token: &str,
+                   frames: Vec<v1::ControlFrame>| {
+        let request = authed(tokio_stream::iter(frames), token);
+        let mut client = client.clone();
+        async move {
+            let mut acks = client.publish(request).await.unwrap().into_inner();
+            while let Some(a) = acks.message().await.unwrap() {
+                assert!(a.error.is_none(), "{a:?}");
+            }
+        }
+    };
+    // One at a time, so that every frame is streamed (latest wins would skip some).
+    for f in &frames {
+        publish(&mut client, &token, vec![f.clone()]).await;
+    }
+    let original = decoded_until(&mut sub, 10).await;
+    let info = client
+        .stop_take(authed(
+            v1::StopTakeRequest {
+                room: "performer".into(),
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(info.frames, 10);
+
+    // The file: the room's actors in the header, each actor's digest, bones and controls; per
+    // frame the control frame with every actor's part, and each actor's pose.
+    let file = std::fs::File::open(takes.path().join(format!("{}.take", info.take))).unwrap();
+    let take = crease_proto::take::read_take(std::io::BufReader::new(file)).unwrap();
+    let header = take.header();
+    let room = header.room.clone().unwrap();
+    assert!(
+        room.model.is_empty(),
+        "a room of actors names no model of its own"
+    );
+    let names: Vec<(&str, &str)> = room
+        .actors
+        .iter()
+        .map(|a| (a.name.as_str(), a.mirror.as_str()))
+        .collect();
+    assert_eq!(names, [("right", ""), ("left", "x")]);
+    assert_eq!(header.actors.len(), 2);
+    for a in &header.actors {
+        assert_eq!(a.bones as usize, model.rig.bone_count);
+        assert_eq!(a.controls as usize, model.controls.len());
+        assert_eq!(a.model_sha256.len(), 64);
+    }
+    assert_eq!(header.actors[0].model_sha256, header.actors[1].model_sha256);
+    assert_eq!(take.frames.len(), 10);
+    for (k, f) in take.frames.iter().enumerate() {
+        assert_eq!(f.actors.len(), 2, "frame {k}: every actor's pose");
+        for pose in &f.actors {
+            assert_eq!(pose.transforms.len(), 7 * model.rig.bone_count);
+            assert_eq!(pose.controls.len(), 3 * model.controls.len());
+        }
+        let parts = f.frame.as_ref().unwrap().actors.len();
+        assert_eq!(
+            parts,
+            if k == 3 { 1 } else { 2 },
+            "frame {k}'s parts as sent"
+        );
+    }
+    // The left hand's recorded controls at frame 4 are its held ones (frame 3's).
+    assert_eq!(
+        take.frames[3].actors[1].controls,
+        take.frames[2].actors[1].controls
+    );
+
+    // Replayed into a fresh room opened with the take's settings, the recorded control frames
+    // give every actor's meshes again, within the stream's quantisation.
+    let replay_token = client
+        .open_room(authed(
+            v1::OpenRoomRequest {
+                room: "replay".into(),
+                ..room
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    let mut replay = client
+        .subscribe(subscribe("replay"))
+        .await
+        .unwrap()
+        .into_inner();
+    for f in &take.frames {
+        let mut control = f.frame.clone().unwrap();
+        control.room = "replay".into();
+        publish(&mut client, &replay_token, vec![control]).await;
+    }
+    let replayed = decoded_until(&mut replay, 10).await;
+    // Latest wins: a subscriber may skip a frame; those both streams carried are compared
+    // (the last one always is).
+    let mut compared = 0;
+    for (seq, meshes) in &original {
+        let Some(again) = replayed.get(seq) else {
+            continue;
+        };
+        compared += 1;
+        assert_eq!(again.len(), 2);
+        for (k, ((a, bound), (b, _))) in meshes.iter().zip(again).enumerate() {
+            let d = a
+                .iter()
+                .zip(b)
+                .map(|(p, q)| (*p - *q).abs().max_element())
+                .fold(0.0f32, f32::max);
+            assert!(
+                d <= 2.0 * bound * 1.001 + 1e-6,
+                "frame {seq} actor {k}: replayed {d} from the original (bound {bound})"
+            );
+        }
+    }
+    assert!(
+        compared >= 1 && replayed.contains_key(&10),
+        "{compared} frames compared"
+    );
+    drop(running);
+}
