@@ -437,6 +437,82 @@ pub fn all_transforms(take: &Take) -> Result<Vec<RigidTransform>, TakeError> {
     Ok(all)
 }
 
+/// A take of a room of several actors (issue 38): actor `k`'s predicted transforms of every
+/// frame, frame after frame (`TakeHeader.actors[k].bones` per frame).
+///
+/// # Errors
+/// [`TakeError::FrameShape`]: a frame without actor `k`'s pose, or with another length.
+pub fn actor_transforms(take: &Take, k: usize) -> Result<Vec<RigidTransform>, TakeError> {
+    let bones = take.header().actors.get(k).map_or(0, |a| a.bones as usize);
+    let mut all = Vec::with_capacity(take.frames.len() * bones);
+    for (i, f) in take.frames.iter().enumerate() {
+        let values = f.actors.get(k).map_or(&[][..], |p| p.transforms.as_slice());
+        if bones == 0 || values.len() != 7 * bones {
+            return Err(TakeError::FrameShape {
+                frame: i,
+                what: "actors[k].transforms",
+                expected: 7 * bones,
+                got: values.len(),
+            });
+        }
+        all.extend(values.chunks_exact(7).map(|v| RigidTransform {
+            rotation: Quat::from_xyzw(v[0], v[1], v[2], v[3]),
+            translation: Vec3::new(v[4], v[5], v[6]),
+        }));
+    }
+    Ok(all)
+}
+
+/// One actor of a take of a room of several actors, as an export needs it
+/// ([`actor_recordings`]).
+#[derive(Clone, Debug)]
+pub struct ActorRecording {
+    /// The actor's name.
+    pub name: String,
+    /// Its model's name, as the room named it.
+    pub model: String,
+    /// The plane its model was mirrored across, if it was.
+    pub mirror: Option<crease_core::model::MirrorPlane>,
+    /// How the room skinned it (`None`: the model's default).
+    pub skinning: Option<Skinning>,
+    /// Its predicted transforms, frame after frame.
+    pub transforms: Vec<RigidTransform>,
+}
+
+/// Every actor of a take of a room of several actors (issue 38), in the room's order: what a
+/// skinned glTF of the take needs of each (`gltf_export::skinned_parts_recording_to_glb`, on
+/// the actor's model mirrored as [`ActorRecording::mirror`] says).
+///
+/// # Errors
+/// [`TakeError::Export`] naming the actor: an unreadable mirror plane or skinning, a frame
+/// without its pose.
+pub fn actor_recordings(take: &Take) -> Result<Vec<ActorRecording>, TakeError> {
+    let room = take.header().room.clone().unwrap_or_default();
+    room.actors
+        .iter()
+        .enumerate()
+        .map(|(k, a)| {
+            let bad = |e: String| TakeError::Export(format!("actor {:?}: {e}", a.name));
+            let mirror = match a.mirror.trim() {
+                "" => None,
+                plane => Some(
+                    crease_core::model::MirrorPlane::parse(plane)
+                        .map_err(|e| bad(format!("mirror: {e}")))?,
+                ),
+            };
+            let skinning = crate::convert::skinning_from_wire("Actor", a.skinning)
+                .map_err(|e| bad(e.to_string()))?;
+            Ok(ActorRecording {
+                name: a.name.clone(),
+                model: a.model.clone(),
+                mirror,
+                skinning,
+                transforms: actor_transforms(take, k).map_err(|e| bad(e.to_string()))?,
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {

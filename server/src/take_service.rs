@@ -230,9 +230,7 @@ pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpErr
         let (take, model) = take_and_model(&state, &id)?;
         let export = |e: &dyn std::fmt::Display| TakeOpError::Model(format!("take {id:?}: {e}"));
         if !take.header().actors.is_empty() {
-            return Err(export(
-                &"a take of a room of actors: its glTF export (a skinned mesh per actor) is not built yet",
-            ));
+            return actors_glb(&state, &take).map_err(|e| export(&e));
         }
         let transforms = take::all_transforms(&take).map_err(|e| export(&e))?;
         gltf_export::skinned_recording_to_glb(
@@ -245,6 +243,43 @@ pub async fn glb(state: &Arc<AppState>, id: String) -> Result<Vec<u8>, TakeOpErr
         .map_err(|e| export(&format!("export: {e}")))
     })
     .await
+}
+
+/// A take of a room of several actors as one glTF (issue 38): a skinned mesh per actor
+/// (`gltf_export::skinned_parts_recording_to_glb`) on the server's copy of its model,
+/// mirrored where the actor was (`ModelRegistry::mirrored`, as the room ran it). Blocking.
+///
+/// # Errors
+/// What is wrong, as text: an actor's model (absent, or not mirrorable), its frames, the
+/// export's.
+fn actors_glb(state: &AppState, take: &take::Take) -> Result<Vec<u8>, String> {
+    let recordings = take::actor_recordings(take).map_err(|e| e.to_string())?;
+    let mut models = Vec::with_capacity(recordings.len());
+    for r in &recordings {
+        let model = match &r.mirror {
+            None => state.models().get(&r.model),
+            Some(plane) => state
+                .models()
+                .mirrored(&r.model, plane)
+                .transpose()
+                .map_err(|e| format!("actor {:?}: mirror: {e}", r.name))?,
+        };
+        models.push(model.ok_or_else(|| format!("actor {:?}: no model {:?}", r.name, r.model))?);
+    }
+    let parts: Vec<_> = recordings
+        .iter()
+        .zip(&models)
+        .map(|(r, m)| {
+            let part = gltf_export::SkinnedPart {
+                name: Some(&r.name),
+                rig: &m.model.rig,
+                transforms: &r.transforms,
+            };
+            (part, r.skinning.unwrap_or(m.model.skinning))
+        })
+        .collect();
+    gltf_export::skinned_parts_recording_to_glb(&parts, "take", &take::keyframe_times(take))
+        .map_err(|e| format!("export: {e}"))
 }
 
 /// Opens a private room (`replay-<random>`) with take `id`'s settings for a viewer to play the

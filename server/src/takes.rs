@@ -526,7 +526,9 @@ mod tests {
             model: "m".into(),
             ..Default::default()
         };
-        let mut rec = takes.start(room, "first", "ab12", 1, 1, Vec::new()).unwrap();
+        let mut rec = takes
+            .start(room, "first", "ab12", 1, 1, Vec::new())
+            .unwrap();
         let id = rec.id().to_owned();
         let t0 = Instant::now();
         for i in 0..10u64 {
@@ -577,7 +579,9 @@ mod tests {
             room: "r1".into(),
             ..Default::default()
         };
-        let rec = takes.start(room, "again", "ab12", 1, 1, Vec::new()).unwrap();
+        let rec = takes
+            .start(room, "again", "ab12", 1, 1, Vec::new())
+            .unwrap();
         assert!(folder.join(format!("{}.take", rec.id())).is_file());
         assert_eq!(rec.finish().unwrap().frames, 0);
     }

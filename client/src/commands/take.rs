@@ -483,10 +483,31 @@ async fn export(args: &ExportArgs) -> anyhow::Result<()> {
         std::fs::read(&args.model).with_context(|| format!("--model {}", args.model.display()))?;
     let model = TrainedModel::from_bytes(&bytes)
         .with_context(|| format!("--model {}", args.model.display()))?;
-    take::check_model(&take, &model, &sha256_hex(&bytes))
+    let sha256 = sha256_hex(&bytes);
+    take::check_model(&take, &model, &sha256)
         .with_context(|| format!("--model {}", args.model.display()))?;
     let started = std::time::Instant::now();
+    let actors = &take.header().actors;
     let glb = match args.level.as_str() {
+        _ if !actors.is_empty() => {
+            // A room of several actors (issue 38): every actor on this model file, mirrored
+            // where the actor was.
+            if let Some(other) = actors
+                .iter()
+                .find(|a| !a.model_sha256.eq_ignore_ascii_case(&sha256))
+            {
+                bail!(
+                    "--model {}: actor {:?} of the take was recorded on another model file (SHA-256 {}); crease take export writes takes whose actors share one model",
+                    args.model.display(),
+                    other.actor,
+                    other.model_sha256
+                );
+            }
+            if args.level == "detail" {
+                bail!("--level detail: a take of a room of actors exports its skinned level only");
+            }
+            take_export::actors_glb(&take, &model)?
+        }
         "detail" => take_export::detail_glb(&take, Arc::new(model), args.every as usize)?,
         _ => take_export::skinned_glb(&take, &model)?,
     };

@@ -31,6 +31,44 @@ pub fn skinned_glb(take: &Take, model: &TrainedModel) -> anyhow::Result<Vec<u8>>
     )?)
 }
 
+/// A take of a room of several actors as one glTF (issue 38): a skinned mesh per actor
+/// (`gltf_export::skinned_parts_recording_to_glb`), every actor on `model` (the user's copy
+/// of the model they share), mirrored where the actor was, as the room ran it: the bytes the
+/// server's download writes.
+///
+/// # Errors
+/// An actor's mirror or frames; the writer's.
+pub fn actors_glb(take: &Take, model: &TrainedModel) -> anyhow::Result<Vec<u8>> {
+    let recordings = take::actor_recordings(take)?;
+    let models = recordings
+        .iter()
+        .map(|r| match &r.mirror {
+            None => Ok(std::borrow::Cow::Borrowed(model)),
+            Some(plane) => model
+                .mirrored(plane)
+                .map(std::borrow::Cow::Owned)
+                .with_context(|| format!("actor {:?}: mirror", r.name)),
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let parts: Vec<_> = recordings
+        .iter()
+        .zip(&models)
+        .map(|(r, m)| {
+            let part = gltf_export::SkinnedPart {
+                name: Some(&r.name),
+                rig: &m.rig,
+                transforms: &r.transforms,
+            };
+            (part, r.skinning.unwrap_or(m.skinning))
+        })
+        .collect();
+    Ok(gltf_export::skinned_parts_recording_to_glb(
+        &parts,
+        "take",
+        &take::keyframe_times(take),
+    )?)
+}
+
 /// The take's detail layer as a morph-target animation (`core::model::gltf_export`'s baked
 /// vertex animation): every `every`-th frame's detail mesh (HZY11 eq. 4 on the recorded
 /// frame's base mesh), at the take's mean frame rate; the first exported frame is the base

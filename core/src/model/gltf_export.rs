@@ -50,7 +50,6 @@
 //! caller's frames, never held in memory a second time by [`export_animation_glb`].
 
 use std::collections::BTreeMap;
-use std::io::{self, Write};
 use std::path::Path;
 
 use glam::{Mat4, Vec3};
@@ -104,7 +103,12 @@ pub fn rig_to_glb(rig: &Rig) -> Result<Vec<u8>, ModelError> {
         .iter()
         .flat_map(|e| e.transforms.iter().copied())
         .collect();
-    skinned_glb(rig, "examples", &times, &transforms)
+    let part = SkinnedPart {
+        name: None,
+        rig,
+        transforms: &transforms,
+    };
+    skinned_glb(&[part], "examples", &times)
 }
 
 /// `rig`'s mesh and joints (as [`rig_to_glb`]) with an animation `name` of one keyframe per
@@ -122,6 +126,24 @@ pub fn skinned_animation_to_glb(
     times: &[f32],
     transforms: &[RigidTransform],
 ) -> Result<Vec<u8>, ModelError> {
+    check_keyframes(rig, times, transforms)?;
+    skinned_glb(
+        &[SkinnedPart {
+            name: None,
+            rig,
+            transforms,
+        }],
+        name,
+        times,
+    )
+}
+
+/// What [`skinned_animation_to_glb`] refuses of `rig`'s keyframes.
+fn check_keyframes(
+    rig: &Rig,
+    times: &[f32],
+    transforms: &[RigidTransform],
+) -> Result<(), ModelError> {
     let export = |m: String| Err(ModelError::Export(m));
     if times.is_empty() {
         return export("an animation needs at least one keyframe".into());
@@ -148,7 +170,53 @@ pub fn skinned_animation_to_glb(
             i % rig.bone_count
         ));
     }
-    skinned_glb(rig, name, times, transforms)
+    Ok(())
+}
+
+/// One skinned mesh of a GLB with several (a room of actors' take, issue 38): its name, its
+/// rig, and its keyframes' transforms (`times.len()` frames of `rig.bone_count`).
+#[derive(Clone, Copy, Debug)]
+pub struct SkinnedPart<'a> {
+    /// The mesh's name (its nodes are `NAME`, `NAME_rig` and `NAME_bone_i`); `None`: the
+    /// one mesh of a single-rig file (`rest`, `rig`, `bone_i`).
+    pub name: Option<&'a str>,
+    /// Its rig.
+    pub rig: &'a Rig,
+    /// Its keyframes.
+    pub transforms: &'a [RigidTransform],
+}
+
+/// Several recordings of one take (a room of actors, issue 38) as one skinned glTF: one
+/// skinned mesh per part, each with its own joints and skin, and one animation `name` whose
+/// keyframes at `times` seconds move every part's joints. Each part is checked and refused as
+/// [`skinned_recording_to_glb`] refuses a single one.
+///
+/// # Errors
+/// [`ModelError::Export`] for no frames, dual-quaternion skinning, or a part's keyframes
+/// that [`skinned_animation_to_glb`] would refuse.
+pub fn skinned_parts_recording_to_glb(
+    parts: &[(SkinnedPart<'_>, Skinning)],
+    name: &str,
+    times: &[f64],
+) -> Result<Vec<u8>, ModelError> {
+    if times.is_empty() {
+        return Err(ModelError::Export("the take has no frames".into()));
+    }
+    let times: Vec<f32> = times.iter().map(|&t| t as f32).collect();
+    for (part, skinning) in parts {
+        let named = |e: ModelError| match (e, part.name) {
+            (ModelError::Export(m), Some(n)) => ModelError::Export(format!("{n}: {m}")),
+            (e, _) => e,
+        };
+        if *skinning == Skinning::Dqs {
+            return Err(named(ModelError::Export(
+                "skinned with dual quaternions, and glTF skins linearly".into(),
+            )));
+        }
+        check_keyframes(part.rig, &times, part.transforms).map_err(named)?;
+    }
+    let parts: Vec<SkinnedPart<'_>> = parts.iter().map(|(p, _)| *p).collect();
+    skinned_glb(&parts, name, &times)
 }
 
 /// A recording's predicted bone transforms (what a room's take holds) as a skinned glTF
@@ -182,177 +250,37 @@ pub fn skinned_recording_to_glb(
     skinned_animation_to_glb(rig, name, &times, transforms)
 }
 
-/// The skinned GLB of `rig` with animation `name` (none when `times` is empty); `transforms`
-/// holds `times.len()` frames of `rig.bone_count` transforms.
+/// The skinned GLB of `parts` (one skinned mesh each) with animation `name` (none when
+/// `times` is empty); each part's `transforms` holds `times.len()` frames of its rig's bones.
 fn skinned_glb(
-    rig: &Rig,
+    parts: &[SkinnedPart<'_>],
     name: &str,
     times: &[f32],
-    transforms: &[RigidTransform],
 ) -> Result<Vec<u8>, ModelError> {
-    rig.validate()?;
-    let n = rig.rest.vertex_count();
-    if n == 0 || rig.rest.triangles.is_empty() {
-        return Err(ModelError::Export("the rest mesh has no triangles".into()));
-    }
-    if rig.bone_count == 0 || rig.bone_count > usize::from(u16::MAX) + 1 {
-        return Err(ModelError::Export(format!(
-            "{} bones; JOINTS_n are u16 here, so 1..=65536 bones can be exported",
-            rig.bone_count
-        )));
-    }
-    let slots = if rig.skin.k() <= 4 { 4 } else { 8 };
-    let (joints, weights) = influences(rig, slots);
-    let centres = bone_centres(rig);
-
     let mut root = json::Root::default();
     let mut bin = Vec::new();
-
-    let (lo, hi) = rig.rest.bounding_box();
-    let positions = flat_f32(rig.rest.positions.iter().flat_map(|p| p.to_array()));
-    let pos = push_accessor(
-        &mut root,
-        &mut bin,
-        &positions,
-        n,
-        F32,
-        json::accessor::Type::Vec3,
-        Some(VERTEX),
-        Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
-    );
-    let tri_bytes: Vec<u8> = rig
-        .rest
-        .triangles
-        .iter()
-        .flatten()
-        .flat_map(|i| i.to_le_bytes())
-        .collect();
-    let indices = push_accessor(
-        &mut root,
-        &mut bin,
-        &tri_bytes,
-        3 * rig.rest.triangles.len(),
-        U32,
-        json::accessor::Type::Scalar,
-        Some(INDEX),
-        None,
-    );
-
-    let mut attributes = BTreeMap::new();
-    attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pos);
-    for set in 0..slots / 4 {
-        let j: Vec<u8> = joints
-            .chunks_exact(slots)
-            .flat_map(|c| &c[4 * set..4 * set + 4])
-            .flat_map(|j| j.to_le_bytes())
-            .collect();
-        let w = flat_f32(
-            weights
-                .chunks_exact(slots)
-                .flat_map(|c| c[4 * set..4 * set + 4].to_vec()),
-        );
-        let ja = push_accessor(
-            &mut root,
-            &mut bin,
-            &j,
-            n,
-            U16,
-            json::accessor::Type::Vec4,
-            Some(VERTEX),
-            None,
-        );
-        let wa = push_accessor(
-            &mut root,
-            &mut bin,
-            &w,
-            n,
-            F32,
-            json::accessor::Type::Vec4,
-            Some(VERTEX),
-            None,
-        );
-        attributes.insert(Checked::Valid(json::mesh::Semantic::Joints(set as u32)), ja);
-        attributes.insert(
-            Checked::Valid(json::mesh::Semantic::Weights(set as u32)),
-            wa,
-        );
+    let mut scene_nodes = Vec::new();
+    let mut joints_of = Vec::with_capacity(parts.len());
+    for part in parts {
+        let m = push_skinned_mesh(&mut root, &mut bin, part)?;
+        scene_nodes.extend([m.skeleton, m.mesh_node]);
+        joints_of.push((m.centres, m.joint_nodes));
     }
-    let mesh = root.push(json::Mesh {
-        extensions: None,
-        extras: Default::default(),
-        name: Some("rest".into()),
-        primitives: vec![json::mesh::Primitive {
-            attributes,
-            extensions: None,
-            extras: Default::default(),
-            indices: Some(indices),
-            material: None,
-            mode: Checked::Valid(json::mesh::Mode::Triangles),
-            targets: None,
-        }],
-        weights: None,
-    });
-
-    let joint_nodes: Vec<_> = centres
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            root.push(json::Node {
-                name: Some(format!("bone_{i}")),
-                translation: Some(c.to_array()),
-                ..Default::default()
-            })
-        })
-        .collect();
-    let skeleton = root.push(json::Node {
-        name: Some("rig".into()),
-        children: Some(joint_nodes.clone()),
-        ..Default::default()
-    });
-    let ibm = flat_f32(
-        centres
-            .iter()
-            .flat_map(|&c| Mat4::from_translation(-c).to_cols_array()),
-    );
-    let ibm = push_accessor(
-        &mut root,
-        &mut bin,
-        &ibm,
-        centres.len(),
-        F32,
-        json::accessor::Type::Mat4,
-        None,
-        None,
-    );
-    let skin = root.push(json::Skin {
-        extensions: None,
-        extras: Default::default(),
-        inverse_bind_matrices: Some(ibm),
-        joints: joint_nodes.clone(),
-        name: Some("proxy_bones".into()),
-        skeleton: Some(skeleton),
-    });
-    let mesh_node = root.push(json::Node {
-        name: Some("rest".into()),
-        mesh: Some(mesh),
-        skin: Some(skin),
-        ..Default::default()
-    });
     let scene = root.push(json::Scene {
         extensions: None,
         extras: Default::default(),
         name: Some("rig".into()),
-        nodes: vec![skeleton, mesh_node],
+        nodes: scene_nodes,
     });
     root.scene = Some(scene);
 
     if !times.is_empty() {
-        let animation = Keyframes {
-            name,
-            times,
-            transforms,
-        };
-        push_animation(&mut root, &mut bin, &animation, &centres, &joint_nodes);
+        let animated: Vec<AnimatedPart<'_>> = parts
+            .iter()
+            .zip(&joints_of)
+            .map(|(p, (c, j))| (p.transforms, c.as_slice(), j.as_slice()))
+            .collect();
+        push_animation(&mut root, &mut bin, name, times, &animated);
     }
 
     root.asset = json::Asset {
@@ -383,92 +311,271 @@ fn skinned_glb(
     glb.to_vec().map_err(|e| ModelError::Export(e.to_string()))
 }
 
-/// An animation's keyframes: `times[f]` seconds, bone `b` at `transforms[f * bones + b]`.
-struct Keyframes<'a> {
-    name: &'a str,
-    times: &'a [f32],
-    transforms: &'a [RigidTransform],
+/// Pushes `part`'s skinned mesh (its rest mesh, joints, skin, skeleton): its skeleton node,
+/// its mesh node, its joints' centres and nodes.
+fn push_skinned_mesh(
+    root: &mut json::Root,
+    bin: &mut Vec<u8>,
+    part: &SkinnedPart<'_>,
+) -> Result<PushedMesh, ModelError> {
+    let rig = part.rig;
+    let (mesh_name, prefix) = match part.name {
+        Some(n) => (n.to_owned(), format!("{n}_")),
+        None => ("rest".to_owned(), String::new()),
+    };
+    rig.validate()?;
+    let n = rig.rest.vertex_count();
+    if n == 0 || rig.rest.triangles.is_empty() {
+        return Err(ModelError::Export("the rest mesh has no triangles".into()));
+    }
+    if rig.bone_count == 0 || rig.bone_count > usize::from(u16::MAX) + 1 {
+        return Err(ModelError::Export(format!(
+            "{} bones; JOINTS_n are u16 here, so 1..=65536 bones can be exported",
+            rig.bone_count
+        )));
+    }
+    let slots = if rig.skin.k() <= 4 { 4 } else { 8 };
+    let (joints, weights) = influences(rig, slots);
+    let centres = bone_centres(rig);
+
+    let (lo, hi) = rig.rest.bounding_box();
+    let positions = flat_f32(rig.rest.positions.iter().flat_map(|p| p.to_array()));
+    let pos = push_accessor(
+        root,
+        bin,
+        &positions,
+        n,
+        F32,
+        json::accessor::Type::Vec3,
+        Some(VERTEX),
+        Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
+    );
+    let tri_bytes: Vec<u8> = rig
+        .rest
+        .triangles
+        .iter()
+        .flatten()
+        .flat_map(|i| i.to_le_bytes())
+        .collect();
+    let indices = push_accessor(
+        root,
+        bin,
+        &tri_bytes,
+        3 * rig.rest.triangles.len(),
+        U32,
+        json::accessor::Type::Scalar,
+        Some(INDEX),
+        None,
+    );
+
+    let mut attributes = BTreeMap::new();
+    attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), pos);
+    for set in 0..slots / 4 {
+        let j: Vec<u8> = joints
+            .chunks_exact(slots)
+            .flat_map(|c| &c[4 * set..4 * set + 4])
+            .flat_map(|j| j.to_le_bytes())
+            .collect();
+        let w = flat_f32(
+            weights
+                .chunks_exact(slots)
+                .flat_map(|c| c[4 * set..4 * set + 4].to_vec()),
+        );
+        let ja = push_accessor(
+            root,
+            bin,
+            &j,
+            n,
+            U16,
+            json::accessor::Type::Vec4,
+            Some(VERTEX),
+            None,
+        );
+        let wa = push_accessor(
+            root,
+            bin,
+            &w,
+            n,
+            F32,
+            json::accessor::Type::Vec4,
+            Some(VERTEX),
+            None,
+        );
+        attributes.insert(Checked::Valid(json::mesh::Semantic::Joints(set as u32)), ja);
+        attributes.insert(
+            Checked::Valid(json::mesh::Semantic::Weights(set as u32)),
+            wa,
+        );
+    }
+    let mesh = root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some(mesh_name.clone()),
+        primitives: vec![json::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(indices),
+            material: None,
+            mode: Checked::Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        }],
+        weights: None,
+    });
+
+    let joint_nodes: Vec<_> = centres
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            root.push(json::Node {
+                name: Some(format!("{prefix}bone_{i}")),
+                translation: Some(c.to_array()),
+                ..Default::default()
+            })
+        })
+        .collect();
+    let skeleton = root.push(json::Node {
+        name: Some(format!("{prefix}rig")),
+        children: Some(joint_nodes.clone()),
+        ..Default::default()
+    });
+    let ibm = flat_f32(
+        centres
+            .iter()
+            .flat_map(|&c| Mat4::from_translation(-c).to_cols_array()),
+    );
+    let ibm = push_accessor(
+        root,
+        bin,
+        &ibm,
+        centres.len(),
+        F32,
+        json::accessor::Type::Mat4,
+        None,
+        None,
+    );
+    let skin = root.push(json::Skin {
+        extensions: None,
+        extras: Default::default(),
+        inverse_bind_matrices: Some(ibm),
+        joints: joint_nodes.clone(),
+        name: Some("proxy_bones".into()),
+        skeleton: Some(skeleton),
+    });
+    let mesh_node = root.push(json::Node {
+        name: Some(mesh_name),
+        mesh: Some(mesh),
+        skin: Some(skin),
+        ..Default::default()
+    });
+    Ok(PushedMesh {
+        skeleton,
+        mesh_node,
+        centres,
+        joint_nodes,
+    })
 }
 
-/// The animation: per joint one translation and one rotation sampler over the keyframes.
+/// One skinned mesh's part of an animation: its transforms (`times.len()` frames of its
+/// bones), its joints' centres and nodes.
+type AnimatedPart<'a> = (
+    &'a [RigidTransform],
+    &'a [Vec3],
+    &'a [json::Index<json::Node>],
+);
+
+/// The skinned mesh [`push_skinned_mesh`] pushed: its skeleton and mesh nodes, its joints'
+/// centres and nodes.
+struct PushedMesh {
+    skeleton: json::Index<json::Node>,
+    mesh_node: json::Index<json::Node>,
+    centres: Vec<Vec3>,
+    joint_nodes: Vec<json::Index<json::Node>>,
+}
+
+/// The animation `name`: keyframes at `times` seconds; per part, per joint one translation
+/// and one rotation sampler over the keyframes.
 fn push_animation(
     root: &mut json::Root,
     bin: &mut Vec<u8>,
-    animation: &Keyframes<'_>,
-    centres: &[Vec3],
-    joint_nodes: &[json::Index<json::Node>],
+    name: &str,
+    times: &[f32],
+    parts: &[AnimatedPart<'_>],
 ) {
-    let e = animation.times.len();
-    let bones = centres.len();
-    let (first, last) = (animation.times[0], animation.times[e - 1]);
+    let e = times.len();
+    let (first, last) = (times[0], times[e - 1]);
     let input = push_accessor(
         root,
         bin,
-        &flat_f32(animation.times.iter().copied()),
+        &flat_f32(times.iter().copied()),
         e,
         F32,
         json::accessor::Type::Scalar,
         None,
         Some((vec![first], vec![last])),
     );
-    let mut samplers = Vec::with_capacity(2 * bones);
-    let mut channels = Vec::with_capacity(2 * bones);
-    for (b, (&c, &node)) in centres.iter().zip(joint_nodes).enumerate() {
-        let mut translations = Vec::with_capacity(3 * e);
-        let mut rotations = Vec::with_capacity(4 * e);
-        let mut prev = glam::Quat::IDENTITY;
-        for frame in animation.transforms.chunks_exact(bones) {
-            let t = frame[b];
-            // Keep consecutive keys in one hemisphere so LINEAR slerps the short way; q and -q
-            // are the same rotation, so the keyframes themselves are unchanged.
-            let q = if t.rotation.dot(prev) < 0.0 {
-                -t.rotation
-            } else {
-                t.rotation
-            };
-            prev = q;
-            translations.extend((q * c + t.translation).to_array());
-            rotations.extend(q.to_array());
-        }
-        for (values, ty, property) in [
-            (
-                translations,
-                json::accessor::Type::Vec3,
-                json::animation::Property::Translation,
-            ),
-            (
-                rotations,
-                json::accessor::Type::Vec4,
-                json::animation::Property::Rotation,
-            ),
-        ] {
-            let output = push_accessor(root, bin, &flat_f32(values), e, F32, ty, None, None);
-            let sampler = json::Index::new(samplers.len() as u32);
-            samplers.push(json::animation::Sampler {
-                extensions: None,
-                extras: Default::default(),
-                input,
-                interpolation: Checked::Valid(json::animation::Interpolation::Linear),
-                output,
-            });
-            channels.push(json::animation::Channel {
-                sampler,
-                target: json::animation::Target {
+    let joints: usize = parts.iter().map(|p| p.1.len()).sum();
+    let mut samplers = Vec::with_capacity(2 * joints);
+    let mut channels = Vec::with_capacity(2 * joints);
+    for &(transforms, centres, joint_nodes) in parts {
+        let bones = centres.len();
+        for (b, (&c, &node)) in centres.iter().zip(joint_nodes).enumerate() {
+            let mut translations = Vec::with_capacity(3 * e);
+            let mut rotations = Vec::with_capacity(4 * e);
+            let mut prev = glam::Quat::IDENTITY;
+            for frame in transforms.chunks_exact(bones) {
+                let t = frame[b];
+                // Keep consecutive keys in one hemisphere so LINEAR slerps the short way; q and -q
+                // are the same rotation, so the keyframes themselves are unchanged.
+                let q = if t.rotation.dot(prev) < 0.0 {
+                    -t.rotation
+                } else {
+                    t.rotation
+                };
+                prev = q;
+                translations.extend((q * c + t.translation).to_array());
+                rotations.extend(q.to_array());
+            }
+            for (values, ty, property) in [
+                (
+                    translations,
+                    json::accessor::Type::Vec3,
+                    json::animation::Property::Translation,
+                ),
+                (
+                    rotations,
+                    json::accessor::Type::Vec4,
+                    json::animation::Property::Rotation,
+                ),
+            ] {
+                let output = push_accessor(root, bin, &flat_f32(values), e, F32, ty, None, None);
+                let sampler = json::Index::new(samplers.len() as u32);
+                samplers.push(json::animation::Sampler {
                     extensions: None,
                     extras: Default::default(),
-                    node,
-                    path: Checked::Valid(property),
-                },
-                extensions: None,
-                extras: Default::default(),
-            });
+                    input,
+                    interpolation: Checked::Valid(json::animation::Interpolation::Linear),
+                    output,
+                });
+                channels.push(json::animation::Channel {
+                    sampler,
+                    target: json::animation::Target {
+                        extensions: None,
+                        extras: Default::default(),
+                        node,
+                        path: Checked::Valid(property),
+                    },
+                    extensions: None,
+                    extras: Default::default(),
+                });
+            }
         }
     }
     root.push(json::Animation {
         extensions: None,
         extras: Default::default(),
         channels,
-        name: Some(animation.name.into()),
+        name: Some(name.into()),
         samplers,
     });
 }
@@ -502,352 +609,6 @@ fn influences(rig: &Rig, slots: usize) -> (Vec<u16>, Vec<f32>) {
         ws.iter_mut().for_each(|w| *w /= sum);
     }
     (joints, weights)
-}
-
-/// Largest GLB the format can describe: the header stores the file length as a u32.
-pub const GLB_MAX_BYTES: u64 = u32::MAX as u64;
-
-/// GLB header (12 bytes) plus the JSON and BIN chunk headers (8 each).
-const GLB_FIXED_BYTES: u64 = 28;
-
-/// Bytes of the binary chunk of a baked animation (layout in the module docs); `None` when that
-/// does not even fit a u64.
-fn animation_bin_bytes(vertices: usize, triangles: usize, frames: usize) -> Option<u64> {
-    let (n, t, f) = (vertices as u64, triangles as u64, frames as u64);
-    let mesh = n.checked_mul(12)?;
-    let weights = f.checked_mul(f)?.checked_mul(4)?;
-    mesh.checked_mul(f.checked_add(1)?)?
-        .checked_add(t.checked_mul(12)?)?
-        .checked_add(f.checked_mul(4)?)?
-        .checked_add(weights)
-}
-
-/// Fails with [`ModelError::Export`] when `frames` frames of a mesh with `vertices` vertices and
-/// `triangles` triangles cannot fit one GLB (see the module docs); call it before computing the
-/// frames. Passing does not guarantee the JSON also fits, which [`animation_to_glb`] checks.
-pub fn check_animation_size(
-    vertices: usize,
-    triangles: usize,
-    frames: usize,
-) -> Result<(), ModelError> {
-    match animation_bin_bytes(vertices, triangles, frames) {
-        Some(bytes) if bytes <= GLB_MAX_BYTES - GLB_FIXED_BYTES => Ok(()),
-        bytes => Err(ModelError::Export(format!(
-            "{frames} frames of a {vertices}-vertex mesh need {} of morph-target data (12 bytes \
-             per vertex per frame plus 4 × frames² of weights); a GLB holds at most 4 GiB (its \
-             header stores the length as a u32): split the frames over several files",
-            bytes.map_or_else(|| "more than 2^64 bytes".into(), |b| format!("{b} bytes"))
-        ))),
-    }
-}
-
-/// Writes `F = frames.len() / rest.len()` frames of one mesh to `path` as a GLB whose animation
-/// plays them through morph targets (layout in the module docs), atomically, streaming the
-/// binary chunk from `frames`.
-///
-/// `triangles` index `rest`; `frames` holds frame 0's positions, then frame 1's, ...; keyframe
-/// `i` is at `i / fps` seconds.
-pub fn export_animation_glb(
-    path: impl AsRef<Path>,
-    triangles: &[[u32; 3]],
-    rest: &[Vec3],
-    frames: &[Vec3],
-    fps: f32,
-) -> Result<(), ModelError> {
-    let path = path.as_ref();
-    let glb = AnimationGlb::new(triangles, rest, frames, fps)?;
-    crate::atomic::write_atomic_with(path, |out| glb.write(out)).map_err(|error| ModelError::Io {
-        path: path.to_path_buf(),
-        error,
-    })
-}
-
-/// The GLB bytes [`export_animation_glb`] writes.
-pub fn animation_to_glb(
-    triangles: &[[u32; 3]],
-    rest: &[Vec3],
-    frames: &[Vec3],
-    fps: f32,
-) -> Result<Vec<u8>, ModelError> {
-    let glb = AnimationGlb::new(triangles, rest, frames, fps)?;
-    // The total was checked against GLB_MAX_BYTES, so it fits in memory's address range.
-    let mut bytes = Vec::with_capacity(glb.total_bytes() as usize);
-    glb.write(&mut bytes)
-        .map_err(|e| ModelError::Export(e.to_string()))?;
-    Ok(bytes)
-}
-
-/// A baked vertex animation ready to write: the JSON chunk is built, the binary chunk is
-/// produced from the borrowed positions while writing.
-struct AnimationGlb<'a> {
-    /// JSON chunk, padded with spaces to a multiple of 4.
-    json: Vec<u8>,
-    /// Binary chunk length (a multiple of 4: every value is 4 bytes).
-    bin_bytes: u64,
-    triangles: &'a [[u32; 3]],
-    rest: &'a [Vec3],
-    frames: &'a [Vec3],
-    /// Keyframe times in seconds, strictly increasing.
-    times: Vec<f32>,
-}
-
-impl<'a> AnimationGlb<'a> {
-    fn new(
-        triangles: &'a [[u32; 3]],
-        rest: &'a [Vec3],
-        frames: &'a [Vec3],
-        fps: f32,
-    ) -> Result<Self, ModelError> {
-        let export = |m: String| Err(ModelError::Export(m));
-        let n = rest.len();
-        if n == 0 || triangles.is_empty() {
-            return export("the rest mesh has no triangles".into());
-        }
-        if frames.is_empty() || !frames.len().is_multiple_of(n) {
-            return export(format!(
-                "{} frame positions are not a positive multiple of the {n} rest vertices",
-                frames.len()
-            ));
-        }
-        let f = frames.len() / n;
-        if let Some(t) = triangles
-            .iter()
-            .position(|t| t.iter().any(|&i| i as usize >= n))
-        {
-            return export(format!(
-                "triangle {t} {:?} indexes beyond the {n} vertices",
-                triangles[t]
-            ));
-        }
-        if !(fps.is_finite() && fps > 0.0) {
-            return export(format!("fps must be a positive number, got {fps}"));
-        }
-        check_animation_size(n, triangles.len(), f)?;
-        let times: Vec<f32> = (0..f).map(|i| i as f32 / fps).collect();
-        if !times.windows(2).all(|w| w[0] < w[1]) || !times[f - 1].is_finite() {
-            return export(format!(
-                "{f} keyframes at {fps} fps do not give strictly increasing finite f32 times"
-            ));
-        }
-        if let Some(v) = rest.iter().position(|p| !p.is_finite()) {
-            return export(format!("rest vertex {v} is not finite: {}", rest[v]));
-        }
-
-        let mut root = json::Root::default();
-        let mut offset = 0u64;
-        let mut reserve = |bytes: u64| {
-            let at = offset;
-            offset += bytes;
-            at
-        };
-        let (lo, hi) = min_max(rest.iter().copied());
-        let vec3 = json::accessor::Type::Vec3;
-        let scalar = json::accessor::Type::Scalar;
-        let mesh_bytes = 12 * n as u64;
-        let position = accessor_at(
-            &mut root,
-            reserve(mesh_bytes),
-            mesh_bytes,
-            n,
-            F32,
-            vec3,
-            Some(VERTEX),
-            Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
-        );
-        let index_bytes = 12 * triangles.len() as u64;
-        let indices = accessor_at(
-            &mut root,
-            reserve(index_bytes),
-            index_bytes,
-            3 * triangles.len(),
-            U32,
-            scalar,
-            Some(INDEX),
-            None,
-        );
-        let input = accessor_at(
-            &mut root,
-            reserve(4 * f as u64),
-            4 * f as u64,
-            f,
-            F32,
-            scalar,
-            None,
-            Some((vec![times[0]], vec![times[f - 1]])),
-        );
-        let weight_bytes = 4 * (f as u64) * (f as u64);
-        let output = accessor_at(
-            &mut root,
-            reserve(weight_bytes),
-            weight_bytes,
-            f * f,
-            F32,
-            scalar,
-            None,
-            None,
-        );
-        let mut targets = Vec::with_capacity(f);
-        for (i, frame) in frames.chunks_exact(n).enumerate() {
-            // The same f32 subtraction as in `write`, so min/max bound the written values.
-            let displacements = frame.iter().zip(rest).map(|(&p, &r)| p - r);
-            if let Some(v) = displacements.clone().position(|d| !d.is_finite()) {
-                return export(format!(
-                    "frame {i}, vertex {v}: position {} is not finite or too far from the rest \
-                     position {}",
-                    frame[v], rest[v]
-                ));
-            }
-            let (lo, hi) = min_max(displacements);
-            let positions = accessor_at(
-                &mut root,
-                reserve(mesh_bytes),
-                mesh_bytes,
-                n,
-                F32,
-                vec3,
-                Some(VERTEX),
-                Some((lo.to_array().to_vec(), hi.to_array().to_vec())),
-            );
-            targets.push(json::mesh::MorphTarget {
-                positions: Some(positions),
-                normals: None,
-                tangents: None,
-            });
-        }
-        let bin_bytes = offset;
-        debug_assert_eq!(Some(bin_bytes), animation_bin_bytes(n, triangles.len(), f));
-
-        let mut attributes = BTreeMap::new();
-        attributes.insert(Checked::Valid(json::mesh::Semantic::Positions), position);
-        let mesh = root.push(json::Mesh {
-            extensions: None,
-            extras: Default::default(),
-            name: Some("rest".into()),
-            primitives: vec![json::mesh::Primitive {
-                attributes,
-                extensions: None,
-                extras: Default::default(),
-                indices: Some(indices),
-                material: None,
-                mode: Checked::Valid(json::mesh::Mode::Triangles),
-                targets: Some(targets),
-            }],
-            weights: Some(vec![0.0; f]),
-        });
-        let node = root.push(json::Node {
-            name: Some("animation".into()),
-            mesh: Some(mesh),
-            ..Default::default()
-        });
-        let scene = root.push(json::Scene {
-            extensions: None,
-            extras: Default::default(),
-            name: Some("animation".into()),
-            nodes: vec![node],
-        });
-        root.scene = Some(scene);
-        root.push(json::Animation {
-            extensions: None,
-            extras: Default::default(),
-            channels: vec![json::animation::Channel {
-                sampler: json::Index::new(0),
-                target: json::animation::Target {
-                    extensions: None,
-                    extras: Default::default(),
-                    node,
-                    path: Checked::Valid(json::animation::Property::MorphTargetWeights),
-                },
-                extensions: None,
-                extras: Default::default(),
-            }],
-            name: Some("frames".into()),
-            samplers: vec![json::animation::Sampler {
-                extensions: None,
-                extras: Default::default(),
-                input,
-                interpolation: Checked::Valid(json::animation::Interpolation::Linear),
-                output,
-            }],
-        });
-        root.asset = json::Asset {
-            generator: Some(format!("crease {}", env!("CARGO_PKG_VERSION"))),
-            version: "2.0".into(),
-            ..Default::default()
-        };
-        root.push(json::Buffer {
-            byte_length: USize64::from(bin_bytes),
-            name: None,
-            uri: None,
-            extensions: None,
-            extras: Default::default(),
-        });
-        let mut json = root
-            .to_vec()
-            .map_err(|e| ModelError::Export(e.to_string()))?;
-        json.resize(json.len().next_multiple_of(4), b' ');
-        let glb = AnimationGlb {
-            json,
-            bin_bytes,
-            triangles,
-            rest,
-            frames,
-            times,
-        };
-        if glb.total_bytes() > GLB_MAX_BYTES {
-            return export(format!(
-                "the GLB would take {} bytes; at most 4 GiB fit (its header stores the length as \
-                 a u32): split the frames over several files",
-                glb.total_bytes()
-            ));
-        }
-        Ok(glb)
-    }
-
-    /// Length of the whole GLB.
-    fn total_bytes(&self) -> u64 {
-        GLB_FIXED_BYTES + self.json.len() as u64 + self.bin_bytes
-    }
-
-    /// Writes the GLB: header, JSON chunk, BIN chunk in the layout of the module docs. Every
-    /// length fits a u32: [`Self::new`] checked the total against [`GLB_MAX_BYTES`].
-    fn write(&self, out: &mut dyn Write) -> io::Result<()> {
-        out.write_all(b"glTF")?;
-        out.write_all(&2u32.to_le_bytes())?;
-        out.write_all(&(self.total_bytes() as u32).to_le_bytes())?;
-        out.write_all(&(self.json.len() as u32).to_le_bytes())?;
-        out.write_all(b"JSON")?;
-        out.write_all(&self.json)?;
-        out.write_all(&(self.bin_bytes as u32).to_le_bytes())?;
-        out.write_all(b"BIN\0")?;
-        let n = self.rest.len();
-        let f = self.times.len();
-        let mut buf = Vec::with_capacity(12 * n.max(f));
-        let mut put_vec3s = |out: &mut dyn Write, values: &mut dyn Iterator<Item = Vec3>| {
-            buf.clear();
-            buf.extend(values.flat_map(|v| v.to_array()).flat_map(f32::to_le_bytes));
-            out.write_all(&buf)
-        };
-        put_vec3s(out, &mut self.rest.iter().copied())?;
-        let indices: Vec<u8> = self
-            .triangles
-            .iter()
-            .flatten()
-            .flat_map(|i| i.to_le_bytes())
-            .collect();
-        out.write_all(&indices)?;
-        out.write_all(&flat_f32(self.times.iter().copied()))?;
-        let mut row = vec![0u8; 4 * f];
-        for k in 0..f {
-            // One-hot keyframe k: only target k is shown.
-            row.fill(0);
-            row[4 * k..4 * k + 4].copy_from_slice(&1.0f32.to_le_bytes());
-            out.write_all(&row)?;
-        }
-        for frame in self.frames.chunks_exact(n) {
-            put_vec3s(out, &mut frame.iter().zip(self.rest).map(|(&p, &r)| p - r))?;
-        }
-        Ok(())
-    }
 }
 
 /// Component-wise minimum and maximum (glTF accessor `min`/`max`) of a non-empty sequence.
@@ -938,6 +699,10 @@ fn accessor_at(
         sparse: None,
     })
 }
+
+mod morph;
+
+pub use morph::{GLB_MAX_BYTES, animation_to_glb, check_animation_size, export_animation_glb};
 
 #[cfg(test)]
 #[path = "gltf_export_tests.rs"]
