@@ -99,20 +99,31 @@ CREASE_REPORTS="$reports" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
 # by the server (byte-identical), then takes.test.mjs: the viewer's takes list, its player in a
 # private replay room, and three.js's GLTFLoader on the export.
 echo "== takes in headless chromium"
-if take="$("$bin/crease" take start --room demo --name browser --server "http://$grpc_addr" --admin-token "$admin")"; then
+# Issue 38: beside it, a take of room performer (the demo's two hands, one room of actors),
+# recorded at the same time; its export holds a skinned mesh per hand.
+if take="$("$bin/crease" take start --room demo --name browser --server "http://$grpc_addr" --admin-token "$admin")" &&
+    actors_take="$("$bin/crease" take start --room performer --name browser-hands --server "http://$grpc_addr" --admin-token "$admin")"; then
     sleep 8
     "$bin/crease" take stop --room demo --server "http://$grpc_addr" --admin-token "$admin" >/dev/null || failed=1
+    "$bin/crease" take stop --room performer --server "http://$grpc_addr" --admin-token "$admin" >/dev/null || failed=1
+    "$bin/crease" take export "$actors_take" --server "http://$grpc_addr" --model "$target/demo-cache/demo-hand-v1.crease" \
+        --out "$work/take-hands.glb" || failed=1
     "$bin/crease" take export "$take" --server "http://$grpc_addr" --model "$target/demo-cache/demo-hand-v1.crease" \
         --out "$work/take.glb" || failed=1
     node -e 'fetch(process.argv[1]).then(async (r) => { if (!r.ok) throw new Error(`${r.status} ${await r.text()}`); require("fs").writeFileSync(process.argv[2], Buffer.from(await r.arrayBuffer())); }).catch((e) => { console.error(`GET ${process.argv[1]}: ${e.message}`); process.exit(1); })' \
         "http://$http_addr/api/takes/$take/glb" "$work/take-server.glb" || failed=1
-    if cmp -s "$work/take.glb" "$work/take-server.glb"; then
-        echo "ok   crease take export and GET /api/takes/$take/glb write the same bytes"
-    else
-        echo "FAIL crease take export and GET /api/takes/$take/glb differ"
-        failed=1
-    fi
-    CREASE_HTTP="$http_addr" CREASE_TAKE="$take" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+    node -e 'fetch(process.argv[1]).then(async (r) => { if (!r.ok) throw new Error(`${r.status} ${await r.text()}`); require("fs").writeFileSync(process.argv[2], Buffer.from(await r.arrayBuffer())); }).catch((e) => { console.error(`GET ${process.argv[1]}: ${e.message}`); process.exit(1); })' \
+        "http://$http_addr/api/takes/$actors_take/glb" "$work/take-hands-server.glb" || failed=1
+    for pair in "take $take" "take-hands $actors_take"; do
+        set -- $pair
+        if cmp -s "$work/$1.glb" "$work/$1-server.glb"; then
+            echo "ok   crease take export and GET /api/takes/$2/glb write the same bytes"
+        else
+            echo "FAIL crease take export and GET /api/takes/$2/glb differ"
+            failed=1
+        fi
+    done
+    CREASE_HTTP="$http_addr" CREASE_TAKE="$take" CREASE_ACTORS_TAKE="$actors_take" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
         node tests/browser/takes.test.mjs || failed=1
 else
     failed=1

@@ -188,6 +188,63 @@ try {
     return `${got.bones} joints, ${got.vertices} vertices, ${got.tracks} tracks, ${got.duration.toFixed(2)} s; vertices move up to ${got.moved.toFixed(4)}`;
   });
 
+  // Issue 38: a take of room performer (two actors) exports one glTF with both hands.
+  const actorsTake = process.env.CREASE_ACTORS_TAKE;
+  if (actorsTake) {
+    await check("three.js's GLTFLoader loads a room of actors' take with both skinned hands", async () => {
+      const got = await page.evaluate(async (url) => {
+        const THREE = await import("three");
+        const { GLTFLoader } = await import("three/addons/loaders/GLTFLoader.js");
+        const gltf = await new GLTFLoader().loadAsync(url);
+        const skinned = [];
+        gltf.scene.traverse((o) => o.isSkinnedMesh && skinned.push(o));
+        const clip = gltf.animations[0];
+        const mixer = new THREE.AnimationMixer(gltf.scene);
+        mixer.clipAction(clip).play();
+        const sample = (t) => {
+          mixer.setTime(t);
+          gltf.scene.updateMatrixWorld(true);
+          const v = new THREE.Vector3();
+          return skinned.map((mesh) => {
+            const out = [];
+            for (let i = 0; i < mesh.geometry.attributes.position.count; i += 97) {
+              mesh.getVertexPosition(i, v);
+              out.push(v.toArray());
+            }
+            return out;
+          });
+        };
+        const first = sample(0);
+        const middle = sample(clip.duration / 2);
+        const moved = first.map((hand, k) => Math.max(...hand.map((p, i) => Math.hypot(...p.map((x, j) => x - middle[k][i][j])))));
+        const finite = [...first, ...middle].every((hand) => hand.every((p) => p.every(Number.isFinite)));
+        // The left hand's rest mesh is the right one's mirror image across x = 0.
+        const [r, l] = skinned.map((m) => m.geometry.attributes.position);
+        let mirrorError = 0;
+        for (let i = 0; i < r.count; i++) {
+          mirrorError = Math.max(mirrorError, Math.abs(l.getX(i) + r.getX(i)), Math.abs(l.getY(i) - r.getY(i)), Math.abs(l.getZ(i) - r.getZ(i)));
+        }
+        return {
+          names: skinned.map((m) => m.name),
+          bones: skinned.map((m) => m.skeleton.bones.length),
+          vertices: skinned.map((m) => m.geometry.attributes.position.count),
+          tracks: clip?.tracks.length,
+          moved,
+          finite,
+          mirrorError,
+        };
+      }, `/api/takes/${encodeURIComponent(actorsTake)}/glb`);
+      assert.deepEqual(got.names, ["right", "left"], "a skinned mesh per actor, named after it");
+      assert.deepEqual(got.bones, [recorded.bones, recorded.bones], "one joint per bone, each hand");
+      assert.deepEqual(got.vertices, [model.base_vertices, model.base_vertices], "each the base mesh");
+      assert.equal(got.tracks, 2 * 2 * recorded.bones, "a translation and a rotation track per joint of both");
+      assert.ok(got.finite, "finite skinned positions");
+      assert.ok(got.moved.every((d) => d > 0), `both hands move: ${got.moved}`);
+      assert.ok(got.mirrorError < 1e-6, `the left rest mesh mirrors the right one: off by ${got.mirrorError}`);
+      return `hands ${got.names.join(" and ")}, ${got.bones[0]} joints each, ${got.tracks} tracks, rest meshes mirrored to ${got.mirrorError}; moved ${got.moved.map((d) => d.toFixed(4)).join(", ")}`;
+    });
+  }
+
   await check("no uncaught page errors", async () => {
     assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);
   });
