@@ -14,16 +14,17 @@
 //!
 //! So with palette viewers alone a frame is prediction and translation solve only: no
 //! skinning, no detail synthesis, no vertex encode. A channel the pipeline stops computing is
-//! cleared, so that a viewer who comes later waits for its next frame instead of an old pose. Everything here is blocking: building a pipeline
-//! factorises the predictor's sparse system, and [`Pipeline::process`] predicts and encodes a
-//! frame; callers run both on the blocking pool (`spawn_blocking`), never on the async
-//! executor.
+//! cleared, so that a viewer who comes later waits for its next frame instead of an old
+//! pose. Everything here is blocking: building a pipeline factorises the predictor's sparse
+//! system, and `Pipeline::run` predicts and encodes a frame (`Pipeline::frames` then hands
+//! its frames to the pools); callers run them on the blocking pool (`spawn_blocking`), never
+//! on the async executor.
 //!
 //! While the room records a take (`crate::takes`), the room records every frame that
 //! predicted once it is through: the control frame, and each actor's controls used and bone
-//! transforms ([`Pipeline::pose`]).
+//! transforms (`Pipeline::pose`).
 //!
-//! Frames are handed to the fan-out as [`MeshUpdate`](crate::frames::MeshUpdate)s taken from a small pool per level
+//! Frames are handed to the fan-out as [`MeshUpdate`]s taken from a small pool per level
 //! (`crate::frames`): after warm-up a frame allocates nothing, even while a slow subscriber
 //! still holds an older frame.
 
@@ -108,7 +109,7 @@ pub enum PipelineError {
     #[error("the pipeline panicked: {0}")]
     Panicked(String),
     /// A room of several actors: actor `actor`'s pipeline refused the frame (a wire error
-    /// names the actor in its field instead: [`PipelineError::in_actor`]).
+    /// names the actor in its field instead: `PipelineError::in_actor`).
     #[error("actor {actor:?}: {error}")]
     Actor {
         /// The actor's name.

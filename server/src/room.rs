@@ -5,7 +5,7 @@
 //! [`crate::stream`].
 //!
 //! A room of several actors (issue 38: both hands of a performer, several performers) runs
-//! each control frame's actors together ([`Room::process`]): every actor's part is checked
+//! each control frame's actors together (`Room::process`): every actor's part is checked
 //! first (so a bad frame changes nothing), then the actors are predicted and encoded in
 //! parallel where the machine has cores (rayon), an actor missing from the frame holding its
 //! last pose; then one frame per channel goes to the fan-out, actor 0's, carrying the others'
