@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use crease_core::codec::{CodecError, FrameDecoder};
+use crease_core::codec::{CodecError, FrameDecoder, FrameHeader};
 use crease_proto::cluster::interest;
 use crease_proto::{Encoding, Level, actor_frame, actors_frame_message, frame_message, v1};
 use futures_util::StreamExt;
@@ -48,6 +48,10 @@ const KEY_REQUEST_EVERY: Duration = Duration::from_millis(200);
 struct RelayLevel {
     decoders: Vec<FrameDecoder>,
     pools: Vec<FramePool>,
+    /// A room of several actors' frame: its actors' headers and the others' frames while it
+    /// is republished (reused per frame).
+    headers: Vec<FrameHeader>,
+    others: Vec<Arc<MeshUpdate>>,
 }
 
 /// A room's cluster side (module docs).
@@ -107,6 +111,8 @@ impl RoomLink {
             Mutex::new(RelayLevel {
                 decoders: vertices.iter().map(|v| FrameDecoder::new(v[c])).collect(),
                 pools: vertices.iter().map(|_| FramePool::default()).collect(),
+                headers: Vec::with_capacity(vertices.len()),
+                others: Vec::with_capacity(vertices.len()),
             })
         });
         let link = Arc::new(RoomLink {
@@ -462,12 +468,17 @@ impl RoomLink {
                     frame.actors.len()
                 )));
             }
-            let mut headers = Vec::with_capacity(n);
-            for (a, decoder) in frame.actors.iter().zip(&mut relay.decoders) {
+            let RelayLevel {
+                decoders,
+                pools,
+                headers,
+                others,
+            } = relay;
+            headers.clear();
+            others.clear();
+            for (a, decoder) in frame.actors.iter().zip(decoders.iter_mut()) {
                 headers.push(decoder.decode(&a.data)?);
             }
-            let RelayLevel { decoders, pools } = relay;
-            let mut others = Vec::with_capacity(n - 1);
             for k in 1..n {
                 let (a, h) = (&frame.actors[k], &headers[k]);
                 others.push(pools[k].fill(h.qbox, &a.data, decoders[k].lanes(), |u| {
@@ -481,7 +492,7 @@ impl RoomLink {
                 stamp(u);
                 u.held = a.held;
                 u.set_codec_header(h);
-                u.others.append(&mut others);
+                u.others.append(others);
             })
         };
         drop(guard);
