@@ -3,7 +3,15 @@
 // the binary MeshFrame messages handed to the stream that owns them, the JSON acks of what
 // this page published, and sending control frames. The one place that knows the wire's
 // status codes, by name (`Code`: gRPC's, which the acks carry).
+//
+// A room of several actors (issue 38) sends one header per actor, in the room's order, each
+// naming its actor and how many there are: the first makes the actors' slots (state.js
+// createActor, each with its part of the room document), and the last finishes the stream
+// (`onHeader`: the layout and the handles). Each frame then holds every actor's frame of one
+// instant (`Frame.actors`), handed to each actor's stream.
 
+import { removeActor } from "./scene.js";
+import { createActor } from "./state.js";
 import { readMeshFrame, socketProtocols } from "./wire.js";
 
 /** gRPC status codes (google.rpc.Code), as the server's acks carry them (`ack.error.code`). */
@@ -35,7 +43,8 @@ const BACKED_UP_BYTES = 65536;
 
 /**
  * The room's socket. `token()` reads the publish token; `streams` = {vertices, palette} (their
- * header(t, bytes), true when it began a stream, frame(f, bytes) and closed()); `onHeader()`
+ * header(slot, t, bytes) for one actor's slot, true when it began its stream; frame(f,
+ * bytes) for every actor's frame of a message; closed()); `onHeader()`
  * runs after a stream began; `overlay` for the banner.
  * Returns {connect, reconnect, ready, backedUp, send}.
  */
@@ -52,12 +61,48 @@ export function createConnection(state, { token, streams, onHeader, overlay }) {
     } catch (err) {
       return overlay.fail(`message: ${err.message}`);
     }
-    if (msg.topology) {
-      if (streams.vertices.header(msg.topology, bytes)) onHeader();
-    } else if (msg.paletteTopology) {
-      if (streams.palette.header(msg.paletteTopology, bytes)) onHeader();
-    } else if (msg.frame && state.stream === "palette") streams.palette.frame(msg.frame, bytes);
-    else if (msg.frame && state.stream === "vertices") streams.vertices.frame(msg.frame, bytes);
+    const header = msg.topology ? ["vertices", msg.topology] : msg.paletteTopology ? ["palette", msg.paletteTopology] : null;
+    if (header) {
+      const [kind, t] = header;
+      const slot = actorSlot(t);
+      if (slot && streams[kind].header(slot, t, bytes) && t.actorIndex + 1 >= t.actorCount) {
+        c.model = state.actors.map((a) => a.model).join(", ");
+        c.vertexCount = state.actors.reduce((n, a) => n + (a.vertexCount || 0), 0);
+        c.actors = state.actors.map((a) => ({
+          name: a.name, side: a.side, performer: a.performer, model: a.model, vertexCount: a.vertexCount,
+          frameSeq: null, held: false, residual: null, residualCapture: null, confidence: null,
+        }));
+        onHeader();
+      }
+      return;
+    }
+    if (msg.frame && state.stream) streams[state.stream].frame(msg.frame, bytes);
+  }
+
+  /** The slot of the actor a header is for (the first header of a stream makes the slots), or
+   * null (on the banner) when the header does not fit the stream. */
+  function actorSlot(t) {
+    const count = Math.max(1, t.actorCount);
+    if (t.actorIndex >= count || (t.actorIndex > 0 && state.actors.length !== count)) {
+      overlay.fail(`header of actor ${t.actorIndex} (${JSON.stringify(t.actor)}) of ${count}, after ${state.actors.length}`);
+      return null;
+    }
+    if (t.actorIndex === 0) {
+      for (const gone of state.actors.splice(count)) removeActor(gone);
+      while (state.actors.length < count) state.actors.push(createActor(state.actors.length));
+      state.mesh.framed = false;
+    }
+    const slot = state.actors[t.actorIndex];
+    slot.name = t.actor;
+    // The room document's part for the actor (GET /api/rooms/{id}: `actors`, in this order).
+    const doc = t.actorCount > 0 ? state.room?.actors?.[t.actorIndex] : state.room;
+    if (t.actorCount > 0 && doc && doc.name !== t.actor) {
+      overlay.fail(`the stream's actor ${t.actorIndex} is ${JSON.stringify(t.actor)}, the room's is ${JSON.stringify(doc.name)} (reload the page)`);
+    }
+    slot.room = doc ?? null;
+    slot.side = doc?.side ?? null;
+    slot.performer = doc?.performer ?? "";
+    return slot;
   }
 
   function onAck(ack) {
@@ -73,6 +118,13 @@ export function createConnection(state, { token, streams, onHeader, overlay }) {
       c.residual = ack.control_residual;
       c.residualCapture = ack.control_residual_capture ?? null;
       c.confidence = ack.confidence ?? 0; // absent at an example
+      for (const part of ack.actors ?? []) {
+        const a = c.actors.find((x) => x.name === part.actor);
+        if (!a) continue;
+        a.residual = part.control_residual;
+        a.residualCapture = part.control_residual_capture ?? null;
+        a.confidence = part.confidence ?? 0;
+      }
       return;
     }
     overlay.fail(

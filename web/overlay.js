@@ -20,7 +20,15 @@ export function xrText(state) {
   else if (c.residual != null) res = `${c.residual.toFixed(4)} (model units)`;
   const lat = x.latencyMs == null ? "…" : `${x.latencyMs.toFixed(0)} ms`;
   const far = c.confidence > 1 ? " · outside the examples" : "";
-  return `${x.hand} hand ${x.tracked ? "tracked" : "not seen"}${far}\nresidual ${res} · capture to mesh ${lat}`;
+  const seen = x.hands.length > 1 ? x.hands.map((h) => `${h.hand} ${h.tracked ? "tracked" : "not seen"}`).join(", ") : `${x.hand} hand ${x.tracked ? "tracked" : "not seen"}`;
+  return `${seen}${far}\nresidual ${res} · capture to mesh ${lat}`;
+}
+
+/** A line per actor of a room of several (issue 38): name, side, model, and held. */
+function actorsText(state) {
+  return state.crease.actors
+    .map((a) => `${a.name}${a.side ? ` (${a.side})` : ""}: ${a.model}${a.held ? " · held" : ""}${a.residual != null ? ` · residual ${a.residual.toFixed(4)}` : ""}`)
+    .join("\n");
 }
 
 /** The overlay over `banner` and `stats` (elements); the headset panel is made here too. */
@@ -39,8 +47,19 @@ export function createOverlay(state, { banner, stats }) {
     showBanner("error", message);
   }
 
-  /** A mesh frame shown (either encoding): counts, and an XR frame's capture-to-mesh time. */
-  function meshFrame(seq, captureTimeUs, serverLatencyUs, bytes) {
+  /** An actor's mesh frame shown (either encoding): the actor's seq; the room's counts (its
+   * frames once, by the first actor's; the bytes of every actor's), and an XR frame's
+   * capture-to-mesh time. */
+  function meshFrame(slot, seq, captureTimeUs, serverLatencyUs, bytes) {
+    slot.seq = seq;
+    const pub = c.actors[slot.index];
+    if (pub) {
+      pub.frameSeq = seq;
+      pub.held = slot.held;
+    }
+    c.bytes += bytes;
+    rates.frames.bytes += bytes;
+    if (slot.index !== 0) return;
     c.frameSeq = seq;
     const tracker = state.xr.tracker;
     if (tracker && tracker.firstCaptureUs !== undefined && captureTimeUs >= tracker.firstCaptureUs) {
@@ -48,9 +67,7 @@ export function createOverlay(state, { banner, stats }) {
       rates.xr.frames += 1;
     }
     c.frames += 1;
-    c.bytes += bytes;
     rates.frames.frames += 1;
-    rates.frames.bytes += bytes;
     rates.frames.latency += serverLatencyUs;
   }
 
@@ -114,6 +131,7 @@ export function createOverlay(state, { banner, stats }) {
       `${c.renderFps.toFixed(1)} frames/s drawn\n` +
       `server latency ${(f.lat / 1000).toFixed(2)} ms\n` +
       `published ${c.published} · acks ${c.acks}` +
+      (c.actors.length > 1 ? `\n${actorsText(state)}` : "") +
       (c.confidence != null ? `\nconfidence ${c.confidence.toFixed(2)}${c.confidence > 1 ? " (outside the examples)" : ""}` : "") +
       (state.xr.tracker ? `\n${xrText(state)}` : state.room?.capture && c.xr.reason ? `\nWebXR: ${c.xr.reason}` : "");
   }

@@ -2,7 +2,9 @@
 // detail level's Loop steps and regressor) loaded into palette.js's PaletteSynth, then per
 // frame the bones and the detail kernel vector (a codec frame of ~100 B, decoded here at once:
 // nothing per vertex), synthesised on the GPU at the next redraw (latest wins). Also the
-// choice of encoding (`?encoding=`, float render targets) and window.crease.palette.
+// choice of encoding (`?encoding=`, float render targets) and window.crease.palette. A room of
+// several actors (issue 38) has a palette stream per actor (its slot: state.js createActor),
+// each with its own PaletteSynth; window.crease.palette is the first actor's.
 
 import { PaletteSynth, floatTargetsSupported } from "./palette.js";
 import { MATERIAL_PARAMS, frameCamera, showMesh } from "./scene.js";
@@ -28,14 +30,14 @@ export function chooseEncoding(state, renderer) {
   }
 }
 
-/** The palette stream's handlers; `overlay` for errors and counts. */
+/** The palette streams' handlers, each taking the actor's slot; `overlay` for errors and counts. */
 export function createPaletteStream(state, { view, overlay }) {
   const c = state.crease;
-  const p = state.palette;
 
-  /** A palette stream's header: everything but the bones. A second one (a new socket)
-   * rebuilds. True when it began a stream. */
-  function header(t, bytes) {
+  /** An actor's palette stream's header: everything but the bones. A second one (a new
+   * socket) rebuilds. True when it began a stream. */
+  function header(slot, t, bytes) {
+    const p = slot.palette;
     if (!p.synth) p.synth = new PaletteSynth(view.renderer);
     const synth = p.synth;
     let h;
@@ -44,7 +46,7 @@ export function createPaletteStream(state, { view, overlay }) {
     } catch (err) {
       overlay.fail(err.message);
       state.stream = null;
-      if (state.mesh.mesh) state.mesh.mesh.visible = false;
+      if (slot.mesh) slot.mesh.visible = false;
       return false;
     }
     state.stream = "palette";
@@ -52,44 +54,60 @@ export function createPaletteStream(state, { view, overlay }) {
     c.headerMs = Math.round(performance.now() - state.socket.openedAt);
     c.headerBytes = bytes.length;
     c.encoding = "palette";
-    c.model = h.model;
-    c.vertexCount = h.vertexCount;
+    slot.model = h.model;
+    slot.vertexCount = h.vertexCount;
     p.pending = null;
     p.chain = null;
     if (!p.material) p.material = synth.material(MATERIAL_PARAMS);
-    const mesh = showMesh(state, view, synth.geometry(), p.material);
+    const mesh = showMesh(slot, view, synth.geometry(), p.material);
     // The shader places the vertices: the header's box is the bound, no culling needed.
     mesh.frustumCulled = false;
     mesh.visible = false; // until the first frame's passes ran
-    state.mesh.streamIndex = null; // model vertex order
-    c.palette = { header: bytes, frame: null, frames: null, seq: null, readback: () => synth.readback() };
+    slot.streamIndex = null; // model vertex order
+    if (slot.index === 0) c.palette = { header: bytes, frame: null, frames: null, seq: null, readback: () => synth.readback() };
     return true;
   }
 
-  /** A palette frame: decoded now (keyframe or delta), drawn at the next redraw. */
+  /** A frame message: every actor's palette frame (`f.data` in a one-actor room, else
+   * `f.actors`), decoded now (keyframe or delta), drawn at the next redraw. */
   function frame(f, bytes) {
-    let decoded;
-    try {
-      decoded = p.synth.setFrame(f.data || new Uint8Array(0));
-    } catch (err) {
-      overlay.fail(`frame ${f.seq}: ${err.message}`);
-      return;
+    const list = f.actors.length ? f.actors : [{ actor: 0, data: f.data || new Uint8Array(0), held: false }];
+    for (const a of list) {
+      const slot = state.actors[a.actor];
+      if (!slot || !slot.palette.synth) return overlay.fail(`frame ${f.seq}: actor ${a.actor}, but the stream has ${state.actors.length} actors`);
+      const p = slot.palette;
+      let decoded;
+      try {
+        decoded = p.synth.setFrame(a.data);
+      } catch (err) {
+        overlay.fail(`frame ${f.seq}${f.actors.length ? ` (actor ${slot.name})` : ""}: ${err.message}`);
+        return;
+      }
+      if (decoded.header.kind === 0) p.chain = [bytes];
+      else if (p.chain && p.chain.length < MAX_CHAIN) p.chain.push(bytes);
+      else p.chain = null;
+      p.pending = { bytes, seq: f.seq, chain: p.chain, length: p.chain ? p.chain.length : 0 };
+      slot.held = a.held;
+      overlay.meshFrame(slot, f.seq, f.captureTimeUs, f.serverLatencyUs, a.data.length);
     }
-    if (decoded.header.kind === 0) p.chain = [bytes];
-    else if (p.chain && p.chain.length < MAX_CHAIN) p.chain.push(bytes);
-    else p.chain = null;
-    p.pending = { bytes, seq: f.seq, chain: p.chain, length: p.chain ? p.chain.length : 0 };
-    overlay.meshFrame(f.seq, f.captureTimeUs, f.serverLatencyUs, f.data.length);
   }
 
-  /** At a redraw: runs the GPU passes for a new frame; true when it did. */
+  /** At a redraw: runs every actor's GPU passes for a new frame; true when it did. */
   function update() {
-    if (!p.synth.update()) return false;
-    const pending = p.pending;
-    c.palette.frame = pending.bytes;
-    c.palette.frames = pending.chain && pending.chain.slice(0, pending.length);
-    c.palette.seq = pending.seq;
-    state.mesh.mesh.visible = true;
+    let shown = false;
+    for (const slot of state.actors) {
+      const p = slot.palette;
+      if (!p.synth || !p.synth.update()) continue;
+      const pending = p.pending;
+      if (slot.index === 0) {
+        c.palette.frame = pending.bytes;
+        c.palette.frames = pending.chain && pending.chain.slice(0, pending.length);
+        c.palette.seq = pending.seq;
+      }
+      slot.mesh.visible = true;
+      shown = true;
+    }
+    if (!shown) return false;
     if (!state.mesh.framed) frameCamera(state, view);
     state.mesh.fresh = true;
     return true;
@@ -98,5 +116,8 @@ export function createPaletteStream(state, { view, overlay }) {
   /** The socket closed: the next header rebuilds (nothing to drop before). */
   function closed() {}
 
-  return { header, frame, update, closed };
+  /** Actor `slot`'s drawn mesh read back from the float target (x, y, z per vertex), or null. */
+  const readback = (slot) => (slot && slot.palette.synth && state.stream === "palette" ? slot.palette.synth.readback() : null);
+
+  return { header, frame, update, closed, readback };
 }

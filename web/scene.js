@@ -1,7 +1,8 @@
 // The scene (issue 37): three.js's renderer, camera, orbit controls and lights; the stage (the
-// model's frame: identity on the page, placed in front of the user in an XR session) with the
-// mesh and the handles' group; the shared material; showing a stream's mesh and framing the
-// camera on the room's rest box.
+// room's frame: identity on the page, placed in front of the user in an XR session) with a
+// group per actor (its mesh, its handles' group, its name); the shared material; showing an
+// actor's mesh, laying several actors out (issue 38), and framing the camera on their rest
+// boxes.
 
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
@@ -12,7 +13,7 @@ export const MATERIAL_PARAMS = Object.freeze({ color: 0xd9a58c, roughness: 0.62,
 /**
  * Makes the renderer on `canvas` and the scene; resizes with the window. Returns the three.js
  * objects (made once, never replaced): {canvas, renderer, scene, camera, controls, material,
- * stage, handleGroup}.
+ * stage}.
  */
 export function createScene(canvas) {
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: true });
@@ -33,8 +34,6 @@ export function createScene(canvas) {
   const material = new THREE.MeshStandardMaterial(MATERIAL_PARAMS);
   const stage = new THREE.Group();
   scene.add(stage);
-  const handleGroup = new THREE.Group();
-  stage.add(handleGroup);
 
   const resize = () => {
     const w = canvas.clientWidth;
@@ -45,39 +44,115 @@ export function createScene(canvas) {
   };
   addEventListener("resize", resize);
   resize();
-  return { canvas, renderer, scene, camera, controls, material, stage, handleGroup };
+  return { canvas, renderer, scene, camera, controls, material, stage };
 }
 
-/** Shows `geo` with `mat` (creating the mesh on the first header); disposes the geometry before. */
-export function showMesh(state, view, geo, mat) {
-  const m = state.mesh;
-  if (m.geometry && m.geometry !== geo) m.geometry.dispose();
-  m.geometry = geo;
-  if (!m.mesh) {
-    m.mesh = new THREE.Mesh(geo, mat);
-    view.stage.add(m.mesh);
-  } else {
-    m.mesh.geometry = geo;
-    m.mesh.material = mat;
+/** The actor's group in the stage (made once per slot): its mesh, handles and label go in it. */
+export function actorGroup(slot, view) {
+  if (!slot.group) {
+    slot.group = new THREE.Group();
+    slot.handleGroup = new THREE.Group();
+    slot.group.add(slot.handleGroup);
+    view.stage.add(slot.group);
   }
-  return m.mesh;
+  return slot.group;
+}
+
+/** Takes an actor's slot off the stage (a new stream with fewer actors). */
+export function removeActor(slot) {
+  if (slot.group) slot.group.removeFromParent();
+  if (slot.geometry) slot.geometry.dispose();
+}
+
+/** Shows `geo` with `mat` as the actor's mesh (made at its first header); disposes the
+ * geometry before. */
+export function showMesh(slot, view, geo, mat) {
+  if (slot.geometry && slot.geometry !== geo) slot.geometry.dispose();
+  slot.geometry = geo;
+  if (!slot.mesh) {
+    slot.mesh = new THREE.Mesh(geo, mat);
+    actorGroup(slot, view).add(slot.mesh);
+  } else {
+    slot.mesh.geometry = geo;
+    slot.mesh.material = mat;
+  }
+  return slot.mesh;
+}
+
+/** Side order of the row actors are laid out in: left hands on the left (-x). */
+const SIDE_ORDER = { left: 0, right: 2 };
+
+/**
+ * Places the actors (issue 38) and sets `state.bounds`, the box they occupy. One actor stays
+ * where its model puts it. Several are laid out in a row along x, left sides first, in the
+ * room's order otherwise, each rest box 15% of the widest apart: a performer's two hands on
+ * models in their own frames (the demo's right hand and its mirror) would otherwise overlap.
+ * Each actor's name floats over its box.
+ */
+export function layoutActors(state, view) {
+  const slots = state.actors.filter((a) => a.room && a.room.bounds);
+  if (slots.length === 0) {
+    state.bounds = state.room?.bounds ?? null;
+    return;
+  }
+  const boxes = slots.map((a) => a.room.bounds.map((v) => new THREE.Vector3(...v)));
+  if (slots.length === 1) {
+    actorGroup(slots[0], view).position.set(0, 0, 0);
+    state.bounds = slots[0].room.bounds;
+    return;
+  }
+  const order = slots.map((_, i) => i).sort((i, j) => (SIDE_ORDER[slots[i].side] ?? 1) - (SIDE_ORDER[slots[j].side] ?? 1) || i - j);
+  const gap = 0.15 * Math.max(...boxes.map(([lo, hi]) => hi.x - lo.x));
+  const lo = new THREE.Vector3(Infinity, Infinity, Infinity);
+  const hi = new THREE.Vector3(-Infinity, -Infinity, -Infinity);
+  let cursor = boxes[order[0]][0].x;
+  for (const i of order) {
+    const [blo, bhi] = boxes[i];
+    const dx = cursor - blo.x;
+    actorGroup(slots[i], view).position.set(dx, 0, 0);
+    lo.min(blo.clone().setX(blo.x + dx));
+    hi.max(bhi.clone().setX(bhi.x + dx));
+    cursor = bhi.x + dx + gap;
+    labelActor(slots[i], blo, bhi);
+  }
+  state.bounds = [lo.toArray(), hi.toArray()];
+}
+
+/** The actor's name over its rest box (a sprite: it faces the camera). */
+function labelActor(slot, lo, hi) {
+  if (slot.label) slot.label.removeFromParent();
+  const canvas = document.createElement("canvas");
+  [canvas.width, canvas.height] = [256, 64];
+  const g = canvas.getContext("2d");
+  g.font = "bold 40px system-ui, sans-serif";
+  g.fillStyle = "#e8e8e8";
+  g.textAlign = "center";
+  g.textBaseline = "middle";
+  g.fillText(slot.name, 128, 32);
+  const sprite = new THREE.Sprite(new THREE.SpriteMaterial({ map: new THREE.CanvasTexture(canvas), depthTest: false, transparent: true }));
+  const width = 0.5 * (hi.x - lo.x);
+  sprite.scale.set(width, width / 4, 1);
+  sprite.position.set((lo.x + hi.x) / 2, hi.y + 0.08 * (hi.y - lo.y), (lo.z + hi.z) / 2);
+  sprite.renderOrder = 15;
+  slot.label = sprite;
+  slot.group.add(sprite);
 }
 
 /**
- * Frames the camera on the model's rest box (every pose stays near it) rather than the first
- * frame's pose, so the framing does not depend on when the page joined; the first frame's
- * bounding sphere as a fallback. The same at both levels and in both encodings, so the same
- * frame looks the same.
+ * Frames the camera on the actors' rest boxes as laid out (every pose stays near them) rather
+ * than the first frame's pose, so the framing does not depend on when the page joined; the
+ * first actor's first frame's bounding sphere as a fallback. The same at both levels and in
+ * both encodings, so the same frame looks the same.
  */
 export function frameCamera(state, view) {
   let center;
   let radius;
-  if (state.room && state.room.bounds) {
-    const [lo, hi] = state.room.bounds.map((v) => new THREE.Vector3(...v));
+  if (state.bounds) {
+    const [lo, hi] = state.bounds.map((v) => new THREE.Vector3(...v));
     center = lo.clone().add(hi).multiplyScalar(0.5);
     radius = hi.distanceTo(lo) / 2;
   } else {
-    const s = state.mesh.geometry && state.mesh.geometry.boundingSphere;
+    const s = state.actors[0]?.geometry?.boundingSphere;
     if (!s || !Number.isFinite(s.radius) || s.radius === 0) return;
     center = s.center;
     radius = s.radius;

@@ -7,6 +7,37 @@
 // the browser tests and curious users read. Its functions and the palette capture are not
 // enumerable, so `JSON.stringify(window.crease)` stays small. The rest is the viewer's own.
 
+/**
+ * One actor's slot (issue 38): its name, side and performer, its part of the room document
+ * (`room`: control points, bounds, capture), the three.js group that places it (`group`, in
+ * the stage; its handles' group `handleGroup` and its name's label inside), the mesh on screen
+ * (`mesh`, `geometry`, and `streamIndex`: model vertex -> streamed vertex for base-level
+ * vertex streams, or null), its vertex stream's (buffers to lend the decode worker, and
+ * whether the geometry holds arrays not yet uploaded), its palette stream's (PaletteSynth,
+ * its material, the frame waiting for the GPU passes, the frame messages from the last
+ * keyframe on), its handles, and the last frame it drew (`seq`, `held`).
+ */
+export function createActor(index) {
+  return {
+    index,
+    name: "",
+    side: null,
+    performer: "",
+    room: null,
+    group: null,
+    handleGroup: null,
+    label: null,
+    mesh: null,
+    geometry: null,
+    streamIndex: null,
+    vertices: { spares: { positions: [], normals: [] }, dirty: false },
+    palette: { synth: null, material: null, pending: null, chain: null },
+    handles: [],
+    seq: null,
+    held: false,
+  };
+}
+
 /** Defines a non-enumerable, writable property (assignment later keeps it hidden). */
 function hidden(object, name, value) {
   Object.defineProperty(object, name, { value, enumerable: false, configurable: true, writable: true });
@@ -47,11 +78,16 @@ export function createState(params) {
     residual: null, // the last ack's control residual, model units
     residualCapture: null, // ... and in the capture's units (retargeting rooms)
     confidence: null, // the last ack's distance from the training examples (1: their spread)
+    // A room of several actors (issue 38): per actor {name, side, performer, model,
+    // vertexCount, frameSeq (its last frame drawn), held, residual, residualCapture,
+    // confidence (its part of the last ack)}; one entry, unnamed, in a one-actor room.
+    actors: [],
     // WebXR hands: whether the browser offers an immersive session, why not, whether tracking,
     // the hand, frames published and dropped (socket backed up), the last one's seq, and the
     // capture-to-mesh latency (ms, mean over the last half second: an XR frame's time to its
     // mesh frame's arrival).
-    xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, published: 0, dropped: 0, seq: null, latencyMs: null },
+    // hands: per tracked hand {actor, hand, tracked} (two in a room of actors with sides).
+    xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, hands: [], published: 0, dropped: 0, seq: null, latencyMs: null },
     // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
     // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
     take: { list: [], id: takeId, loaded: false },
@@ -60,8 +96,9 @@ export function createState(params) {
   // displayed, frames: those from the last keyframe to it, seq, readback()}; else null.
   hidden(crease, "palette", null);
   // Set by the modules that own them (viewer.js wires them): reconnect() (connection.js),
-  // publish(flat) (handles.js), controlPositions() (handles.js), xrMarkers() (xr-view.js).
-  for (const name of ["reconnect", "publish", "controlPositions", "xrMarkers"]) hidden(crease, name, () => null);
+  // publish(flat, actor) (handles.js), controlPositions(actor) (handles.js), xrMarkers(actor)
+  // (xr-view.js), readback(actor) (palette-stream.js: an actor's drawn mesh in palette mode).
+  for (const name of ["reconnect", "publish", "controlPositions", "xrMarkers", "readback"]) hidden(crease, name, () => null);
 
   return {
     crease,
@@ -72,22 +109,22 @@ export function createState(params) {
     room: null, // GET /api/rooms/{id}: control points, bounds, capture, skinning (panel.js)
     // What the current socket streams, from its first message: "vertices", "palette" or null.
     stream: null,
-    // The mesh on screen (scene.js): its geometry, whether the camera framed it, whether a new
-    // frame came since the last redraw, and model vertex -> streamed vertex (base level
-    // vertex streams), or null.
-    mesh: { mesh: null, geometry: null, framed: false, fresh: false, streamIndex: null },
+    // The room's actors (issue 38), one slot each (createActor): a one-actor room has one,
+    // unnamed. Made as the stream's headers come (connection.js).
+    actors: [],
+    // The box the actors occupy as laid out (scene.js layoutActors; [min, max]), or null.
+    bounds: null,
+    // Whether the camera was framed on the actors, and whether a new frame came since the
+    // last redraw.
+    mesh: { framed: false, fresh: false },
     // The WebSocket (connection.js): the socket, the next reconnect's wait, when it was
     // opened, and the next control frame's seq (drags and XR frames share it).
     socket: { ws: null, backoff: 500, openedAt: 0, seq: 0 },
-    // Vertex streams (vertex-stream.js): the decode worker, the stream's generation (a new
-    // header or socket starts one: older results are dropped), positions and normals buffers
-    // to lend the worker, and whether the geometry holds arrays not yet uploaded.
-    vertices: { worker: null, generation: 0, spares: { positions: [], normals: [] }, dirty: false },
-    // Palette streams (palette-stream.js): PaletteSynth, its material, the frame waiting for
-    // the GPU passes, and the frame messages from the last keyframe on.
-    palette: { synth: null, material: null, pending: null, chain: null },
-    // Control-point handles (handles.js): their meshes and the drag in progress.
-    handles: { meshes: [], drag: null },
+    // Vertex streams (vertex-stream.js): the decode worker (every actor's), and the stream's
+    // generation (a new stream or socket starts one: older results are dropped).
+    vertices: { worker: null, generation: 0 },
+    // Control-point handles (handles.js): the drag in progress.
+    handles: { drag: null },
     // WebXR (xr-view.js): the HandTracker while a session runs, whether the stage was placed.
     xr: { tracker: null, placed: false },
     // Rates for the overlay (overlay.js): mesh frames (1 s windows), XR latency (0.5 s), redraws.

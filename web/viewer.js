@@ -14,6 +14,10 @@
 // joints every XR frame, the hand floats in front of the user, and the overlay (on the page
 // and in the headset) shows the control residual and the capture-to-mesh latency.
 //
+// A room of several actors (issue 38: both hands of a performer, several performers) draws
+// every actor, named, laid out in a row, each with its handles; "track my hands" publishes
+// both hands at once into a room whose actors have sides.
+//
 // This file is the entry (issue 37): it reads the address, makes the one state object
 // (state.js), the modules (web/README.md has the map) and wires them, then runs the render
 // loop. Nothing here or in the modules keeps state outside that object.
@@ -24,7 +28,7 @@ import { createHandles } from "./handles.js";
 import { createOverlay } from "./overlay.js";
 import { chooseEncoding, createPaletteStream } from "./palette-stream.js";
 import { createPanel } from "./panel.js";
-import { createScene } from "./scene.js";
+import { createScene, layoutActors } from "./scene.js";
 import { createState } from "./state.js";
 import { listTakes, startPlayer } from "./takes.js";
 import { createVertexStream } from "./vertex-stream.js";
@@ -48,8 +52,13 @@ const streams = {
   vertices: createVertexStream(state, { view, overlay }),
   palette: createPaletteStream(state, { view, overlay }),
 };
-const connection = createConnection(state, { token: panel.token, streams, onHeader: () => handles.build(), overlay });
-const handles = createHandles(state, { view, connection, overlay, token: panel.token });
+// Once a stream's headers came (one per actor): the actors laid out, their handles made.
+const onHeader = () => {
+  layoutActors(state, view);
+  handles.build();
+};
+const connection = createConnection(state, { token: panel.token, streams, onHeader, overlay });
+const handles = createHandles(state, { view, connection, overlay, token: panel.token, readback: streams.palette.readback });
 const xr = createXr(state, {
   view,
   connection,
@@ -62,13 +71,13 @@ crease.reconnect = connection.reconnect;
 crease.publish = handles.publish;
 crease.controlPositions = handles.controlPositions;
 crease.xrMarkers = xr.markers;
+crease.readback = handles.readback;
 
 /** One redraw: the window's frames, or the XR session's while one runs (`frame` then). */
 function render(time, frame) {
   xr.onFrame(time, frame);
   view.controls.update();
-  if (state.stream === "palette") streams.palette.update();
-  else if (state.stream === "vertices") streams.vertices.update();
+  if (state.stream) streams[state.stream].update();
   handles.update();
   view.renderer.render(view.scene, view.camera);
   overlay.update(performance.now());

@@ -2,7 +2,9 @@
 // proto/crease/v1/crease.proto): a minimal reader of the protobuf wire format (varints and
 // length-delimited fields; unknown fields are skipped, as protobuf requires). Two kinds of
 // stream (proto Encoding): vertices (a Topology, then codec frames) and palette (a
-// PaletteTopology, then palette frames, issue 18).
+// PaletteTopology, then palette frames, issue 18). A room of several actors (issue 38) sends
+// one header per actor (`actor`, `actorIndex`, `actorCount`), then frames whose `actors` hold
+// each actor's frame ({actor: index, data, held}) instead of `data`.
 
 class Reader {
   constructor(bytes) {
@@ -78,7 +80,7 @@ function readBox(bytes) {
 
 function readTopology(bytes) {
   const r = new Reader(bytes);
-  const t = { model: "", level: 0, vertexCount: 0, triangleCount: 0, indices: null, box: null, vertexOrder: [], bits: 0 };
+  const t = { model: "", level: 0, vertexCount: 0, triangleCount: 0, indices: null, box: null, vertexOrder: [], bits: 0, actor: "", actorIndex: 0, actorCount: 0 };
   for (const [field, wire] of r.fields()) {
     if (field === 1 && wire === 2) t.model = text.decode(r.bytes());
     else if (field === 2 && wire === 0) t.level = r.varint();
@@ -93,20 +95,37 @@ function readTopology(bytes) {
       t.vertexOrder = Uint32Array.from(order);
     } else if (field === 7 && wire === 0) t.vertexOrder.push(r.varint());
     else if (field === 8 && wire === 0) t.bits = r.varint();
+    else if (field === 9 && wire === 2) t.actor = text.decode(r.bytes());
+    else if (field === 10 && wire === 0) t.actorIndex = r.varint();
+    else if (field === 11 && wire === 0) t.actorCount = r.varint();
     else r.skip(wire);
   }
   return t;
 }
 
+/** One actor's mesh in a Frame (issue 38): {actor: its index, data, held}. */
+function readActorFrame(bytes) {
+  const r = new Reader(bytes);
+  const a = { actor: 0, data: new Uint8Array(0), held: false };
+  for (const [field, wire] of r.fields()) {
+    if (field === 1 && wire === 0) a.actor = r.varint();
+    else if (field === 2 && wire === 2) a.data = r.bytes();
+    else if (field === 3 && wire === 0) a.held = r.varint() !== 0;
+    else r.skip(wire);
+  }
+  return a;
+}
+
 function readFrame(bytes) {
   const r = new Reader(bytes);
-  const f = { seq: 0, captureTimeUs: 0, serverLatencyUs: 0, data: null, skipped: 0 };
+  const f = { seq: 0, captureTimeUs: 0, serverLatencyUs: 0, data: null, skipped: 0, actors: [] };
   for (const [field, wire] of r.fields()) {
     if (field === 1 && wire === 0) f.seq = r.varint();
     else if (field === 2 && wire === 0) f.captureTimeUs = r.varint();
     else if (field === 3 && wire === 0) f.serverLatencyUs = r.varint();
     else if (field === 4 && wire === 2) f.data = r.bytes();
     else if (field === 5 && wire === 0) f.skipped = r.varint();
+    else if (field === 6 && wire === 2) f.actors.push(readActorFrame(r.bytes()));
     else r.skip(wire);
   }
   return f;
@@ -171,16 +190,17 @@ export function readPaletteTopology(bytes) {
   const t = {
     model: "", level: 0, version: 0, vertexCount: 0, triangleCount: 0, indices: empty, bounds: null,
     bones: 0, baseVertices: 0, restPositions: empty, influences: 0, skinBones: empty, skinWeights: empty,
-    subdivision: [], examples: 0, detailRows: empty, detailScales: empty,
+    subdivision: [], examples: 0, detailRows: empty, detailScales: empty, actor: "", actorIndex: 0, actorCount: 0,
   };
   for (const [field, wire] of r.fields()) {
     if (wire === 0) {
       const v = r.varint();
-      const name = { 2: "level", 3: "version", 4: "vertexCount", 5: "triangleCount", 8: "bones", 9: "baseVertices", 11: "influences", 15: "examples" }[field];
+      const name = { 2: "level", 3: "version", 4: "vertexCount", 5: "triangleCount", 8: "bones", 9: "baseVertices", 11: "influences", 15: "examples", 19: "actorIndex", 20: "actorCount" }[field];
       if (name) t[name] = v;
     } else if (wire === 2) {
       const b = r.bytes();
       if (field === 1) t.model = text.decode(b);
+      else if (field === 18) t.actor = text.decode(b);
       else if (field === 7) t.bounds = readBox(b);
       else if (field === 14) t.subdivision.push(readSubdivisionStep(b));
       else {

@@ -10,9 +10,12 @@
 //   which the specification points out of the back of the hand: a point on the skin over the
 //   joint, where a glove's marker would sit;
 // - `index-finger-tip/palmar`: the centre minus the radius along +Y, on the palm side.
-// Positions are metres in the session's `local` reference space. A left hand is mirrored
-// (x -> -x) onto the right-hand models the maps are written for: the room's registration is a
-// rotation, which cannot turn a left hand into a right one.
+// Positions are metres in the session's `local` reference space. In a one-actor room a left
+// hand is mirrored (x -> -x) onto the right-hand models the maps are written for: the room's
+// registration is a rotation, which cannot turn a left hand into a right one. In a room of
+// several actors (issue 38) each actor with a side takes that hand as tracked (a left actor
+// runs on a left-hand model: the right-hand one mirrored, with its own map), and one message
+// carries every tracked hand of an XR frame.
 
 /** The WebXR joints in the specification's order (also XRHand's iteration order). */
 export const JOINTS = [
@@ -70,32 +73,75 @@ export function fillMarkers(plan, poses, radii, mirror, out) {
   }
 }
 
-/** A JSON marker frame (metres to 10 µm: ~1.8 KB for 75 markers). */
-export function markerMessage(seq, captureTimeUs, markers) {
-  let text = `{"seq":${seq},"capture_time_us":${captureTimeUs},"markers":[`;
-  for (let i = 0; i < markers.length; i++) text += (i ? "," : "") + markers[i].toFixed(5);
-  return `${text}]}`;
+/**
+ * A JSON marker frame (metres to 10 µm: ~1.8 KB for 75 markers per hand) of `parts`, each
+ * {actor, markers}: a one-actor room's (actor null) carries its markers, a room of several
+ * actors' each tracked hand's under its actor's name.
+ */
+export function markerMessage(seq, captureTimeUs, parts) {
+  const list = (markers) => {
+    let text = "";
+    for (let i = 0; i < markers.length; i++) text += (i ? "," : "") + markers[i].toFixed(5);
+    return `[${text}]`;
+  };
+  const head = `{"seq":${seq},"capture_time_us":${captureTimeUs}`;
+  if (parts.length === 1 && parts[0].actor == null) return `${head},"markers":${list(parts[0].markers)}}`;
+  return `${head},"actors":[${parts.map((p) => `{"actor":${JSON.stringify(p.actor)},"markers":${list(p.markers)}}`).join(",")}]}`;
+}
+
+/** One tracked hand of a session: which input source, its actor, its plan and buffers. */
+class TrackedHand {
+  constructor({ actor, handedness, plan, mirror }) {
+    this.actor = actor; // the actor's name, or null in a one-actor room
+    this.handedness = handedness;
+    this.plan = plan;
+    this.mirror = mirror;
+    this.spaces = null; // the hand's 25 joint spaces, in JOINTS order
+    this.poses = new Float32Array(16 * JOINTS.length);
+    this.radii = new Float32Array(JOINTS.length);
+    this.markers = new Float32Array(3 * plan.joint.length);
+    this.tracked = false; // tracked in the last XR frame
+  }
+
+  /** The hand among the session's input sources, and its joint spaces. */
+  find(session) {
+    for (const source of session.inputSources) {
+      if (source.hand && source.handedness === this.handedness) {
+        this.spaces = JOINTS.map((name) => source.hand.get(name));
+        return;
+      }
+    }
+  }
+
+  /** Reads the hand's joints in `frame` into its markers; whether it was tracked. */
+  read(session, frame, space) {
+    if (!this.spaces) this.find(session);
+    this.tracked =
+      Boolean(this.spaces) &&
+      this.spaces.every(Boolean) &&
+      frame.fillPoses(this.spaces, space, this.poses) &&
+      frame.fillJointRadii(this.spaces, this.radii);
+    if (this.tracked) fillMarkers(this.plan, this.poses, this.radii, this.mirror, this.markers);
+    return this.tracked;
+  }
 }
 
 /**
  * One hand-tracking session. `renderer` is the viewer's three.js renderer (xr enabled),
- * `handedness` "right" or "left", `plan` a markerPlan, `send(captureTimeUs, markers)`
- * publishes, `onEnd()` runs when the session ends (by the user or the runtime).
+ * `hands` the hands to publish, each {actor (null in a one-actor room), handedness "right" or
+ * "left", plan (a markerPlan), mirror (negate x)}, `send(captureTimeUs, parts)` publishes
+ * ([{actor, markers}] of the hands tracked), `onEnd()` runs when the session ends (by the
+ * user or the runtime).
  */
 export class HandTracker {
-  constructor({ renderer, handedness, plan, send, onEnd }) {
+  constructor({ renderer, hands, send, onEnd }) {
     this.renderer = renderer;
-    this.handedness = handedness;
-    this.plan = plan;
+    this.hands = hands.map((h) => new TrackedHand(h));
     this.send = send;
     this.onEnd = onEnd;
     this.session = null;
-    this.spaces = null; // the tracked hand's 25 joint spaces, in JOINTS order
-    this.source = null;
-    this.poses = new Float32Array(16 * JOINTS.length);
-    this.radii = new Float32Array(JOINTS.length);
-    this.markers = new Float32Array(3 * plan.joint.length);
-    this.tracked = false; // the hand was tracked in the last XR frame
+    this.parts = []; // the last frame's tracked hands, reused
+    this.tracked = false; // a hand was tracked in the last XR frame
     this.published = 0;
     this.viewer = null; // the viewer's pose at the first frame: {position, orientation}
   }
@@ -106,16 +152,15 @@ export class HandTracker {
       optionalFeatures: ["hand-tracking"],
     });
     this.session = session;
+    const forget = () => {
+      for (const h of this.hands) h.spaces = null; // found again at the next frame
+    };
     session.addEventListener("end", () => {
       this.session = null;
-      this.spaces = null;
-      this.source = null;
+      forget();
       this.onEnd();
     });
-    session.addEventListener("inputsourceschange", () => {
-      this.spaces = null; // found again at the next frame
-      this.source = null;
-    });
+    session.addEventListener("inputsourceschange", forget);
     this.renderer.xr.setReferenceSpaceType("local");
     await this.renderer.xr.setSession(session);
   }
@@ -125,20 +170,16 @@ export class HandTracker {
     if (this.session) await this.session.end();
   }
 
-  /** The hand to track among the session's input sources, and its joint spaces. */
-  findHand() {
-    for (const source of this.session.inputSources) {
-      if (source.hand && source.handedness === this.handedness) {
-        this.source = source;
-        this.spaces = JOINTS.map((name) => source.hand.get(name));
-        return;
-      }
-    }
+  /** The markers `actor`'s hand (the first hand when absent) last published, or null. */
+  markersOf(actor) {
+    const hand = actor == null ? this.hands[0] : this.hands.find((h) => h.actor === actor);
+    return hand ? hand.markers : null;
   }
 
   /**
-   * Called with every XR frame (time in the performance clock, ms): reads the hand's joints
-   * and publishes them. Sends nothing while the hand is not tracked (the room holds its pose).
+   * Called with every XR frame (time in the performance clock, ms): reads the hands' joints
+   * and publishes the tracked ones in one message. Sends nothing while no hand is tracked (an
+   * actor whose hand is not seen holds its pose).
    */
   onFrame(time, frame) {
     const space = this.renderer.xr.getReferenceSpace();
@@ -146,15 +187,11 @@ export class HandTracker {
       const pose = frame.getViewerPose(space);
       if (pose) this.viewer = { position: pose.transform.position, orientation: pose.transform.orientation };
     }
-    if (!this.spaces) this.findHand();
-    this.tracked =
-      Boolean(this.spaces) &&
-      this.spaces.every(Boolean) &&
-      frame.fillPoses(this.spaces, space, this.poses) &&
-      frame.fillJointRadii(this.spaces, this.radii);
+    this.parts.length = 0;
+    for (const h of this.hands) if (h.read(this.session, frame, space)) this.parts.push(h);
+    this.tracked = this.parts.length > 0;
     if (!this.tracked) return;
-    fillMarkers(this.plan, this.poses, this.radii, this.handedness === "left", this.markers);
     const captureUs = Math.round((performance.timeOrigin + time) * 1000);
-    if (this.send(captureUs, this.markers)) this.published += 1;
+    if (this.send(captureUs, this.parts)) this.published += 1;
   }
 }

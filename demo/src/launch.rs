@@ -16,8 +16,8 @@ use crease_server::{AppState, OpenRoomError, Running};
 use crate::animation::{ActorAnimation, DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
 use crate::{
-    DEMO_BETA, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM,
-    PERFORMER_LEFT_POSES, WEBXR_MAP,
+    DEMO_BETA, DEMO_BOTH_HANDS_ROOM, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL,
+    DEMO_PERFORMER_ROOM, DEMO_ROOM, PERFORMER_LEFT_POSES, WEBXR_LEFT_MAP, WEBXR_MAP,
 };
 
 /// Everything `crease-server` is told: what to serve and how.
@@ -158,6 +158,13 @@ impl Started {
             host(http),
             http.port(),
         ));
+        lines.push(format!(
+            "demo: room {DEMO_PERFORMER_ROOM:?} holds both hands of a performer, one stream \
+             ({scheme}://{}:{}/?room={DEMO_PERFORMER_ROOM}); room {DEMO_BOTH_HANDS_ROOM:?} \
+             takes both of your tracked hands at once",
+            host(http),
+            http.port(),
+        ));
         if !token_chosen {
             lines.push(format!(
                 "demo: publish token {token} (enter it in the viewer to drag control points)"
@@ -279,6 +286,10 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
             .open_room(hands_room(&model, &token))
             .await
             .map_err(|e| LaunchError::Hands(e.to_string()))?;
+        state
+            .open_room(both_hands_room(&model, &token))
+            .await
+            .map_err(|e| LaunchError::Hands(e.to_string()))?;
         let performer = state
             .open_room(performer_room(&model, &token))
             .await
@@ -316,27 +327,63 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
 /// and no filter (headset runtimes smooth their hand tracking already, and every filtered
 /// frame would add latency).
 fn hands_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
-    let retarget = crease_proto::room::retarget(
-        WEBXR_MAP.to_owned(),
-        crease_hand::joint_map::capture_markers(),
-        "m".into(),
-    );
     RoomSpec {
         id: DEMO_HANDS_ROOM.into(),
         model: model.name.clone(),
-        // A performer's hands leave the training poses: the refinement holds the fingers to
-        // the tracked joints where the regression extrapolates (issue 20; BENCHMARKS.md
-        // "Beyond the examples": half the regression's error on hands far from the examples).
-        options: RoomOptions {
-            beta: Some(DEMO_BETA),
-            filter: None,
-            refine: Some(DEMO_HANDS_REFINE),
-            // The model's default (the demo hand is trained with LBS): the viewer may
-            // subscribe with palette frames, which it skins with LBS, and a DQS room refuses
-            // those.
-            skinning: None,
-        },
-        retarget: Some(retarget),
+        options: hands_options(),
+        retarget: Some(webxr_retarget(WEBXR_MAP)),
+        token: RoomToken::Fixed(token.to_owned()),
+        placement: Placement::Local,
+        ..RoomSpec::default()
+    }
+}
+
+/// The retargeting of WebXR's joints (the markers of `crease_hand::joint_map::capture_markers`,
+/// in metres) through the joint map `map`.
+fn webxr_retarget(map: &str) -> crease_proto::v1::Retarget {
+    crease_proto::room::retarget(
+        map.to_owned(),
+        crease_hand::joint_map::capture_markers(),
+        "m".into(),
+    )
+}
+
+/// The options of a room (or actor) a tracked hand drives: the demo's beta, no filter
+/// (headset runtimes smooth their hand tracking already, and every filtered frame would add
+/// latency), and the refinement: a performer's hands leave the training poses, and it holds
+/// the fingers to the tracked joints where the regression extrapolates (issue 20;
+/// BENCHMARKS.md "Beyond the examples": half the regression's error on hands far from the
+/// examples). Skinning is the model's default (the demo hand is trained with LBS): the viewer
+/// may subscribe with palette frames, which it skins with LBS, and a DQS room refuses those.
+fn hands_options() -> RoomOptions {
+    RoomOptions {
+        beta: Some(DEMO_BETA),
+        filter: None,
+        refine: Some(DEMO_HANDS_REFINE),
+        skinning: None,
+    }
+}
+
+/// The WebXR room of two actors [`DEMO_BOTH_HANDS_ROOM`] on the demo model (issue 38): `right`
+/// through [`WEBXR_MAP`], `left` on the model mirrored across x through [`WEBXR_LEFT_MAP`], one
+/// performer, as [`DEMO_HANDS_ROOM`] otherwise.
+fn both_hands_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
+    let actor = |name: &str, side, mirror, map| ActorSpec {
+        name: name.into(),
+        model: model.name.clone(),
+        side,
+        mirror,
+        performer: "you".into(),
+        options: hands_options(),
+        retarget: Some(webxr_retarget(map)),
+        model_sha256: None,
+    };
+    RoomSpec {
+        id: DEMO_BOTH_HANDS_ROOM.into(),
+        actors: vec![
+            actor("right", Side::Right, None, WEBXR_MAP),
+            actor("left", Side::Left, Some(MirrorPlane::X), WEBXR_LEFT_MAP),
+        ],
         token: RoomToken::Fixed(token.to_owned()),
         placement: Placement::Local,
         ..RoomSpec::default()

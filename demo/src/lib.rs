@@ -50,6 +50,13 @@ pub const PERFORMER_LEFT_POSES: [crease_hand::skeleton::NamedPose; 10] = {
 /// The joint map of [`DEMO_HANDS_ROOM`]: WebXR joints onto the demo hand's `back` landmarks
 /// (`bench/mocap/webxr-back.toml`, which says how it was built).
 pub const WEBXR_MAP: &str = include_str!("../../bench/mocap/webxr-back.toml");
+/// The demo's WebXR room of two actors (issue 38): the viewer's "track my hands" publishes both
+/// tracked hands at once, the right onto the demo hand through [`WEBXR_MAP`], the left onto it
+/// mirrored across x through [`WEBXR_LEFT_MAP`], one performer, one frame per XR frame.
+pub const DEMO_BOTH_HANDS_ROOM: &str = "both-hands";
+/// The joint map of [`DEMO_BOTH_HANDS_ROOM`]'s left actor: [`WEBXR_MAP`]'s mixes under the
+/// mirrored model's landmark names (`bench/mocap/webxr-back-left.toml`).
+pub const WEBXR_LEFT_MAP: &str = include_str!("../../bench/mocap/webxr-back-left.toml");
 /// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
 /// control point is followed closely.
 pub const DEMO_BETA: f32 = 3.0;

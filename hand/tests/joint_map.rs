@@ -7,6 +7,7 @@
 
 use std::path::Path;
 
+use crease_core::model::mirror_name;
 use crease_hand::dataset::{Layout, dataset_poses};
 use crease_hand::joint_map::{
     PosedHands, Side, capture_markers, fit_joint_map, joint_map_toml, mix_errors,
@@ -102,7 +103,44 @@ fn fitted_maps_put_the_landmarks_on_the_joints_of_unseen_poses() {
             "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --test joint_map rewrites it); the fit:\n{text}",
             path.display()
         );
+
+        // The left hand on the model mirrored across x (issue 38: room `both-hands`): WebXR's
+        // joints have no side, and a tracked left hand is the mirror image of a right one, so
+        // each landmark takes the same mix; only the landmarks' names follow the mirrored
+        // model's (`hand_left` on the right hand is `hand_right` on its mirror).
+        if layout == Layout::Back {
+            let left: Vec<_> = mixes
+                .iter()
+                .map(|m| crease_hand::joint_map::Mix {
+                    name: mirror_name(&m.name),
+                    ..m.clone()
+                })
+                .collect();
+            let points: Vec<String> = registration.iter().map(|p| mirror_name(p)).collect();
+            let points: Vec<&str> = points.iter().map(String::as_str).collect();
+            let text = joint_map_toml(&left, &points, 40, &left_map_header());
+            let path = root.join("bench/mocap/webxr-back-left.toml");
+            if std::env::var_os("CREASE_WRITE_MAPS").is_some() {
+                std::fs::write(&path, &text).unwrap();
+            }
+            let committed = std::fs::read_to_string(&path).unwrap_or_default();
+            assert!(
+                committed == text,
+                "{} is not what the fit writes (CREASE_WRITE_MAPS=1 rewrites it); the fit:\n{text}",
+                path.display()
+            );
+        }
     }
+}
+
+fn left_map_header() -> String {
+    "WebXR hand tracking of a LEFT hand onto the demo hand mirrored across x = 0 (`crease model
+mirror --plane x`; the left actor of the demo's room `both-hands`, issue 38). Written by
+hand/tests/joint_map.rs beside webxr-back.toml: the same mixes (WebXR's joints have no side,
+and a left hand is the mirror image of a right one), each landmark under the mirrored model's
+name (mirroring swaps `left` and `right` in names: `hand_left` is `hand_right` here). The
+viewer sends a left hand's joints as tracked, not mirrored, to an actor whose side is left."
+        .to_owned()
 }
 
 fn map_header(layout: Layout) -> String {

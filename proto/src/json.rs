@@ -16,6 +16,8 @@ use crate::{WireError, encode_valid_mask, v1};
 
 /// A control frame as JSON: `{"seq": 1, "capture_time_us": 0, "positions": [x, y, z, ...],
 /// "valid": [true, ...]}`, `valid` optional (every point valid), `seq` and the time 0 when absent.
+/// A room of several actors takes `"actors": [{"actor": "left", "positions": [...]}, ...]`
+/// ([`JsonActorControls`], `ControlFrame.actors`) instead of the points.
 #[derive(Clone, Debug, PartialEq, serde::Deserialize, Serialize)]
 pub struct JsonControlFrame {
     /// The publisher's sequence number.
@@ -37,6 +39,55 @@ pub struct JsonControlFrame {
     /// One flag per marker.
     #[serde(default)]
     pub markers_valid: Option<Vec<bool>>,
+    /// A room of several actors (issue 38): each actor's points or markers, by name; an actor
+    /// left out holds its last pose.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub actors: Vec<JsonActorControls>,
+}
+
+/// One actor's part of a [`JsonControlFrame`]: `{"actor": "left", "positions": [...],
+/// "valid": [...], "markers": [...], "markers_valid": [...]}` (`v1::ActorControls`).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize, Serialize)]
+pub struct JsonActorControls {
+    /// The actor's name.
+    pub actor: String,
+    /// As [`JsonControlFrame::positions`].
+    #[serde(default)]
+    pub positions: Vec<f32>,
+    /// As [`JsonControlFrame::valid`].
+    #[serde(default)]
+    pub valid: Option<Vec<bool>>,
+    /// As [`JsonControlFrame::markers`].
+    #[serde(default)]
+    pub markers: Vec<f32>,
+    /// As [`JsonControlFrame::markers_valid`].
+    #[serde(default)]
+    pub markers_valid: Option<Vec<bool>>,
+}
+
+/// A validity mask from one flag per `x, y, z` triple of `values`; empty when `flags` is absent.
+fn json_mask(
+    field: &str,
+    what: &str,
+    flags: &Option<Vec<bool>>,
+    values: &[f32],
+) -> Result<Vec<u8>, WireError> {
+    let mut out = Vec::new();
+    if let Some(v) = flags {
+        if v.len() * 3 != values.len() {
+            return Err(WireError::new(
+                "ControlFrame",
+                field,
+                format!(
+                    "{} flags for {} {what} values (one flag per x, y, z triple)",
+                    v.len(),
+                    values.len()
+                ),
+            ));
+        }
+        encode_valid_mask(v, &mut out);
+    }
+    Ok(out)
 }
 
 impl JsonControlFrame {
@@ -59,31 +110,33 @@ impl JsonControlFrame {
     /// # Errors
     /// A [`WireError`] naming `valid` when its flags are not one per `x, y, z` triple.
     pub fn into_control_frame(self, room: &str) -> Result<v1::ControlFrame, WireError> {
-        let mask = |field: &'static str, what: &str, flags: &Option<Vec<bool>>, values: &[f32]| {
-            let mut out = Vec::new();
-            if let Some(v) = flags {
-                if v.len() * 3 != values.len() {
-                    return Err(WireError::new(
-                        "ControlFrame",
-                        field,
-                        format!(
-                            "{} flags for {} {what} values (one flag per x, y, z triple)",
-                            v.len(),
-                            values.len()
-                        ),
-                    ));
-                }
-                encode_valid_mask(v, &mut out);
-            }
-            Ok(out)
-        };
-        let valid = mask("valid", "position", &self.valid, &self.positions)?;
-        let markers_valid = mask(
+        let valid = json_mask("valid", "position", &self.valid, &self.positions)?;
+        let markers_valid = json_mask(
             "markers_valid",
             "marker",
             &self.markers_valid,
             &self.markers,
         )?;
+        let actors = self
+            .actors
+            .into_iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let field = |f: &str| format!("actors[{i}].{f}");
+                Ok(v1::ActorControls {
+                    valid: json_mask(&field("valid"), "position", &a.valid, &a.positions)?,
+                    markers_valid: json_mask(
+                        &field("markers_valid"),
+                        "marker",
+                        &a.markers_valid,
+                        &a.markers,
+                    )?,
+                    actor: a.actor,
+                    positions: a.positions,
+                    markers: a.markers,
+                })
+            })
+            .collect::<Result<Vec<_>, WireError>>()?;
         Ok(v1::ControlFrame {
             room: room.to_owned(),
             seq: self.seq,
@@ -92,7 +145,7 @@ impl JsonControlFrame {
             valid,
             markers: self.markers,
             markers_valid,
-            actors: Vec::new(),
+            actors,
         })
     }
 }
@@ -118,6 +171,43 @@ pub struct JsonAck {
     pub confidence: f32,
     /// Set when the frame was refused.
     pub error: Option<JsonError>,
+    /// A room of several actors (issue 38): each actor's part (`PublishAck.actors`), in the
+    /// room's order; absent in a one-actor room.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub actors: Vec<JsonActorAck>,
+}
+
+/// One actor's part of a [`JsonAck`]: `{"actor": "left", "held": false, "held_controls": 0,
+/// "control_residual": 0.002}`, the capture residual and confidence as in the ack.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct JsonActorAck {
+    /// The actor's name.
+    pub actor: String,
+    /// The actor was missing from the frame and holds its last pose.
+    pub held: bool,
+    /// Its control points held.
+    pub held_controls: u32,
+    /// Its control residual, model units.
+    pub control_residual: f32,
+    /// In the capture's units (retargeting actors).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub control_residual_capture: f32,
+    /// Its distance from its model's examples.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub confidence: f32,
+}
+
+impl From<v1::ActorAck> for JsonActorAck {
+    fn from(a: v1::ActorAck) -> Self {
+        Self {
+            actor: a.actor,
+            held: a.held,
+            held_controls: a.held_controls,
+            control_residual: a.control_residual,
+            control_residual_capture: a.control_residual_capture,
+            confidence: a.confidence,
+        }
+    }
 }
 
 fn is_zero(x: &f32) -> bool {
@@ -152,6 +242,7 @@ impl From<v1::PublishAck> for JsonAck {
             control_residual_capture: ack.control_residual_capture,
             confidence: ack.confidence,
             error: ack.error.map(JsonError::from),
+            actors: ack.actors.into_iter().map(JsonActorAck::from).collect(),
         }
     }
 }
@@ -480,6 +571,68 @@ mod tests {
             "{e}"
         );
     }
+
+    #[test]
+    fn json_frames_and_acks_of_a_room_of_actors() {
+        let f = JsonControlFrame::parse(
+            r#"{"seq": 9, "capture_time_us": 5, "actors": [
+                {"actor": "right", "markers": [1, 2, 3], "markers_valid": [false]},
+                {"actor": "left", "positions": [4, 5, 6, 7, 8, 9]}]}"#,
+        )
+        .unwrap()
+        .into_control_frame("duo")
+        .unwrap();
+        assert!(f.positions.is_empty() && f.markers.is_empty());
+        assert_eq!((f.seq, f.capture_time_us), (9, 5));
+        assert_eq!(f.actors.len(), 2);
+        assert_eq!(
+            (f.actors[0].actor.as_str(), &f.actors[0].markers[..]),
+            ("right", &[1.0, 2.0, 3.0][..])
+        );
+        assert_eq!(f.actors[0].markers_valid, [0]);
+        assert_eq!(f.actors[1].actor, "left");
+        assert_eq!(f.actors[1].positions, [4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+        assert!(f.actors[1].valid.is_empty());
+        // A mask of the wrong length names the actor's index and field.
+        let e = JsonControlFrame::parse(
+            r#"{"actors": [{"actor": "a"}, {"actor": "b", "positions": [1, 2, 3], "valid": []}]}"#,
+        )
+        .unwrap()
+        .into_control_frame("duo")
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "ControlFrame.actors[1].valid: 0 flags for 3 position values (one flag per x, y, z triple)"
+        );
+        // The ack lists each actor's part; a one-actor room's ack has no "actors" key.
+        let ack = v1::PublishAck {
+            seq: 9,
+            actors: vec![
+                v1::ActorAck {
+                    actor: "right".into(),
+                    control_residual: 0.5,
+                    control_residual_capture: 0.25,
+                    ..Default::default()
+                },
+                v1::ActorAck {
+                    actor: "left".into(),
+                    held: true,
+                    held_controls: 15,
+                    ..Default::default()
+                },
+            ],
+            ..Default::default()
+        };
+        let text = JsonAck::from(ack).to_text();
+        assert!(
+            text.ends_with(concat!(
+                r#""error":null,"actors":[{"actor":"right","held":false,"held_controls":0,"#,
+                r#""control_residual":0.5,"control_residual_capture":0.25},"#,
+                r#"{"actor":"left","held":true,"held_controls":15,"control_residual":0.0}]}"#
+            )),
+            "{text}"
+        );
+    }
 }
 
 /// A take in [`TakeList`] (`v1::TakeInfo`, with the duration in seconds).
@@ -574,6 +727,26 @@ impl TakeFrames {
                 .iter()
                 .map(|f| {
                     let c = f.frame.clone().unwrap_or_default();
+                    let actors = c
+                        .actors
+                        .into_iter()
+                        .map(|a| {
+                            // The counts of the actor of that name (the room's order).
+                            let at = header.actors.iter().position(|h| h.actor == a.actor);
+                            let controls = at.map_or(0, |i| header.actors[i].controls as usize);
+                            let markers = at
+                                .and_then(|i| room.actors.get(i))
+                                .and_then(|r| r.retarget.as_ref())
+                                .map_or(0, |r| r.markers.len());
+                            JsonActorControls {
+                                valid: flags(&a.valid, controls),
+                                markers_valid: flags(&a.markers_valid, markers),
+                                actor: a.actor,
+                                positions: a.positions,
+                                markers: a.markers,
+                            }
+                        })
+                        .collect();
                     JsonControlFrame {
                         seq: c.seq,
                         capture_time_us: c.capture_time_us,
@@ -581,6 +754,7 @@ impl TakeFrames {
                         markers_valid: flags(&c.markers_valid, markers),
                         positions: c.positions,
                         markers: c.markers,
+                        actors,
                     }
                 })
                 .collect(),

@@ -4,7 +4,9 @@
 # demo), then runs tests/browser/viewer.test.mjs and tests/browser/palette.test.mjs (palette
 # streams on the GPU against `crease decode-stream`; playwright-core driving Debian's
 # /usr/bin/chromium) and tests/browser/webxr.test.mjs (WebXR hands in room `hands`, through
-# Meta's WebXR emulator iwer) against it, tests/browser/report.test.mjs (the --report pages of
+# Meta's WebXR emulator iwer) against it, tests/browser/actors.test.mjs and webxr-hands.test.mjs
+# (rooms of actors, issue 38: two named hands, a drag of one, both tracked hands at once),
+# tests/browser/report.test.mjs (the --report pages of
 # crease eval and crease train, written here), and tests/browser/takes.test.mjs (a take of room
 # demo: the viewer's takes list and player, GLTFLoader on its skinned glTF export).
 # Called by .ci/run; runs alone from anywhere:
@@ -72,6 +74,26 @@ for encoding in "" vertices; do
     echo "== WebXR hands in headless chromium (iwer${encoding:+, $encoding frames})"
     CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work${encoding:+/$encoding}" CHROMIUM="$chromium_bin" \
         CREASE_XR_ENCODING="$encoding" node tests/browser/webxr.test.mjs || failed=1
+done
+
+# Issue 38: rooms of actors. The demo's room `performer` drawn as two named hands, and room `duo`
+# (opened here: two actors nobody animates, keyframe beta) where a drag moves one hand alone.
+echo "== rooms of actors in headless chromium"
+if duo_token="$("$bin/crease" room open --room duo --actors tests/browser/duo-actors.toml --beta 3 \
+    --server "http://$grpc_addr" --admin-token "$admin" 2>/dev/null)"; then
+    CREASE_HTTP="$http_addr" CREASE_DUO_TOKEN="$duo_token" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+        node tests/browser/actors.test.mjs || failed=1
+else
+    echo "FAIL: crease room open --room duo --actors tests/browser/duo-actors.toml"
+    failed=1
+fi
+
+# Issue 38: both hands at once into the demo's room `both-hands` (two actors, the left on the
+# mirrored model), in both encodings.
+for encoding in "" vertices; do
+    echo "== WebXR, both hands, in headless chromium (iwer${encoding:+, $encoding frames})"
+    CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work${encoding:+/$encoding}" CHROMIUM="$chromium_bin" \
+        CREASE_XR_ENCODING="$encoding" node tests/browser/webxr-hands.test.mjs || failed=1
 done
 
 # Issue 22: the --report pages of crease eval (horse split, generated hand) and crease train,
