@@ -11,7 +11,8 @@ use std::time::{Duration, Instant};
 use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
 use crease_demo::{
-    DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM, DemoAnimation, demo_model,
+    DEMO_BOTH_HANDS_ROOM, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM,
+    DemoAnimation, demo_model,
 };
 use crease_hand::rig::{HandRig, Layers};
 use crease_hand::skeleton::{HandPose, NamedPose};
@@ -262,6 +263,53 @@ fn demo_trains_animates_and_serves() {
         assert_eq!(retarget.markers, crease_hand::joint_map::capture_markers());
         assert_eq!(retarget.markers.len(), 75);
         assert_eq!(retarget.units, "m");
+        // ... and its two-hand twin (issue 38): both tracked hands at once, the left on the
+        // mirrored model through the map with the mirrored landmark names.
+        let both = client
+            .get_room(v1::GetRoomRequest {
+                room: DEMO_BOTH_HANDS_ROOM.into(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let actors: Vec<_> = both
+            .actors
+            .iter()
+            .map(|a| {
+                let spec = a.actor.as_ref().expect("each actor as it runs");
+                let r = spec.retarget.as_ref().expect("each actor retargets");
+                assert_eq!(r.markers, crease_hand::joint_map::capture_markers());
+                let model = a.model.as_ref().expect("each actor's model");
+                let names: Vec<&str> = model
+                    .control_points
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect();
+                (
+                    spec.name.as_str(),
+                    spec.side.as_str(),
+                    spec.mirror.as_str(),
+                    names,
+                )
+            })
+            .collect();
+        assert_eq!(actors.len(), 2, "{actors:?}");
+        assert_eq!(
+            (actors[0].0, actors[0].1, actors[0].2),
+            ("right", "right", "")
+        );
+        assert_eq!(
+            (actors[1].0, actors[1].1, actors[1].2),
+            ("left", "left", "x")
+        );
+        // The mirrored model swaps the side words of its landmarks' names, as the left map does.
+        let swapped: Vec<String> = actors[0]
+            .3
+            .iter()
+            .map(|n| crease_core::model::mirror_name(n))
+            .collect();
+        assert_eq!(actors[1].3, swapped);
+        assert!(crease_demo::WEBXR_LEFT_MAP.contains("hand_right = "));
 
         // And the room of two actors (issue 38): one stream with both hands, the left one on
         // the mirrored model, through different pose loops.
