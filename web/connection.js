@@ -70,7 +70,7 @@ export function createConnection(state, { token, streams, onHeader, overlay }) {
         c.vertexCount = state.actors.reduce((n, a) => n + (a.vertexCount || 0), 0);
         c.actors = state.actors.map((a) => ({
           name: a.name, side: a.side, performer: a.performer, model: a.model, vertexCount: a.vertexCount,
-          frameSeq: null, held: false, residual: null, residualCapture: null, confidence: null,
+          frameSeq: null, held: false, placed: false, residual: null, residualCapture: null, confidence: null,
         }));
         onHeader();
       }
@@ -90,6 +90,7 @@ export function createConnection(state, { token, streams, onHeader, overlay }) {
     if (t.actorIndex === 0) {
       for (const gone of state.actors.splice(count)) removeActor(gone);
       while (state.actors.length < count) state.actors.push(createActor(state.actors.length));
+      for (const a of state.actors) a.placed = false;
       state.mesh.framed = false;
     }
     const slot = state.actors[t.actorIndex];

@@ -54,13 +54,17 @@ export function createHandles(state, { view, connection, overlay, token, readbac
   /** The actor named `actor` (the first when absent), or undefined. */
   const actorNamed = (actor) => (actor == null ? state.actors[0] : state.actors.find((a) => a.name === actor));
 
-  /** The control vertices of actor `actor`'s mesh shown (model units, its model's frame,
-   * model order), or null. */
-  function controlPositions(actor) {
+  /** The control vertices of actor `actor`'s mesh shown (model units, model order), in its
+   * model's frame, or with `world` where the page draws them (the actor placed or laid out,
+   * the stage moved in an XR session); null when there is no mesh. */
+  function controlPositions(actor, world = false) {
     const slot = actorNamed(actor);
-    return slot && slot.room && slot.geometry && state.stream
-      ? slot.room.control_points.map((cp) => vertexPosition(slot, cp.vertex, new THREE.Vector3()).toArray())
-      : null;
+    if (!(slot && slot.room && slot.geometry && state.stream)) return null;
+    if (world) view.stage.updateMatrixWorld();
+    return slot.room.control_points.map((cp) => {
+      const v = vertexPosition(slot, cp.vertex, new THREE.Vector3());
+      return (world ? v.applyMatrix4(slot.handleGroup.matrixWorld) : v).toArray();
+    });
   }
 
   /** At a redraw: puts the handles on their vertices and notes their screen positions. */

@@ -7,7 +7,7 @@
 // each with its own PaletteSynth; window.crease.palette is the first actor's.
 
 import { PaletteSynth, floatTargetsSupported } from "./palette.js";
-import { MATERIAL_PARAMS, frameCamera, showMesh } from "./scene.js";
+import { MATERIAL_PARAMS, frameCamera, placeActor, showMesh } from "./scene.js";
 
 /** The most frame messages kept from the last keyframe on (the server keys every 600 or fewer). */
 const MAX_CHAIN = 4096;
@@ -71,7 +71,7 @@ export function createPaletteStream(state, { view, overlay }) {
   /** A frame message: every actor's palette frame (`f.data` in a one-actor room, else
    * `f.actors`), decoded now (keyframe or delta), drawn at the next redraw. */
   function frame(f, bytes) {
-    const list = f.actors.length ? f.actors : [{ actor: 0, data: f.data || new Uint8Array(0), held: false }];
+    const list = f.actors.length ? f.actors : [{ actor: 0, data: f.data || new Uint8Array(0), held: false, placement: null }];
     for (const a of list) {
       const slot = state.actors[a.actor];
       if (!slot || !slot.palette.synth) return overlay.fail(`frame ${f.seq}: actor ${a.actor}, but the stream has ${state.actors.length} actors`);
@@ -86,7 +86,7 @@ export function createPaletteStream(state, { view, overlay }) {
       if (decoded.header.kind === 0) p.chain = [bytes];
       else if (p.chain && p.chain.length < MAX_CHAIN) p.chain.push(bytes);
       else p.chain = null;
-      p.pending = { bytes, seq: f.seq, chain: p.chain, length: p.chain ? p.chain.length : 0 };
+      p.pending = { bytes, seq: f.seq, chain: p.chain, length: p.chain ? p.chain.length : 0, placement: a.placement };
       slot.held = a.held;
       overlay.meshFrame(slot, f.seq, f.captureTimeUs, f.serverLatencyUs, a.data.length);
     }
@@ -105,6 +105,8 @@ export function createPaletteStream(state, { view, overlay }) {
         c.palette.seq = pending.seq;
       }
       slot.mesh.visible = true;
+      slot.placement = pending.placement;
+      placeActor(state, slot);
       shown = true;
     }
     if (!shown) return false;

@@ -87,7 +87,8 @@ const SIDE_ORDER = { left: 0, right: 2 };
  * where its model puts it. Several are laid out in a row along x, left sides first, in the
  * room's order otherwise, each rest box 15% of the widest apart: a performer's two hands on
  * models in their own frames (the demo's right hand and its mirror) would otherwise overlap.
- * Each actor's name floats over its box.
+ * Each actor's name floats over its box. A frame that places an actor (its performer's
+ * capture, `placeActor`) overrides this.
  */
 export function layoutActors(state, view) {
   const slots = state.actors.filter((a) => a.room && a.room.bounds);
@@ -96,6 +97,11 @@ export function layoutActors(state, view) {
     return;
   }
   const boxes = slots.map((a) => a.room.bounds.map((v) => new THREE.Vector3(...v)));
+  for (const a of slots) {
+    // Unplaced until a frame says where its performer's capture puts it (placeActor).
+    actorGroup(a, view).quaternion.identity();
+    a.group.scale.setScalar(1);
+  }
   if (slots.length === 1) {
     actorGroup(slots[0], view).position.set(0, 0, 0);
     state.bounds = slots[0].room.bounds;
@@ -116,6 +122,37 @@ export function layoutActors(state, view) {
     labelActor(slots[i], blo, bhi);
   }
   state.bounds = [lo.toArray(), hi.toArray()];
+}
+
+/**
+ * Places an actor where its performer's capture put it (`slot.placement`, from its frames:
+ * `x -> scale * rotation x + translation`, crease_server::performer), instead of the row
+ * layout. The first placement of the stream recomputes `state.bounds` (the placed rest boxes)
+ * and has the camera framed again.
+ */
+export function placeActor(state, slot) {
+  const p = slot.placement;
+  if (!p || !slot.group || !(p.scale > 0)) return;
+  slot.group.position.fromArray(p.translation);
+  slot.group.quaternion.fromArray(p.rotation);
+  slot.group.scale.setScalar(p.scale);
+  if (slot.placed) return;
+  slot.placed = true;
+  if (state.crease.actors[slot.index]) state.crease.actors[slot.index].placed = true;
+  const lo = new THREE.Vector3(Infinity, Infinity, Infinity);
+  const hi = new THREE.Vector3(-Infinity, -Infinity, -Infinity);
+  for (const a of state.actors) {
+    if (!a.group || !a.room?.bounds) continue;
+    a.group.updateMatrix();
+    const [blo, bhi] = a.room.bounds;
+    for (let k = 0; k < 8; k++) {
+      const corner = new THREE.Vector3(k & 1 ? bhi[0] : blo[0], k & 2 ? bhi[1] : blo[1], k & 4 ? bhi[2] : blo[2]).applyMatrix4(a.group.matrix);
+      lo.min(corner);
+      hi.max(corner);
+    }
+  }
+  state.bounds = [lo.toArray(), hi.toArray()];
+  state.mesh.framed = false;
 }
 
 /** The actor's name over its rest box (a sprite: it faces the camera). */

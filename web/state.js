@@ -15,7 +15,7 @@
  * vertex streams, or null), its vertex stream's (buffers to lend the decode worker, and
  * whether the geometry holds arrays not yet uploaded), its palette stream's (PaletteSynth,
  * its material, the frame waiting for the GPU passes, the frame messages from the last
- * keyframe on), its handles, and the last frame it drew (`seq`, `held`).
+ * keyframe on), its handles, and the last frame it drew (`seq`, `held`, `placement`).
  */
 export function createActor(index) {
   return {
@@ -35,6 +35,8 @@ export function createActor(index) {
     handles: [],
     seq: null,
     held: false,
+    placement: null, // where its performer's capture puts it (ActorFrame.placement), or null
+    placed: false, // whether a placement was applied since the stream began
   };
 }
 
@@ -79,8 +81,9 @@ export function createState(params) {
     residualCapture: null, // ... and in the capture's units (retargeting rooms)
     confidence: null, // the last ack's distance from the training examples (1: their spread)
     // A room of several actors (issue 38): per actor {name, side, performer, model,
-    // vertexCount, frameSeq (its last frame drawn), held, residual, residualCapture,
-    // confidence (its part of the last ack)}; one entry, unnamed, in a one-actor room.
+    // vertexCount, frameSeq (its last frame drawn), held, placed (where its performer's
+    // capture put it), residual, residualCapture, confidence (its part of the last ack)}; one
+    // entry, unnamed, in a one-actor room.
     actors: [],
     // WebXR hands: whether the browser offers an immersive session, why not, whether tracking,
     // the hand, frames published and dropped (socket backed up), the last one's seq, and the

@@ -16,7 +16,7 @@
 
 import * as THREE from "three";
 import { decodeIndices } from "./codec.js";
-import { frameCamera, showMesh } from "./scene.js";
+import { frameCamera, placeActor, showMesh } from "./scene.js";
 
 /** Buffers of each kind kept per actor to lend the worker (more in flight allocate; extras
  * are dropped). */
@@ -103,7 +103,7 @@ export function createVertexStream(state, { view, overlay }) {
    * `f.actors`) to the worker, with the socket message's buffer (`bytes`, transferred: each
    * part is a view of it). */
   function frame(f, bytes) {
-    const list = f.actors.length ? f.actors : [{ actor: 0, data: f.data || new Uint8Array(0), held: false }];
+    const list = f.actors.length ? f.actors : [{ actor: 0, data: f.data || new Uint8Array(0), held: false, placement: null }];
     const parts = [];
     const transfer = [bytes.buffer];
     for (const a of list) {
@@ -114,7 +114,7 @@ export function createVertexStream(state, { view, overlay }) {
       const normals = slot.vertices.spares.normals.pop() || null;
       if (positions) transfer.push(positions.buffer);
       if (normals) transfer.push(normals.buffer);
-      parts.push({ actor: a.actor, held: a.held, offset: data.byteOffset, length: data.length, positions, normals });
+      parts.push({ actor: a.actor, held: a.held, placement: a.placement, offset: data.byteOffset, length: data.length, positions, normals });
     }
     worker().postMessage(
       {
@@ -160,6 +160,7 @@ export function createVertexStream(state, { view, overlay }) {
       normal.array = part.normals;
       slot.vertices.dirty = true;
       slot.held = part.held;
+      slot.placement = part.placement;
       overlay.meshFrame(slot, m.seq, m.captureTimeUs, m.serverLatencyUs, part.length);
     }
   }
@@ -175,6 +176,7 @@ export function createVertexStream(state, { view, overlay }) {
       geometry.getAttribute("position").needsUpdate = true;
       geometry.getAttribute("normal").needsUpdate = true;
       geometry.computeBoundingSphere();
+      placeActor(state, slot);
       shown = true;
     }
     if (!shown) return false;

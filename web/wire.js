@@ -4,7 +4,7 @@
 // stream (proto Encoding): vertices (a Topology, then codec frames) and palette (a
 // PaletteTopology, then palette frames, issue 18). A room of several actors (issue 38) sends
 // one header per actor (`actor`, `actorIndex`, `actorCount`), then frames whose `actors` hold
-// each actor's frame ({actor: index, data, held}) instead of `data`.
+// each actor's frame ({actor: index, data, held, placement}) instead of `data`.
 
 class Reader {
   constructor(bytes) {
@@ -103,14 +103,44 @@ function readTopology(bytes) {
   return t;
 }
 
-/** One actor's mesh in a Frame (issue 38): {actor: its index, data, held}. */
+/** A Quat as [x, y, z, w]. */
+function readQuat(bytes) {
+  const r = new Reader(bytes);
+  const q = [0, 0, 0, 0];
+  for (const [field, wire] of r.fields()) {
+    if (wire === 5 && field >= 1 && field <= 4) {
+      q[field - 1] = readFloat(r.b.subarray(r.pos, r.pos + 4));
+      r.pos += 4;
+    } else r.skip(wire);
+  }
+  return q;
+}
+
+/** An ActorPlacement: {scale, translation: [x, y, z], rotation: [x, y, z, w]}. */
+function readPlacement(bytes) {
+  const r = new Reader(bytes);
+  const p = { scale: 0, translation: [0, 0, 0], rotation: [0, 0, 0, 1] };
+  for (const [field, wire] of r.fields()) {
+    if (field === 1 && wire === 5) {
+      p.scale = readFloat(r.b.subarray(r.pos, r.pos + 4));
+      r.pos += 4;
+    } else if (field === 2 && wire === 2) p.translation = readVec3(r.bytes());
+    else if (field === 3 && wire === 2) p.rotation = readQuat(r.bytes());
+    else r.skip(wire);
+  }
+  return p;
+}
+
+/** One actor's mesh in a Frame (issue 38): {actor: its index, data, held, placement (where
+ * its performer's capture puts it, or null)}. */
 function readActorFrame(bytes) {
   const r = new Reader(bytes);
-  const a = { actor: 0, data: new Uint8Array(0), held: false };
+  const a = { actor: 0, data: new Uint8Array(0), held: false, placement: null };
   for (const [field, wire] of r.fields()) {
     if (field === 1 && wire === 0) a.actor = r.varint();
     else if (field === 2 && wire === 2) a.data = r.bytes();
     else if (field === 3 && wire === 0) a.held = r.varint() !== 0;
+    else if (field === 4 && wire === 2) a.placement = readPlacement(r.bytes());
     else r.skip(wire);
   }
   return a;

@@ -46,8 +46,8 @@ pub use control::{
 pub use convert::{Encoding, Level, box3, model_info};
 pub use errors::WireError;
 pub use mesh::{
-    StreamTopology, TopologyParts, actor_frame, actors_frame_message, frame_message, name_actor,
-    read_topology, topology_message,
+    ActorPlace, StreamTopology, TopologyParts, actor_frame, actors_frame_message, frame_message,
+    name_actor, read_topology, topology_message,
 };
 pub use palette::{PaletteParts, StreamPalette, palette_topology_message, read_palette_topology};
 pub use room::{RoomOptions, RoomSpec, StreamSettings};

@@ -178,11 +178,70 @@ pub fn name_actor(message: &mut v1::MeshFrame, actor: &str, index: usize, count:
 
 /// Actor `index`'s part of a room of several actors' frame: its encoded frame (shared, not
 /// copied), and whether it `held` its pose (missing from the control frame).
-pub fn actor_frame(index: usize, data: Bytes, held: bool) -> v1::ActorFrame {
+pub fn actor_frame(
+    index: usize,
+    data: Bytes,
+    held: bool,
+    placement: Option<ActorPlace>,
+) -> v1::ActorFrame {
     v1::ActorFrame {
         actor: index as u32,
         data,
         held,
+        placement: placement.map(|p| p.to_wire()),
+    }
+}
+
+/// Where an actor's mesh sits in its performer's frame (`v1::ActorPlacement`, issue 38):
+/// `x -> scale * rotation * x + translation`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActorPlace {
+    /// Uniform scale.
+    pub scale: f32,
+    /// Rotation.
+    pub rotation: crease_core::glam::Quat,
+    /// Translation.
+    pub translation: crease_core::glam::Vec3,
+}
+
+impl ActorPlace {
+    /// Maps a point of the actor's model frame.
+    pub fn apply(&self, p: crease_core::glam::Vec3) -> crease_core::glam::Vec3 {
+        self.scale * (self.rotation * p) + self.translation
+    }
+
+    /// The wire form.
+    pub fn to_wire(&self) -> v1::ActorPlacement {
+        let q = self.rotation;
+        v1::ActorPlacement {
+            scale: self.scale,
+            translation: Some(self.translation.into()),
+            rotation: Some(v1::Quat {
+                x: q.x,
+                y: q.y,
+                z: q.z,
+                w: q.w,
+            }),
+        }
+    }
+
+    /// Reads the wire form: `None` for a scale that is not positive and finite, a rotation
+    /// that is not a unit quaternion (within 1e-3), or anything not finite.
+    pub fn from_wire(p: &v1::ActorPlacement) -> Option<ActorPlace> {
+        let t = p.translation.as_ref().map_or([0.0; 3], |v| [v.x, v.y, v.z]);
+        let q = p.rotation.as_ref()?;
+        let rotation = crease_core::glam::Quat::from_xyzw(q.x, q.y, q.z, q.w);
+        let place = ActorPlace {
+            scale: p.scale,
+            rotation,
+            translation: crease_core::glam::Vec3::from_array(t),
+        };
+        (p.scale.is_finite()
+            && p.scale > 0.0
+            && place.translation.is_finite()
+            && rotation.is_finite()
+            && (rotation.length() - 1.0).abs() < 1e-3)
+            .then_some(place)
     }
 }
 

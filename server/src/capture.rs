@@ -218,6 +218,13 @@ impl Capture {
         Ok(valid.iter().filter(|v| !**v).count())
     }
 
+    /// The current capture-to-model registration, and whether its scale is fixed
+    /// (`crate::performer`).
+    pub(crate) fn registration(&self) -> Option<(crease_mocap::register::Similarity, bool)> {
+        let r = self.retarget.registration();
+        r.transform().map(|t| (t, r.scale().is_some()))
+    }
+
     /// The capture-to-model scale once the registration has one.
     pub(crate) fn scale(&self) -> Option<f32> {
         self.retarget

@@ -47,6 +47,9 @@ pub struct MeshUpdate {
     /// The actor was missing from the control frame and holds its last pose (a room of
     /// several actors, issue 38).
     pub held: bool,
+    /// Where the actor's mesh sits in its performer's frame this instant (a retargeting actor
+    /// of a named performer, once the performer's registration is fixed; `crate::room`).
+    pub placement: Option<crease_proto::ActorPlace>,
     /// A room of several actors: this is actor 0's frame, and these are the other actors'
     /// frames of the same instant, in the room's actor order (each a frame of its own actor's
     /// stream, with its own codec sequence). Empty in a one-actor room.
@@ -68,6 +71,7 @@ impl MeshUpdate {
             lanes: Vec::new(),
             key: OnceLock::new(),
             held: false,
+            placement: None,
             others: Vec::new(),
         }
     }
@@ -198,6 +202,7 @@ impl FramePool {
         u.key.take();
         u.others.clear();
         u.held = false;
+        u.placement = None;
         if !u.buffer.try_reclaim(encoded.len()) {
             self.fresh += 1;
             // Room for a few frames of this size: the buffer is split per frame and reclaimed

@@ -18,7 +18,8 @@
 //!   time, rate limit, subscriber slots), its [`pipeline`] (One Euro filter, predictor,
 //!   encoders, frame pools; blocking work, run on the blocking pool), its [`mailbox`] (latest
 //!   wins on the way in) and its [`fanout`] (latest-wins delivery per level behind a trait);
-//!   [`capture`]: a retargeting room's markers to control points (issue 19).
+//!   [`capture`]: a retargeting room's markers to control points (issue 19);
+//!   [`performer`]: a performer's actors placed where the capture put them (issue 38).
 //! - [`frames`]: the encoded frame a room hands out ([`frames::MeshUpdate`], with its
 //!   on-demand keyframe from the encoder's lanes) and the pool that recycles them.
 //! - [`stream`]: subscribers' mesh streams (topology, then frames; on-demand keyframes) and
@@ -53,6 +54,7 @@ pub mod ingest;
 pub mod listen;
 pub mod mailbox;
 pub mod metrics;
+pub mod performer;
 pub mod pipeline;
 pub mod registry;
 pub mod room;

@@ -376,6 +376,13 @@ impl Pipeline {
         self.capture = Some(spec);
     }
 
+    /// A retargeting room's current capture-to-model registration and whether its scale is
+    /// fixed (`crate::performer`); `None` before its first registered frame, and elsewhere.
+    pub(crate) fn registration(&self) -> Option<(crease_mocap::register::Similarity, bool)> {
+        let state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.capture.as_ref().and_then(Capture::registration)
+    }
+
     /// A retargeting room's map and markers.
     pub fn capture(&self) -> Option<&CaptureSpec> {
         self.capture.as_deref()

@@ -30,6 +30,7 @@ pub use crease_proto::{Encoding, Level};
 use crate::capture::CaptureSpec;
 use crate::fanout::{self, Fanout, LocalFanout};
 use crate::mailbox::{Mailbox, Outcome};
+use crate::performer::Performers;
 use crate::pipeline::{Demand, Pipeline, PipelineError};
 use crate::registry::LoadedModel;
 use crate::session::{CountGuard, Session};
@@ -129,6 +130,8 @@ struct Work {
     out: Vec<[Option<Arc<MeshUpdate>>; Channel::COUNT]>,
     /// The take being recorded (`crate::takes`), if any.
     take: Option<Recorder>,
+    /// Where each actor of a performer sits this frame (`crate::performer`).
+    performers: Performers,
 }
 
 /// A live session on one or more actors (module docs).
@@ -240,6 +243,13 @@ impl Room {
                     slots: vec![None; n],
                     results: std::iter::repeat_with(|| None).take(n).collect(),
                     out: vec![Default::default(); n],
+                    performers: Performers::new(actors.iter().map(|a| {
+                        let spec = a.spec.as_ref();
+                        (
+                            spec.map_or("", |s| s.performer.as_str()),
+                            a.pipeline.capture().is_some(),
+                        )
+                    })),
                     ..Work::default()
                 }),
                 actors,
@@ -656,6 +666,7 @@ impl Room {
             slots,
             results,
             out,
+            performers,
             ..
         } = work;
         let run = |k: usize| {
@@ -700,12 +711,19 @@ impl Room {
                 published: p,
             });
         }
+        if performers.any() {
+            performers.place(|k| self.actors[k].pipeline.registration());
+        }
         let (first, others) = out.split_first_mut().expect("a room has an actor");
-        for (actor, out) in self.actors[1..].iter().zip(others.iter_mut()) {
-            actor.pipeline.frames(out, |_, u| stamp(u, frame, received));
+        for (k, (actor, out)) in self.actors[1..].iter().zip(others.iter_mut()).enumerate() {
+            actor.pipeline.frames(out, |_, u| {
+                stamp(u, frame, received);
+                u.placement = performers.get(k + 1);
+            });
         }
         self.actors[0].pipeline.frames(first, |channel, u| {
             stamp(u, frame, received);
+            u.placement = performers.get(0);
             u.others
                 .extend(others.iter().filter_map(|o| o[channel.index()].clone()));
         });

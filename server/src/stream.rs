@@ -132,7 +132,12 @@ async fn frame_for(
     let mut actors = Vec::with_capacity(update.actor_count());
     for (i, last) in last_sent.iter_mut().enumerate().take(update.actor_count()) {
         let frame = update.actor(i);
-        actors.push(actor_frame(i, bytes_for(frame, last).await?, frame.held));
+        actors.push(actor_frame(
+            i,
+            bytes_for(frame, last).await?,
+            frame.held,
+            frame.placement,
+        ));
     }
     Ok(actors_frame_message(
         update.seq,

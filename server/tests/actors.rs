@@ -651,3 +651,210 @@ async fn a_take_of_a_room_of_actors_records_every_actor_and_replays_into_a_fresh
     );
     drop(running);
 }
+
+/// A retargeting actor's map for the tube: control point `c` is marker `{prefix}{i}`, every
+/// control point registers, the scale is fitted over three frames.
+fn tube_map(model: &TrainedModel, prefix: &str) -> (String, Vec<String>) {
+    let names: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
+    let quoted: Vec<String> = names.iter().map(|n| format!("{n:?}")).collect();
+    let mut toml = format!(
+        "[registration]\npoints = [{}]\ncalibration_frames = 3\n[markers]\n",
+        quoted.join(", ")
+    );
+    let markers: Vec<String> = (0..names.len()).map(|i| format!("{prefix}{i}")).collect();
+    for (n, m) in names.iter().zip(&markers) {
+        toml += &format!("{n} = {m:?}\n");
+    }
+    (toml, markers)
+}
+
+/// A similarity from a model frame into the capture's (millimetres): `1000 R x + t`.
+fn capture_of(angle: f32, t: Vec3) -> impl Fn(Vec3) -> Vec3 {
+    move |p| crease_core::glam::Quat::from_rotation_y(angle) * (1000.0 * p) + t
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_performers_hands_are_placed_where_the_capture_put_them() {
+    // Two retargeting actors of one performer, the left hand on the mirrored tube: each
+    // registers its own markers onto its model (what it predicts from), and each frame places
+    // its mesh by the performer's registration (the right hand's, fixed once its scale is)
+    // after the inverse of its own (crease_server::performer).
+    let model = model();
+    let mirrored = model.mirrored(&MirrorPlane::X).unwrap();
+    let running = serve_model(
+        "tube",
+        &model,
+        Some(ADMIN),
+        Limits {
+            publish_hz: f64::INFINITY,
+            ..Limits::default()
+        },
+    )
+    .await;
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let (right_map, right_markers) = tube_map(&model, "R");
+    let (left_map, left_markers) = tube_map(&mirrored, "L");
+    let actor = |name: &str, mirror: &str, map: &str, markers: &[String]| v1::Actor {
+        name: name.into(),
+        model: "tube".into(),
+        side: name.into(),
+        mirror: mirror.into(),
+        performer: "ana".into(),
+        retarget: Some(v1::Retarget {
+            map_toml: map.into(),
+            markers: markers.to_vec(),
+            units: "mm".into(),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let token = client
+        .open_room(authed(
+            v1::OpenRoomRequest {
+                room: "stage".into(),
+                actors: vec![
+                    actor("right", "", &right_map, &right_markers),
+                    actor("left", "x", &left_map, &left_markers),
+                ],
+                ..Default::default()
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap()
+        .into_inner()
+        .publish_token;
+    let mut sub = client
+        .subscribe(v1::SubscribeRequest {
+            room: "stage".into(),
+            level: v1::Level::Base as i32,
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    for _ in 0..2 {
+        let m = sub.message().await.unwrap().unwrap();
+        assert!(matches!(m.body, Some(v1::mesh_frame::Body::Topology(_))));
+    }
+
+    // The capture: the right hand here, the left hand 300 mm to its side, turned; later the
+    // right hand moves 40 mm.
+    let right_at = capture_of(0.3, Vec3::new(100.0, 50.0, 900.0));
+    let left_at = capture_of(-0.8, Vec3::new(-200.0, 60.0, 880.0));
+    let right_moved = capture_of(0.3, Vec3::new(140.0, 50.0, 900.0));
+    let rest = |m: &TrainedModel| -> Vec<Vec3> {
+        m.controls
+            .iter()
+            .map(|c| m.rig.rest.positions[c.vertex as usize])
+            .collect()
+    };
+    let (right_rest, left_rest) = (rest(&model), rest(&mirrored));
+    let markers = |at: &dyn Fn(Vec3) -> Vec3, points: &[Vec3]| -> Vec<f32> {
+        points.iter().flat_map(|p| at(*p).to_array()).collect()
+    };
+    let part = |name: &str, m: Vec<f32>| v1::ActorControls {
+        actor: name.into(),
+        markers: m,
+        ..Default::default()
+    };
+    let frames: Vec<v1::ControlFrame> = (0..8u64)
+        .map(|seq| {
+            let right: &dyn Fn(Vec3) -> Vec3 = if seq < 6 { &right_at } else { &right_moved };
+            v1::ControlFrame {
+                room: "stage".into(),
+                seq,
+                actors: vec![
+                    part("right", markers(right, &right_rest)),
+                    part("left", markers(&left_at, &left_rest)),
+                ],
+                ..Default::default()
+            }
+        })
+        .collect();
+    let (calibrated, moved) = (frames[5].clone(), frames[7].clone());
+    let publish = |frames: Vec<v1::ControlFrame>| {
+        let mut client = client.clone();
+        let token = token.clone();
+        async move {
+            let mut acks = client
+                .publish(authed(tokio_stream::iter(frames), &token))
+                .await
+                .unwrap()
+                .into_inner();
+            while let Some(a) = acks.message().await.unwrap() {
+                assert!(a.error.is_none(), "{a:?}");
+            }
+        }
+    };
+    /// The placements of the frame with sequence number `seq`.
+    async fn placements_of(
+        sub: &mut tonic::Streaming<v1::MeshFrame>,
+        seq: u64,
+    ) -> Vec<Option<crease_proto::ActorPlace>> {
+        loop {
+            let f = next_frame(sub).await;
+            if f.seq == seq {
+                return f
+                    .actors
+                    .iter()
+                    .map(|a| {
+                        a.placement
+                            .as_ref()
+                            .map(|p| crease_proto::ActorPlace::from_wire(p).unwrap())
+                    })
+                    .collect();
+            }
+        }
+    }
+    publish(frames[..6].to_vec()).await;
+    let placed = placements_of(&mut sub, calibrated.seq).await;
+    // Where the capture put each control point, through the performer's registration (the
+    // right hand's: the capture -> its model, as it was when fixed).
+    let into_performer = |q: Vec3| {
+        let inv = crease_core::glam::Quat::from_rotation_y(0.3).inverse();
+        inv * (q - Vec3::new(100.0, 50.0, 900.0)) / 1000.0
+    };
+    let check = |place: crease_proto::ActorPlace,
+                 points: &[Vec3],
+                 at: &dyn Fn(Vec3) -> Vec3,
+                 what: &str| {
+        for p in points {
+            let want = into_performer(at(*p));
+            let got = place.apply(*p);
+            assert!(
+                (got - want).length() < 1e-4,
+                "{what}: model point {p} placed at {got}, the capture put it at {want}"
+            );
+        }
+    };
+    check(
+        placed[0].expect("the right hand is placed"),
+        &right_rest,
+        &right_at,
+        "right",
+    );
+    check(
+        placed[1].expect("the left hand is placed"),
+        &left_rest,
+        &left_at,
+        "left",
+    );
+    let apart = placed[1].unwrap().apply(left_rest[0]) - placed[0].unwrap().apply(right_rest[0]);
+    assert!(
+        apart.length() > 0.25,
+        "the hands are 300 mm apart in the capture: {apart}"
+    );
+    // The right hand moves in the capture: its mesh moves with it, the left stays.
+    publish(frames[6..].to_vec()).await;
+    let placed = placements_of(&mut sub, moved.seq).await;
+    check(
+        placed[0].unwrap(),
+        &right_rest,
+        &right_moved,
+        "right, moved",
+    );
+    check(placed[1].unwrap(), &left_rest, &left_at, "left, still");
+}

@@ -6,8 +6,9 @@
 // iwer-pose-{relaxed,pinch,point}.js: relaxed then pinch on one hand while the other points,
 // then the other way round), and checks, per hand, that its mesh follows within the one-hand
 // test's per-pose bounds, and that both meshes measured belong to the same frame (one sequence
-// number: the room's frames carry both hands of an instant). run.sh starts the server and
-// runs this; alone:
+// number: the room's frames carry both hands of an instant); and that the page draws both
+// hands where the capture put them, under one registration for the performer (the server's
+// placements, crease_server::performer). run.sh starts the server and runs this; alone:
 //   CREASE_HTTP=127.0.0.1:PORT CREASE_TOKEN=TOKEN node tests/browser/webxr-hands.test.mjs
 // Env as webxr.test.mjs (CREASE_HTTP, CREASE_TOKEN, CREASE_SHOTS, CHROMIUM, CREASE_XR_ENCODING).
 //
@@ -193,7 +194,36 @@ try {
     });
   }
 
-  await check("(h4) stop tracking ends the session", async () => {
+  await check("(h4) one registration for the performer: both hands where the capture put them", async () => {
+    // Where the page draws each hand's control vertices (placed by the server's performer
+    // registration, in the stage) against where the capture put their targets: one similarity
+    // for both hands together must fit them as well as each hand's own does. Hands laid out
+    // side by side, or each registered on its own, would be centimetres off.
+    const look = await page.evaluate((actors) => {
+      const c = window.crease;
+      return {
+        placed: c.actors.map((a) => a.placed),
+        seqs: c.actors.map((a) => a.frameSeq),
+        hands: actors.map((a) => ({ markers: c.xrMarkers(a.name), world: c.controlPositions(a.name, true) })),
+      };
+    }, actors);
+    assert.deepEqual(look.placed, [true, true], "both hands placed by their performer's registration");
+    assert.equal(look.seqs[0], look.seqs[1], "one frame");
+    const goal = [];
+    const drawn = [];
+    actors.forEach((a, i) => {
+      goal.push(...mapTargets(maps[a.side], MAPS[a.side], a.control_points, a.capture.markers, look.hands[i].markers));
+      drawn.push(...look.hands[i].world);
+    });
+    const together = fittedDistances(goal, drawn);
+    const n = actors[0].control_points.length;
+    const apart = mm(dist(goal[0], goal[n]));
+    const line = `both hands under one similarity: max ${mm(Math.max(...together))} mm, RMS ${mm(rms(together))} mm (the hands' hand_top targets ${apart} mm apart)`;
+    assert.ok(Math.max(...together) <= MAX_FOLLOW_MM / 1000, `${line}: over ${MAX_FOLLOW_MM} mm`);
+    return line;
+  });
+
+  await check("(h5) stop tracking ends the session", async () => {
     await page.evaluate(() => document.getElementById("xr").click());
     const c = await waitForCrease(page, "the session's end", (c) => !c.xr.active, 10_000);
     return `${c.xr.published} frames in the session`;

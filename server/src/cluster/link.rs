@@ -15,7 +15,9 @@ use std::time::{Duration, Instant};
 
 use crease_core::codec::{CodecError, FrameDecoder, FrameHeader};
 use crease_proto::cluster::interest;
-use crease_proto::{Encoding, Level, actor_frame, actors_frame_message, frame_message, v1};
+use crease_proto::{
+    ActorPlace, Encoding, Level, actor_frame, actors_frame_message, frame_message, v1,
+};
 use futures_util::StreamExt;
 use futures_util::future::BoxFuture;
 use prost::Message as _;
@@ -298,7 +300,7 @@ impl RoomLink {
                 let actors = (0..update.actor_count())
                     .map(|i| {
                         let a = update.actor(i);
-                        actor_frame(i, a.encoded(), a.held)
+                        actor_frame(i, a.encoded(), a.held, a.placement)
                     })
                     .collect();
                 actors_frame_message(update.seq, update.capture_time_us, latency, 0, actors)
@@ -484,6 +486,7 @@ impl RoomLink {
                 others.push(pools[k].fill(h.qbox, &a.data, decoders[k].lanes(), |u| {
                     stamp(u);
                     u.held = a.held;
+                    u.placement = a.placement.as_ref().and_then(ActorPlace::from_wire);
                     u.set_codec_header(h);
                 }));
             }
@@ -491,6 +494,7 @@ impl RoomLink {
             pools[0].fill(h.qbox, &a.data, decoders[0].lanes(), |u| {
                 stamp(u);
                 u.held = a.held;
+                u.placement = a.placement.as_ref().and_then(ActorPlace::from_wire);
                 u.set_codec_header(h);
                 u.others.append(others);
             })
