@@ -225,6 +225,102 @@ fn loose_messages_make_a_frame_at_ok_and_bundles_without_hand_bones_make_none() 
 }
 
 #[test]
+fn both_hands_of_one_skeleton_go_to_their_actors_in_one_frame() {
+    // A room of actors (issue 38): the right hand drives actor "r", the left actor "l"; each
+    // actor's part of a frame is what a one-hand bridge of that side makes of the same bundle.
+    let right = names(&["RightHand", "RightIndexProximal", "RightIndexTip", "Hips"]);
+    let left = names(&["LeftHand", "LeftIndexProximal", "LeftIndexTip"]);
+    let actors = vec![
+        ("r".to_owned(), Hand::Right, right.clone()),
+        ("l".to_owned(), Hand::Left, left.clone()),
+    ];
+    let mut both = Bridge::actors("room", &actors, TipLengths::default()).unwrap();
+    let mut one_right = Bridge::new("room", Hand::Right, TipLengths::default(), &right).unwrap();
+    let mut one_left = Bridge::new("room", Hand::Left, TipLengths::default(), &left).unwrap();
+    let skeleton = |extra: Vec<OscPacket>| {
+        let mut content = vec![
+            bone("Hips", [0.0, 1.0, 0.0], ID),
+            bone("RightUpperArm", [0.2, 0.4, 0.0], RY90),
+            bone("LeftUpperArm", [-0.2, 0.4, 0.0], RZ90),
+        ];
+        content.extend(extra);
+        decode(&bundle(content)).unwrap()
+    };
+    let hands = skeleton(vec![
+        bone("RightHand", [0.3, 0.0, 0.0], ID),
+        bone("RightIndexProximal", [0.1, 0.0, 0.0], RZ90),
+        bone("RightIndexIntermediate", [0.04, 0.0, 0.0], RZ90),
+        bone("RightIndexDistal", [0.03, 0.0, 0.0], ID),
+        bone("LeftHand", [-0.3, 0.0, 0.0], RY90),
+        bone("LeftIndexProximal", [-0.1, 0.0, 0.0], ID),
+        bone("LeftIndexIntermediate", [-0.04, 0.0, 0.0], RZ90),
+        bone("LeftIndexDistal", [-0.03, 0.0, 0.0], ID),
+    ]);
+    let f = both.apply(&hands, 7).frame.expect("a frame");
+    assert!(
+        f.markers.is_empty(),
+        "a room of actors' frame carries its actors' parts"
+    );
+    assert_eq!((f.seq, f.capture_time_us), (0, 7));
+    let parts: Vec<&str> = f.actors.iter().map(|a| a.actor.as_str()).collect();
+    assert_eq!(parts, ["r", "l"]);
+    let alone = [
+        one_right.apply(&hands, 7).frame.unwrap(),
+        one_left.apply(&hands, 7).frame.unwrap(),
+    ];
+    for (part, alone) in f.actors.iter().zip(&alone) {
+        assert_eq!(part.markers, alone.markers, "actor {}", part.actor);
+        assert_eq!(
+            part.markers_valid, alone.markers_valid,
+            "actor {}",
+            part.actor
+        );
+    }
+    // The hands sit apart, as the skeleton has them (the left arm turned the other way).
+    assert_near(
+        Some([
+            part_marker(&f, 0, 0),
+            part_marker(&f, 0, 1),
+            part_marker(&f, 0, 2),
+        ]),
+        [0.2, 1.4, 0.3],
+        "RightHand",
+    );
+    assert!((part_marker(&f, 1, 0) - part_marker(&f, 0, 0)).abs() > 0.3);
+    // A bundle that moves the left hand only: a frame of the left actor alone (the right
+    // holds its pose in the room).
+    let f = both
+        .apply(&skeleton(vec![bone("LeftHand", [-0.3, 0.0, 0.0], ID)]), 8)
+        .frame
+        .unwrap();
+    let parts: Vec<&str> = f.actors.iter().map(|a| a.actor.as_str()).collect();
+    assert_eq!((f.seq, parts), (1, vec!["l"]));
+    // Two actors of one hand, and an actor declaring the other hand's bones, are named.
+    let twice = vec![
+        ("a".to_owned(), Hand::Right, right.clone()),
+        ("b".to_owned(), Hand::Right, right.clone()),
+    ];
+    let e = Bridge::actors("room", &twice, TipLengths::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("\"a\" and \"b\" are both the right hand"),
+        "{e}"
+    );
+    let crossed = vec![("l".to_owned(), Hand::Left, right)];
+    let e = Bridge::actors("room", &crossed, TipLengths::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("room \"room\" (actor \"l\") declares marker \"RightHand\""),
+        "{e}"
+    );
+}
+
+/// Coordinate `k` of the first marker of the frame's actor part `a`.
+fn part_marker(f: &v1::ControlFrame, a: usize, k: usize) -> f32 {
+    f.actors[a].markers[k]
+}
+
+#[test]
 fn declared_names_the_stream_cannot_carry_are_errors_naming_them() {
     let e = Bridge::new(
         "r",
@@ -537,9 +633,84 @@ fn curl_bundle(k: usize, theta: f32) -> Vec<u8> {
     bundle(content)
 }
 
+/// Runs `crease bridge vmc` into `room` until idle, sends `bundles` to it at 60 Hz (junk after
+/// every `junk_every`-th, counted as malformed), and returns its exit status and stderr.
+async fn run_bridge(
+    addr: std::net::SocketAddr,
+    room: &str,
+    token: &str,
+    bundles: Vec<Vec<u8>>,
+    junk_every: usize,
+) -> (std::process::ExitStatus, String) {
+    use std::io::BufRead;
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut child = common::crease()
+        .args([
+            "bridge",
+            "vmc",
+            "--server",
+            &format!("http://{addr}"),
+            "--room",
+            room,
+        ])
+        .args(["--listen", &format!("127.0.0.1:{port}"), "--token", token])
+        .args(["--idle-exit", "1", "--summary-every", "1"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines_tx, lines_rx) = std::sync::mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if lines_tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut log = Vec::new();
+    loop {
+        let line = lines_rx
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the bridge starts");
+        let ready = line.contains("listening on");
+        log.push(line);
+        if ready {
+            break;
+        }
+    }
+    let sent = tokio::task::spawn_blocking(move || {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let start = std::time::Instant::now();
+        for (k, b) in bundles.iter().enumerate() {
+            s.send_to(b, ("127.0.0.1", port)).unwrap();
+            if k % junk_every == 7 {
+                s.send_to(b"\x00\x01junk", ("127.0.0.1", port)).unwrap();
+            }
+            let next = start + Duration::from_secs_f64((k + 1) as f64 / 60.0);
+            std::thread::sleep(next.saturating_duration_since(std::time::Instant::now()));
+        }
+    });
+    sent.await.unwrap();
+    let status = tokio::task::spawn_blocking(move || child.wait().unwrap())
+        .await
+        .unwrap();
+    while let Ok(line) = lines_rx.recv_timeout(Duration::from_secs(5)) {
+        log.push(line);
+    }
+    let log = log.join("\n");
+    println!("{log}");
+    (status, log)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn crease_bridge_vmc_publishes_every_bundle_into_a_retargeting_room() {
-    use std::io::BufRead;
     let tmp = tempfile::tempdir().unwrap();
     let model = crease_core::model::TrainedModel::load(common::train_model(tmp.path())).unwrap();
     let controls: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
@@ -623,72 +794,11 @@ async fn crease_bridge_vmc_publishes_every_bundle_into_a_retargeting_room() {
         }
         out
     });
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let mut child = common::crease()
-        .args([
-            "bridge",
-            "vmc",
-            "--server",
-            &format!("http://{addr}"),
-            "--room",
-            "vmc",
-        ])
-        .args(["--listen", &format!("127.0.0.1:{port}"), "--token", &token])
-        .args(["--idle-exit", "1", "--summary-every", "1"])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let (lines_tx, lines_rx) = std::sync::mpsc::channel();
-    let stderr = child.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        for line in std::io::BufReader::new(stderr)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if lines_tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    let mut log = Vec::new();
-    loop {
-        let line = lines_rx
-            .recv_timeout(Duration::from_secs(30))
-            .expect("the bridge starts");
-        let ready = line.contains("listening on");
-        log.push(line);
-        if ready {
-            break;
-        }
-    }
     const N: usize = 90;
-    let sent = tokio::task::spawn_blocking(move || {
-        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-        let start = std::time::Instant::now();
-        for k in 0..N {
-            let theta = std::f32::consts::FRAC_PI_2 * k as f32 / (N - 1) as f32;
-            s.send_to(&curl_bundle(k, theta), ("127.0.0.1", port))
-                .unwrap();
-            if k % 15 == 7 {
-                s.send_to(b"\x00\x01junk", ("127.0.0.1", port)).unwrap();
-            }
-            let next = start + Duration::from_secs_f64((k + 1) as f64 / 60.0);
-            std::thread::sleep(next.saturating_duration_since(std::time::Instant::now()));
-        }
-    });
-    sent.await.unwrap();
-    let status = tokio::task::spawn_blocking(move || child.wait().unwrap())
-        .await
-        .unwrap();
-    while let Ok(line) = lines_rx.recv_timeout(Duration::from_secs(5)) {
-        log.push(line);
-    }
-    let log = log.join("\n");
-    println!("{log}");
+    let bundles = (0..N)
+        .map(|k| curl_bundle(k, std::f32::consts::FRAC_PI_2 * k as f32 / (N - 1) as f32))
+        .collect();
+    let (status, log) = run_bridge(addr, "vmc", &token, bundles, 15).await;
     assert!(status.success(), "crease bridge vmc failed:\n{log}");
     let last = log
         .lines()
@@ -769,4 +879,119 @@ async fn crease_bridge_vmc_publishes_every_bundle_into_a_retargeting_room() {
         "the curl moves the mesh: {} model units",
         moved(first, last)
     );
+}
+
+/// A bundle of both hands, each with its fingers curled by `theta`: the right hand as
+/// [`curl_bundle`] has it, the left its mirror image across Unity's x = 0.
+fn two_hand_bundle(theta: f32) -> Vec<u8> {
+    let (s, c) = (theta / 2.0).sin_cos();
+    let mut content = vec![
+        bone("RightHand", [0.35, 1.45, 0.05], ID),
+        bone("LeftHand", [-0.35, 1.45, 0.05], ID),
+    ];
+    for (side, sx, q) in [
+        ("Right", 1.0, [0.0, 0.0, s, c]),
+        ("Left", -1.0, [0.0, 0.0, -s, c]),
+    ] {
+        for (f, z) in ["Index", "Little"].iter().zip([0.03, -0.03]) {
+            content.push(bone(&format!("{side}{f}Proximal"), [sx * 0.09, 0.0, z], q));
+            content.push(bone(
+                &format!("{side}{f}Intermediate"),
+                [sx * 0.045, 0.0, 0.0],
+                q,
+            ));
+            content.push(bone(&format!("{side}{f}Distal"), [sx * 0.028, 0.0, 0.0], q));
+        }
+    }
+    content.push(ok());
+    bundle(content)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn crease_bridge_vmc_publishes_both_hands_into_a_room_of_actors() {
+    // Issue 38: a room of two actors on the tube, the right hand driving `right`, the left
+    // (the tube mirrored) driving `left`, each through a map of its hand's bones: the bridge
+    // reads the actors from the room and every bundle makes one frame the room accepts
+    // (what each actor's part holds: both_hands_of_one_skeleton_go_to_their_actors_in_one_frame).
+    let tmp = tempfile::tempdir().unwrap();
+    let model = crease_core::model::TrainedModel::load(common::train_model(tmp.path())).unwrap();
+    let controls: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
+    let served = common::serve_tube(model, Some("admin")).await;
+    let addr = served.grpc;
+    let actor = |side: &str, mirror: &str| {
+        let drivers = [
+            "Hand",
+            "IndexProximal",
+            "IndexTip",
+            "LittleProximal",
+            "LittleTip",
+        ]
+        .map(|d| format!("{}{d}", if side == "right" { "Right" } else { "Left" }));
+        let mut map = format!(
+            "[registration]\npoints = [{}]\ncalibration_frames = 10\n[markers]\n",
+            controls
+                .iter()
+                .map(|c| format!("{c:?}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        for (c, m) in controls.iter().zip(&drivers) {
+            map += &format!("{c} = {m:?}\n");
+        }
+        v1::Actor {
+            name: side.into(),
+            model: "tube".into(),
+            side: side.into(),
+            mirror: mirror.into(),
+            performer: "vmc".into(),
+            retarget: Some(v1::Retarget {
+                map_toml: map,
+                markers: drivers.to_vec(),
+                units: "m".into(),
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    };
+    let token = common::open_room(
+        addr,
+        "admin",
+        v1::OpenRoomRequest {
+            room: "hands".into(),
+            actors: vec![actor("right", ""), actor("left", "x")],
+            ..Default::default()
+        },
+    )
+    .await;
+    const N: usize = 40;
+    let bundles = (0..N)
+        .map(|k| two_hand_bundle(std::f32::consts::FRAC_PI_2 * k as f32 / (N - 1) as f32))
+        .collect();
+    let (status, log) = run_bridge(addr, "hands", &token, bundles, usize::MAX).await;
+    assert!(status.success(), "crease bridge vmc failed:\n{log}");
+    assert!(
+        log.contains("the right hand as actor \"right\" (5 markers) and the left hand as actor \"left\" (5 markers)"),
+        "{log}"
+    );
+    let last = log
+        .lines()
+        .rev()
+        .find(|l| l.starts_with("vmc: done: "))
+        .unwrap();
+    assert!(
+        last.contains(&format!(
+            "{N} frames built, {N} published ({N} acked, 0 refused"
+        )),
+        "{last}"
+    );
+    let info = crease_proto::v1::crease_client::CreaseClient::connect(format!("http://{addr}"))
+        .await
+        .unwrap()
+        .get_room(v1::GetRoomRequest {
+            room: "hands".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(info.published, N as u64);
 }

@@ -31,26 +31,119 @@ enum Source {
     Tracker(String),
 }
 
-/// The bridge's state between datagrams.
+/// One bridged hand: its actor (in a room of several), its skeleton, the latest local poses
+/// and which of them came in the current frame, the markers its room (or actor) declares and
+/// where each comes from, whether a bone of the hand came (in this bundle, or loose since the
+/// last `/VMC/Ext/OK`), and its latest joints.
 #[derive(Debug)]
-pub struct Bridge {
-    room: String,
+struct HandPart {
+    actor: Option<String>,
     hand: Hand,
     skeleton: Skeleton,
     locals: Vec<Option<Pose>>,
     fresh: Vec<bool>,
+    declared: Vec<String>,
+    sources: Vec<Source>,
+    moved: bool,
+    loose: bool,
+    last: Joints,
+}
+
+impl HandPart {
+    /// `hand` publishing `declared` (module docs of [`Bridge::new`] for the errors).
+    fn new(
+        room: &str,
+        actor: Option<String>,
+        hand: Hand,
+        tips: TipLengths,
+        declared: &[String],
+    ) -> anyhow::Result<HandPart> {
+        let skeleton = Skeleton::new(hand, tips);
+        let mut sources = Vec::with_capacity(declared.len());
+        let whose = actor
+            .as_ref()
+            .map_or(String::new(), |a| format!(" (actor {a:?})"));
+        for name in declared {
+            match skeleton.names().iter().position(|n| n == name) {
+                Some(i) => sources.push(Source::Joint(i)),
+                None if is_humanoid_name(name) => bail!(
+                    "room {room:?}{whose} declares marker {name:?}, which a VMC stream of the {} hand does not carry{}; it carries {}, and trackers by serial",
+                    hand.prefix().to_lowercase(),
+                    if actor.is_none()
+                        && name.starts_with(if hand == Hand::Right { "Left" } else { "Right" })
+                    {
+                        " (see --hand)"
+                    } else {
+                        ""
+                    },
+                    skeleton.names().join(", ")
+                ),
+                None => sources.push(Source::Tracker(name.clone())),
+            }
+        }
+        let n = skeleton.names().len();
+        Ok(HandPart {
+            actor,
+            hand,
+            skeleton,
+            locals: vec![None; n],
+            fresh: vec![false; n],
+            declared: declared.to_vec(),
+            sources,
+            moved: false,
+            loose: false,
+            last: Joints::default(),
+        })
+    }
+
+    /// The hand's markers of this frame (solved from the latest poses) into `markers` and its
+    /// validity mask (empty when every marker is valid).
+    fn markers(
+        &mut self,
+        root: Option<Pose>,
+        trackers: &BTreeMap<String, Pose>,
+        fresh_trackers: &BTreeSet<String>,
+    ) -> (Vec<f32>, Vec<u8>) {
+        self.last = self.skeleton.solve(&self.locals, &self.fresh, root);
+        let mut markers = Vec::with_capacity(3 * self.sources.len());
+        let mut valid = Vec::with_capacity(self.sources.len());
+        for s in &self.sources {
+            let p = match s {
+                Source::Joint(i) => self.last.valid[*i].then(|| self.last.positions[*i]),
+                Source::Tracker(t) => fresh_trackers.contains(t).then(|| trackers[t].position),
+            };
+            match p.filter(|p| p.is_finite()) {
+                Some(p) => {
+                    markers.extend_from_slice(&p.to_array());
+                    valid.push(true);
+                }
+                None => {
+                    markers.extend_from_slice(&[0.0; 3]);
+                    valid.push(false);
+                }
+            }
+        }
+        let mut mask = Vec::new();
+        if valid.iter().any(|v| !v) {
+            encode_valid_mask(&valid, &mut mask);
+        }
+        (markers, mask)
+    }
+}
+
+/// The bridge's state between datagrams: one hand into a one-actor room, or a hand per actor
+/// into a room of several (issue 38: both hands of one VMC skeleton), sharing the root, the
+/// trackers and the sequence numbers.
+#[derive(Debug)]
+pub struct Bridge {
+    room: String,
+    parts: Vec<HandPart>,
     root: Option<Pose>,
     trackers: BTreeMap<String, Pose>,
     fresh_trackers: BTreeSet<String>,
-    /// Loose messages since the last frame carried a hand bone.
-    loose_hand: bool,
-    declared: Vec<String>,
-    sources: Vec<Source>,
     seq: u64,
     /// Every bone name received (for the no-hand warning).
     bones_seen: BTreeSet<String>,
-    /// The latest joints (for tests and the summary).
-    last: Joints,
 }
 
 /// What one datagram did.
@@ -76,57 +169,73 @@ impl Bridge {
         tips: TipLengths,
         declared: &[String],
     ) -> anyhow::Result<Bridge> {
-        let skeleton = Skeleton::new(hand, tips);
-        let mut sources = Vec::with_capacity(declared.len());
-        for name in declared {
-            match skeleton.names().iter().position(|n| n == name) {
-                Some(i) => sources.push(Source::Joint(i)),
-                None if is_humanoid_name(name) => bail!(
-                    "room {room:?} declares marker {name:?}, which a VMC stream of the {} hand does not carry{}; it carries {}, and trackers by serial",
-                    hand.prefix().to_lowercase(),
-                    if name.starts_with(if hand == Hand::Right { "Left" } else { "Right" }) {
-                        " (see --hand)"
-                    } else {
-                        ""
-                    },
-                    skeleton.names().join(", ")
-                ),
-                None => sources.push(Source::Tracker(name.clone())),
-            }
+        Ok(Bridge::of(
+            room,
+            vec![HandPart::new(room, None, hand, tips, declared)?],
+        ))
+    }
+
+    /// A bridge of both hands (issue 38) into a room of actors: per actor `(name, hand,
+    /// declared markers)`, each actor's part of a frame its hand's markers. A frame holds the
+    /// actors whose hand (or finger) bones came in it; the others hold their poses.
+    ///
+    /// # Errors
+    /// No actor, two of the same hand, or [`Bridge::new`]'s errors, naming the actor.
+    pub fn actors(
+        room: &str,
+        actors: &[(String, Hand, Vec<String>)],
+        tips: TipLengths,
+    ) -> anyhow::Result<Bridge> {
+        if actors.is_empty() {
+            bail!("room {room:?} has no actor with a side (left or right) for a VMC hand");
         }
-        let n = skeleton.names().len();
-        Ok(Bridge {
+        let mut parts = Vec::with_capacity(actors.len());
+        for (name, hand, declared) in actors {
+            if let Some(other) = parts.iter().find(|p: &&HandPart| p.hand == *hand) {
+                bail!(
+                    "room {room:?}: actors {:?} and {name:?} are both the {} hand of the VMC skeleton",
+                    other.actor.as_deref().unwrap_or_default(),
+                    hand.prefix().to_lowercase()
+                );
+            }
+            parts.push(HandPart::new(
+                room,
+                Some(name.clone()),
+                *hand,
+                tips.clone(),
+                declared,
+            )?);
+        }
+        Ok(Bridge::of(room, parts))
+    }
+
+    fn of(room: &str, parts: Vec<HandPart>) -> Bridge {
+        Bridge {
             room: room.to_owned(),
-            hand,
-            skeleton,
-            locals: vec![None; n],
-            fresh: vec![false; n],
+            parts,
             root: None,
             trackers: BTreeMap::new(),
             fresh_trackers: BTreeSet::new(),
-            loose_hand: false,
-            declared: declared.to_vec(),
-            sources,
             seq: 0,
             bones_seen: BTreeSet::new(),
-            last: Joints::default(),
-        })
+        }
     }
 
-    /// The skeleton's marker names (joints and tips).
+    /// The (first) hand's marker names (joints and tips).
     pub fn joint_names(&self) -> &[String] {
-        self.skeleton.names()
+        self.parts[0].skeleton.names()
     }
 
-    /// The latest frame's joints, in [`Bridge::joint_names`] order.
+    /// The (first) hand's latest joints, in [`Bridge::joint_names`] order.
     pub fn joints(&self) -> &Joints {
-        &self.last
+        &self.parts[0].last
     }
 
     /// Declared markers taken for trackers whose serial has not been received.
     pub fn missing_trackers(&self) -> Vec<&str> {
-        self.sources
+        self.parts
             .iter()
+            .flat_map(|p| &p.sources)
             .filter_map(|s| match s {
                 Source::Tracker(t) if !self.trackers.contains_key(t) => Some(t.as_str()),
                 _ => None,
@@ -134,12 +243,18 @@ impl Bridge {
             .collect()
     }
 
-    /// What the stream carries: the skeleton's names and the trackers received so far.
+    /// What the stream carries: the skeletons' names and the trackers received so far.
     pub fn carried(&self) -> String {
         let trackers: Vec<&str> = self.trackers.keys().map(String::as_str).collect();
+        let names: Vec<&str> = self
+            .parts
+            .iter()
+            .flat_map(|p| p.skeleton.names())
+            .map(String::as_str)
+            .collect();
         format!(
             "{}; trackers: {}",
-            self.skeleton.names().join(", "),
+            names.join(", "),
             if trackers.is_empty() {
                 "none received".to_owned()
             } else {
@@ -153,9 +268,17 @@ impl Bridge {
         &self.bones_seen
     }
 
-    /// The bridged hand.
+    /// The bridged hand (the first, in a room of actors).
     pub fn hand(&self) -> Hand {
-        self.hand
+        self.parts[0].hand
+    }
+
+    /// The bridged hands: per hand its actor (`None` in a one-actor room) and side.
+    pub fn hands(&self) -> Vec<(Option<&str>, Hand)> {
+        self.parts
+            .iter()
+            .map(|p| (p.actor.as_deref(), p.hand))
+            .collect()
     }
 
     /// Applies one decoded datagram received at `capture_time_us`; returns the frame it
@@ -164,7 +287,6 @@ impl Bridge {
         if d.bundle {
             self.clear_fresh();
         }
-        let mut hand = false;
         let mut ok = false;
         for m in &d.messages {
             match m {
@@ -172,10 +294,12 @@ impl Bridge {
                     if !self.bones_seen.contains(name) {
                         self.bones_seen.insert(name.clone());
                     }
-                    if let Some(i) = self.skeleton.bone_index(name) {
-                        self.locals[i] = Some(*pose);
-                        self.fresh[i] = true;
-                        hand |= self.skeleton.is_hand_bone(i);
+                    for part in &mut self.parts {
+                        if let Some(i) = part.skeleton.bone_index(name) {
+                            part.locals[i] = Some(*pose);
+                            part.fresh[i] = true;
+                            part.moved |= part.skeleton.is_hand_bone(i);
+                        }
                     }
                 }
                 Vmc::Root { pose } => self.root = Some(*pose),
@@ -187,12 +311,15 @@ impl Bridge {
                 Vmc::Time(_) => {}
             }
         }
-        let complete = if d.bundle {
-            hand
-        } else {
-            self.loose_hand |= hand;
-            ok && std::mem::take(&mut self.loose_hand)
-        };
+        // Which hands this datagram completes: in a bundle, those whose bones it carried;
+        // loose messages accumulate until an OK.
+        for part in &mut self.parts {
+            if !d.bundle {
+                part.loose |= std::mem::take(&mut part.moved);
+                part.moved = ok && std::mem::take(&mut part.loose);
+            }
+        }
+        let complete = self.parts.iter().any(|p| p.moved);
         let frame = complete.then(|| self.frame(capture_time_us));
         if frame.is_some() || (!d.bundle && ok) {
             self.clear_fresh();
@@ -204,52 +331,44 @@ impl Bridge {
     }
 
     fn clear_fresh(&mut self) {
-        self.fresh.iter_mut().for_each(|f| *f = false);
+        for part in &mut self.parts {
+            part.fresh.iter_mut().for_each(|f| *f = false);
+            part.moved = false;
+        }
         self.fresh_trackers.clear();
     }
 
     fn frame(&mut self, capture_time_us: i64) -> v1::ControlFrame {
-        self.last = self.skeleton.solve(&self.locals, &self.fresh, self.root);
-        let mut markers = Vec::with_capacity(3 * self.sources.len());
-        let mut valid = Vec::with_capacity(self.sources.len());
-        for s in &self.sources {
-            let p = match s {
-                Source::Joint(i) => self.last.valid[*i].then(|| self.last.positions[*i]),
-                Source::Tracker(t) => self
-                    .fresh_trackers
-                    .contains(t)
-                    .then(|| self.trackers[t].position),
-            };
-            match p.filter(|p| p.is_finite()) {
-                Some(p) => {
-                    markers.extend_from_slice(&p.to_array());
-                    valid.push(true);
-                }
-                None => {
-                    markers.extend_from_slice(&[0.0; 3]);
-                    valid.push(false);
-                }
-            }
-        }
-        let mut mask = Vec::new();
-        if valid.iter().any(|v| !v) {
-            encode_valid_mask(&valid, &mut mask);
-        }
         let seq = self.seq;
         self.seq += 1;
-        v1::ControlFrame {
+        let (root, trackers, fresh) = (self.root, &self.trackers, &self.fresh_trackers);
+        let mut frame = v1::ControlFrame {
             room: self.room.clone(),
             seq,
             capture_time_us,
-            markers,
-            markers_valid: mask,
             ..Default::default()
+        };
+        for part in self.parts.iter_mut().filter(|p| p.moved) {
+            let (markers, mask) = part.markers(root, trackers, fresh);
+            match &part.actor {
+                None => {
+                    frame.markers = markers;
+                    frame.markers_valid = mask;
+                }
+                Some(actor) => frame.actors.push(v1::ActorControls {
+                    actor: actor.clone(),
+                    markers,
+                    markers_valid: mask,
+                    ..Default::default()
+                }),
+            }
         }
+        frame
     }
 
-    /// The declared markers, in order.
+    /// The (first) hand's declared markers, in order.
     pub fn declared(&self) -> &[String] {
-        &self.declared
+        &self.parts[0].declared
     }
 }
 

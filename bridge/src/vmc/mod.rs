@@ -1,6 +1,8 @@
 //! The VMC bridge (`crease bridge vmc`, issue 19): receives the VMC protocol (OSC over UDP, as VSeeFace,
 //! VirtualMotionCapture or Warudo send it) and publishes one hand's joints and the trackers
-//! into a retargeting room as marker frames (`ControlFrame.markers`).
+//! into a retargeting room as marker frames (`ControlFrame.markers`); into a room of actors
+//! (issue 38) both hands of the skeleton, each to the actor of its side, in one frame
+//! (`ControlFrame.actors`).
 //!
 //! - [`osc`]: VMC messages out of OSC datagrams; malformed ones are refused whole.
 //! - [`skeleton`]: Unity's humanoid chain, the left- to right-handed mirror, forward
@@ -70,6 +72,43 @@ pub fn declared_markers(
     Ok(r.markers.clone())
 }
 
+/// A room of actors' hands (issue 38): per actor with a side (`left`, `right`) its name, the
+/// VMC hand of that side, and the markers its retarget declares. `--hand` does not apply: the
+/// actors' sides say which hand drives which actor.
+///
+/// # Errors
+/// No actor with a side, or one with a side that does not retarget markers, naming it.
+pub fn hand_actors(
+    room: &str,
+    info: &crease_proto::v1::RoomInfo,
+) -> anyhow::Result<Vec<(String, Hand, Vec<String>)>> {
+    let mut out = Vec::new();
+    for a in &info.actors {
+        let Some(actor) = &a.actor else { continue };
+        let hand = match actor.side.as_str() {
+            "right" => Hand::Right,
+            "left" => Hand::Left,
+            _ => continue,
+        };
+        let declared = match &actor.retarget {
+            Some(r) if !r.markers.is_empty() => r.markers.clone(),
+            _ => bail!(
+                "room {room:?}: actor {:?} ({} hand) does not retarget markers: crease bridge publishes capture markers, so give the actor a marker map",
+                actor.name,
+                actor.side
+            ),
+        };
+        out.push((actor.name.clone(), hand, declared));
+    }
+    if out.is_empty() {
+        bail!(
+            "room {room:?} has {} actors, none with a side (left or right): a VMC hand drives the actor of its side",
+            info.actors.len()
+        );
+    }
+    Ok(out)
+}
+
 /// Runs the bridge: reads the room's declared markers, listens for VMC, and publishes every
 /// frame into the room through the publish loop until interrupted (Ctrl-C), idle
 /// ([`LoopOptions::idle_exit`]) or ended by the server, printing summaries on stderr.
@@ -86,20 +125,39 @@ pub async fn run(client: &mut CreaseClient<Channel>, opts: VmcOptions) -> anyhow
         receive,
     } = opts;
     let info = get_room(client, &room).await?;
-    let declared = declared_markers(&room, &info)?;
-    let bridge = Bridge::new(&room, hand, tips, &declared)?;
+    let (bridge, what) = if info.actors.is_empty() {
+        let declared = declared_markers(&room, &info)?;
+        let what = format!(
+            "the {} hand; publishing {} markers into room {room:?} ({})",
+            hand.prefix().to_lowercase(),
+            declared.len(),
+            declared.join(", ")
+        );
+        (Bridge::new(&room, hand, tips, &declared)?, what)
+    } else {
+        let actors = hand_actors(&room, &info)?;
+        let what = format!(
+            "{} into room {room:?} (one frame per bundle holds every hand it moved)",
+            actors
+                .iter()
+                .map(|(name, hand, declared)| format!(
+                    "the {} hand as actor {name:?} ({} markers)",
+                    hand.prefix().to_lowercase(),
+                    declared.len()
+                ))
+                .collect::<Vec<_>>()
+                .join(" and ")
+        );
+        (Bridge::actors(&room, &actors, tips)?, what)
+    };
     let socket = tokio::net::UdpSocket::bind(&receive.listen)
         .await
         .with_context(|| format!("--listen {}: cannot bind UDP", receive.listen))?;
     eprintln!(
-        "vmc: listening on {} for the {} hand; publishing {} markers into room {:?} ({})",
+        "vmc: listening on {} for {what}",
         socket
             .local_addr()
             .map_or(receive.listen.clone(), |a| a.to_string()),
-        hand.prefix().to_lowercase(),
-        declared.len(),
-        room,
-        declared.join(", ")
     );
     let stats = Arc::new(Stats::default());
     let source = {

@@ -58,7 +58,8 @@ pub struct VmcArgs {
     /// The room's publish token (from `crease room open`). Also read from CREASE_TOKEN.
     #[arg(long, env = "CREASE_TOKEN", hide_env_values = true)]
     pub token: String,
-    /// Which hand's bones to publish.
+    /// Which hand's bones to publish into a one-actor room. A room of actors (issue 38) takes
+    /// both: each hand drives the actor of its side (`crease room open --actors`).
     #[arg(long, value_enum, default_value = "right")]
     pub hand: Hand,
     /// Fingertip lengths (TOML: `[tip_ratio]` / `[tip_length]` per digit; see the docs of
