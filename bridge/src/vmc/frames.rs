@@ -202,7 +202,7 @@ impl Bridge {
                 room,
                 Some(name.clone()),
                 *hand,
-                tips.clone(),
+                tips,
                 declared,
             )?);
         }
