@@ -619,3 +619,144 @@ fn room_commands_open_inspect_and_close() {
     assert!(e.contains("no room \"m\""), "{e}");
     drop(runtime);
 }
+
+/// Issue 38: both hands of the ART C3D in one room of two actors (bench/mocap/
+/// art-hands-glove13.toml: the right hand on the glove13 hand, the left on it mirrored), from
+/// `crease room open --actors` to `crease stream --c3d --check`: every frame acknowledged,
+/// every actor's mesh decoded finite, a residual per hand, the right hand's as in a one-hand
+/// room streamed the same recording in the same run; `crease room info` lists the actors and
+/// `crease watch` decodes and dumps both hands.
+#[test]
+fn stream_c3d_into_a_room_of_both_hands() {
+    let Some(c3d) = data(C3D) else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = TrainedModel::load(glove_model(tmp.path())).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let served = runtime.block_on(serve_model(
+        "glove-hand",
+        &model,
+        Some("admin"),
+        crease_server::Limits {
+            publish_hz: 4000.0,
+            ..crease_server::Limits::default()
+        },
+    ));
+    let server = format!("http://{}", served.grpc);
+    let open = |room: &str, how: &[&str]| {
+        let mut c = crease();
+        c.args([
+            "room",
+            "open",
+            "--server",
+            &server,
+            "--admin-token",
+            "admin",
+        ])
+        .args([
+            "--room",
+            room,
+            "--beta",
+            "0.3",
+            "--filter",
+            "--markers-from",
+        ])
+        .arg(&c3d)
+        .args(how);
+        run_ok(&mut c).trim().to_owned()
+    };
+    let right_map = map("art-right-hand-glove13.toml");
+    let one = open(
+        "right",
+        &[
+            "--model",
+            "glove-hand",
+            "--map",
+            right_map.to_str().unwrap(),
+        ],
+    );
+    let hands = map("art-hands-glove13.toml");
+    let both = open("art", &["--actors", hands.to_str().unwrap()]);
+    let info = run_ok(crease().args(["room", "info", "--server", &server, "--room", "art"]));
+    assert!(
+        info.contains("room \"art\": 2 actors")
+            && info
+                .contains("actor \"right\" (right) of performer \"art\" on model \"glove-hand\"")
+            && info.contains(
+                "actor \"left\" (left) of performer \"art\" on model \"glove-hand~mirror-x\""
+            ),
+        "{info}"
+    );
+    // A viewer of both hands while the recording plays.
+    let dump = tmp.path().join("watched");
+    let watch = crease()
+        .args([
+            "watch", "--server", &server, "--room", "art", "--frames", "20", "--dump",
+        ])
+        .arg(&dump)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let stream_into = |room: &str, token: &str, json: &Path| {
+        run_ok(
+            crease()
+                .args([
+                    "stream", "--server", &server, "--room", room, "--token", token,
+                ])
+                .arg("--c3d")
+                .arg(&c3d)
+                .args(["--speed", "4", "--check", "--report"])
+                .arg(json),
+        )
+    };
+    let both_json = tmp.path().join("both.json");
+    let stdout = stream_into("art", &both, &both_json);
+    let watched = watch.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&watched.stderr);
+    assert!(watched.status.success(), "crease watch: {said}");
+    assert!(said.contains("2 actors: right: "), "{said}");
+    for actor in ["right", "left"] {
+        let obj = dump.join(format!("frame_00019_{actor}.obj"));
+        let mesh = Mesh::read(&obj).unwrap_or_else(|e| panic!("{}: {e}", obj.display()));
+        assert!(
+            mesh.positions.iter().all(|p| p.is_finite()),
+            "{}",
+            obj.display()
+        );
+    }
+    let one_json = tmp.path().join("one.json");
+    stream_into("right", &one, &one_json);
+    assert!(stdout.contains("969 acknowledged, 0 refused"), "{stdout}");
+    let r = report(&both_json);
+    assert_eq!(r["meshes"]["non_finite"], 0, "{r}");
+    assert_eq!(r["meshes"]["decode_errors"], 0, "{r}");
+    let actor = |name: &str| {
+        r["actors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|a| a["name"] == name)
+            .unwrap_or_else(|| panic!("no actor {name} in {r}"))["control_residual_rms_recording_units"]
+            .as_f64()
+            .unwrap()
+    };
+    let (right, left) = (actor("right"), actor("left"));
+    let alone = report(&one_json)["control_residual_rms_recording_units"]
+        .as_f64()
+        .unwrap();
+    eprintln!(
+        "ART C3D residual RMS: right {right:.2} mm, left {left:.2} mm; the right hand alone {alone:.2} mm"
+    );
+    assert!(
+        stdout.contains(&format!("actor \"right\": control residual RMS"))
+            && stdout.contains("actor \"left\""),
+        "{stdout}"
+    );
+    assert!(
+        (right - alone).abs() <= 0.02 * alone,
+        "right {right} mm in the room of both hands, {alone} mm alone"
+    );
+    assert!(left > 0.0 && left < 2.0 * alone, "left {left} mm");
+    drop(served);
+}

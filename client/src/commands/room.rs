@@ -256,30 +256,8 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
         .into_inner();
     let room = get_room(&mut client, &opened.room).await?;
     if with_actors {
-        for info in &room.actors {
-            let (Some(a), Some(m)) = (&info.actor, &info.model) else {
-                continue;
-            };
-            eprintln!(
-                "room {:?}: actor {:?}{} on model {:?}: beta {}, filter {}, refinement {}, skinning {}{}",
-                room.room,
-                a.name,
-                if a.side.is_empty() {
-                    String::new()
-                } else {
-                    format!(" ({})", a.side)
-                },
-                m.name,
-                a.beta,
-                print_filter(a.filter.as_ref()),
-                print_refinement(a.refine.as_ref()),
-                print_skinning(a.skinning),
-                a.retarget.as_ref().map_or(String::new(), |r| format!(
-                    ", retargets {} markers ({})",
-                    r.markers.len(),
-                    r.units
-                ))
-            );
+        for line in actor_lines(&room) {
+            eprintln!("room {:?}: {line}", room.room);
         }
         println!("{}", opened.publish_token);
         return Ok(());
@@ -427,9 +405,59 @@ fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
     }))
 }
 
+/// One line per actor of a room of several (issue 38): name, side, performer, model, options
+/// and capture.
+fn actor_lines(room: &v1::RoomInfo) -> Vec<String> {
+    room.actors
+        .iter()
+        .filter_map(|info| {
+            let (a, m) = (info.actor.as_ref()?, info.model.as_ref()?);
+            Some(format!(
+                "actor {:?}{}{} on model {:?} ({} vertices, {} control points): beta {}, filter {}, refinement {}, skinning {}{}",
+                a.name,
+                if a.side.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", a.side)
+                },
+                if a.performer.is_empty() {
+                    String::new()
+                } else {
+                    format!(" of performer {:?}", a.performer)
+                },
+                m.name,
+                m.base_vertices,
+                m.control_points.len(),
+                a.beta,
+                print_filter(a.filter.as_ref()),
+                print_refinement(a.refine.as_ref()),
+                print_skinning(a.skinning),
+                a.retarget.as_ref().map_or(String::new(), |r| format!(
+                    ", retargets {} markers ({})",
+                    r.markers.len(),
+                    r.units
+                ))
+            ))
+        })
+        .collect()
+}
+
 async fn info(args: &InfoArgs) -> anyhow::Result<()> {
     let mut client = args.server.connect().await?;
     let room = get_room(&mut client, &args.room).await?;
+    if !room.actors.is_empty() {
+        println!(
+            "room {:?}: {} actors, {} subscribers, {} frames published",
+            room.room,
+            room.actors.len(),
+            room.subscribers,
+            room.published
+        );
+        for line in actor_lines(&room) {
+            println!("  {line}");
+        }
+        return Ok(());
+    }
     let model = room.model.unwrap_or_default();
     println!(
         "room {:?}: model {:?} ({} vertices, {} control points: {}), beta {}, filter {}, refinement {}, skinning {}, {} subscribers, {} frames published",

@@ -1,5 +1,7 @@
 //! `crease watch`: subscribe to a room over gRPC, decode every frame, and report frames per
-//! second, bytes per frame and latency percentiles; optionally dump frames as OBJ.
+//! second, bytes per frame and latency percentiles; optionally dump frames as OBJ. A room of
+//! several actors (issue 38) is watched whole: every actor's part of each frame decoded with
+//! its own reader, its bytes counted, its mesh dumped beside the others'.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -32,7 +34,8 @@ pub struct WatchArgs {
     /// Stop after this many frames and print a one-line summary.
     #[arg(long, value_name = "N")]
     pub frames: Option<u64>,
-    /// Write every received frame as `DIR/frame_00000.obj`, ...
+    /// Write every received frame as `DIR/frame_00000.obj`, ... (a room of actors:
+    /// `DIR/frame_00000_ACTOR.obj` per actor)
     #[arg(long, value_name = "DIR")]
     pub dump: Option<PathBuf>,
     /// Record the stream as it arrives (its first message, then every frame) to FILE, the
@@ -64,19 +67,45 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
     let header_start = Instant::now();
     let mut sub = mesh_stream::subscribe_encoded(&mut client, &args.room, level, encoding).await?;
     let header_secs = header_start.elapsed().as_secs_f64();
-    let mut reader = sub.stream_reader()?;
-    let n = reader.vertex_count();
-    let triangles = reader.model_triangles();
+    let mut readers = sub.stream_readers()?;
+    let names = sub.actor_names();
+    let n: usize = readers.iter().map(|r| r.vertex_count()).sum();
+    let triangles: Vec<Vec<[u32; 3]>> = readers.iter().map(|r| r.model_triangles()).collect();
+    let first_bytes = prost::Message::encoded_len(&sub.first)
+        + sub
+            .actors
+            .iter()
+            .skip(1)
+            .map(prost::Message::encoded_len)
+            .sum::<usize>();
+    let what = if names.is_empty() {
+        format!(
+            "model {:?}, {} vertices, {} triangles",
+            sub.model(),
+            n,
+            triangles[0].len()
+        )
+    } else {
+        let actors: Vec<String> = names
+            .iter()
+            .zip(&readers)
+            .map(|(a, r)| format!("{a}: {} vertices", r.vertex_count()))
+            .collect();
+        format!("{} actors: {}", names.len(), actors.join(", "))
+    };
     eprintln!(
-        "watching room {:?} (model {:?}, {} vertices, {} triangles, {} encoding; first message {} bytes in {:.3} s)",
+        "watching room {:?} ({what}, {} encoding; first message{} {first_bytes} bytes in {header_secs:.3} s)",
         args.room,
-        sub.model(),
-        n,
-        triangles.len(),
         encoding.name(),
-        prost::Message::encoded_len(&sub.first),
-        header_secs
+        if names.is_empty() { "" } else { "s" },
     );
+    if !names.is_empty() && args.record.is_some() {
+        bail!(
+            "--record: room {:?} has {} actors, and `crease decode-stream` reads one actor's stream; record a take instead (`crease take start`)",
+            args.room,
+            names.len()
+        );
+    }
     if let Some(dir) = &args.dump {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
@@ -91,20 +120,41 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    // The dumped mesh, in model vertex order: the topology once, each frame's positions
-    // decoded and put back in model order into it.
-    let mut mesh = Mesh {
-        positions: Vec::new(),
-        triangles,
-    };
+    // The dumped meshes, one per actor, in model vertex order: the topology once, each
+    // frame's positions decoded and put back in model order into it.
+    let mut meshes: Vec<Mesh> = triangles
+        .into_iter()
+        .map(|triangles| Mesh {
+            positions: Vec::new(),
+            triangles,
+        })
+        .collect();
     let (mut frames, mut bytes, mut skipped) = (0u64, 0u64, 0u64);
     let mut latencies: Vec<u32> = Vec::new();
     let start = Instant::now();
     let mut window = (Instant::now(), 0u64, 0u64);
     while let Some(f) = sub.next_frame().await? {
-        reader
-            .decode(&f.data)
-            .with_context(|| format!("decoding frame {}", f.seq))?;
+        let mut size = f.data.len();
+        if f.actors.is_empty() {
+            readers[0]
+                .decode(&f.data)
+                .with_context(|| format!("decoding frame {}", f.seq))?;
+        } else {
+            for a in &f.actors {
+                let reader = readers.get_mut(a.actor as usize).with_context(|| {
+                    format!(
+                        "frame {}: actor {}, of {} actors",
+                        f.seq,
+                        a.actor,
+                        names.len()
+                    )
+                })?;
+                reader
+                    .decode(&a.data)
+                    .with_context(|| format!("decoding frame {} of actor {}", f.seq, a.actor))?;
+                size += a.data.len();
+            }
+        }
         if let Some((w, path)) = &mut record {
             let msg = v1::MeshFrame {
                 body: Some(v1::mesh_frame::Body::Frame(f.clone())),
@@ -113,17 +163,22 @@ async fn watch(args: &WatchArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         frames += 1;
-        bytes += f.data.len() as u64;
+        bytes += size as u64;
         skipped += u64::from(f.skipped);
         latencies.push(f.server_latency_us);
         if let Some(dir) = &args.dump {
-            reader.model_positions(&mut mesh.positions);
-            let path = dir.join(format!("frame_{:05}.obj", frames - 1));
-            mesh.write(&path)
-                .with_context(|| format!("writing {}", path.display()))?;
+            for (k, (reader, mesh)) in readers.iter_mut().zip(&mut meshes).enumerate() {
+                reader.model_positions(&mut mesh.positions);
+                let path = match names.get(k) {
+                    Some(actor) => dir.join(format!("frame_{:05}_{actor}.obj", frames - 1)),
+                    None => dir.join(format!("frame_{:05}.obj", frames - 1)),
+                };
+                mesh.write(&path)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
         }
         window.1 += 1;
-        window.2 += f.data.len() as u64;
+        window.2 += size as u64;
         if window.0.elapsed() >= Duration::from_secs(1) {
             let secs = window.0.elapsed().as_secs_f64();
             eprintln!(
