@@ -667,6 +667,19 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         ],
         "C's relay runs the registry's actors"
     );
+    let listed = c.rooms().await;
+    let duo_listed = listed["cluster"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["room"] == "duo")
+        .cloned()
+        .unwrap_or_default();
+    assert_eq!(
+        duo_listed["actors"],
+        serde_json::json!(["right", "left"]),
+        "/api/rooms on C lists the cluster room's actors: {listed}"
+    );
     // A viewer joining B late, while B relays: its first frame is a keyframe made on B from
     // the lanes B decoded (the owner is not asked), and it matches the prediction.
     let (late_b, _tl) = grpc_viewer(&b, &model, "r", v1::Level::Base).await;

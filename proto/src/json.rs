@@ -256,7 +256,8 @@ impl JsonAck {
 }
 
 /// `GET /api/rooms`: `{"rooms": [ids, in order]}`; in a cluster also
-/// `"cluster": [{"room", "model", "owner"}, ...]` and `"replica"` (the one that answered).
+/// `"cluster": [{"room", "model", "owner", "actors"}, ...]` and `"replica"` (the one that
+/// answered).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RoomList {
     /// The open rooms' ids, sorted.
@@ -278,6 +279,10 @@ pub struct RoomOwner {
     pub model: String,
     /// The replica that predicts its frames.
     pub owner: String,
+    /// A room of several actors (issue 38): the actors' names, in the room's order; absent
+    /// in a one-actor room.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub actors: Vec<String>,
 }
 
 /// `f32`s as the `f64` they widen to (see the module docs).

@@ -57,7 +57,7 @@ async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {
 }
 
 /// `GET /api/rooms`: the open rooms' ids, in order; in a cluster every room of the cluster,
-/// with its model and owner.
+/// with its model, owner and actors.
 async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     if let Some(cluster) = state.cluster() {
         let rooms = cluster.rooms();
@@ -69,6 +69,12 @@ async fn rooms(State(state): State<Arc<AppState>>) -> impl IntoResponse {
                     room: id.clone(),
                     model: k.entry.model.clone(),
                     owner: k.entry.owner.clone(),
+                    actors: k
+                        .entry
+                        .actors
+                        .iter()
+                        .filter_map(|a| a.actor.as_ref().map(|a| a.name.clone()))
+                        .collect(),
                 })
                 .collect(),
             replica: Some(cluster.replica.clone()),

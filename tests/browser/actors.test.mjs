@@ -10,24 +10,10 @@
 
 import assert from "node:assert/strict";
 import fs from "node:fs";
-import os from "node:os";
 import path from "node:path";
-import { fileURLToPath } from "node:url";
-import { chromium } from "playwright-core";
-import { LAUNCH_ARGS, capturePng, checkList, sleep, waitForCrease, watchPage } from "./common.mjs";
+import { capturePng, runBrowserTest, sleep, waitForCrease } from "./common.mjs";
 
-const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
-const httpAddr = process.env.CREASE_HTTP;
-const duoToken = process.env.CREASE_DUO_TOKEN;
-if (!httpAddr || !duoToken) {
-  console.error("FAIL: set CREASE_HTTP (host:port of crease-server's HTTP side) and CREASE_DUO_TOKEN");
-  process.exit(2);
-}
-const base = `http://${httpAddr}`;
-const shots = path.resolve(root, process.env.CREASE_SHOTS || path.join(process.env.CARGO_TARGET_DIR || "target", "browser-test"));
-const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 const VIEWPORT = { width: 1024, height: 768 };
-const OVERALL_TIMEOUT_MS = 180_000;
 /** Looks at room performer: both hands must be in different poses (the left's mirror image
  * apart from the right by more than this share of the hand's size, RMS over control points)
  * in most looks (the loops run the same poses in opposite orders: they cross now and then). */
@@ -39,25 +25,13 @@ const LOOKS = 20;
 const DRAG_PX = 40;
 const MIN_FOLLOW = 0.3;
 
-const { check, results, failed, fail } = checkList();
-const watchdog = setTimeout(() => {
-  console.error(`FAIL: the actors test did not finish within ${OVERALL_TIMEOUT_MS / 1000} s`);
-  process.exit(1);
-}, OVERALL_TIMEOUT_MS);
-
 const dist = (a, b) => Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
 const rmsGap = (a, b) => Math.sqrt(a.reduce((s, p, i) => s + dist(p, b[i]) ** 2, 0) / a.length);
 const sizeOf = ([lo, hi]) => Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
 
-fs.mkdirSync(shots, { recursive: true });
-const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-chromium-"));
-const context = await chromium.launchPersistentContext(userDataDir, { executablePath, headless: true, args: LAUNCH_ARGS, viewport: VIEWPORT });
-console.log(`chromium ${context.browser()?.version() ?? "(version unknown)"}; server ${base}`);
-
-let pageErrors = [];
-try {
-  const page = context.pages()[0] ?? (await context.newPage());
-  pageErrors = watchPage(page, "actors page");
+/** The checks, on the harness's page (common.mjs runBrowserTest). */
+async function checks({ page, base, shots, env, check }) {
+  const duoToken = env.CREASE_DUO_TOKEN;
   const performer = await fetch(`${base}/api/rooms/performer`).then((r) => r.json());
   const size = sizeOf(performer.actors[0].bounds);
 
@@ -151,18 +125,6 @@ try {
     fs.writeFileSync(path.join(shots, "actors-duo-drag.png"), await capturePng(page, { x: 0, y: 0, ...VIEWPORT }));
     return `left index_nail dragged ${DRAG_PX} px up, moved ${screenMove.toFixed(1)} px; right hand still (${rightMoved.toExponential(1)}), ${c.published - before.published} frames published`;
   });
-
-  await check("no uncaught page errors", async () => {
-    assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);
-  });
-} catch (e) {
-  fail();
-  results.push(`FAIL ${e && e.message ? e.message : e}`);
-  console.log(results.at(-1));
-} finally {
-  await context.close().catch(() => {});
-  fs.rmSync(userDataDir, { recursive: true, force: true });
-  clearTimeout(watchdog);
 }
-console.log(`actors: ${results.length - failed()} passed, ${failed()} failed`);
-process.exit(failed() ? 1 : 0);
+
+await runBrowserTest({ label: "actors", need: ["CREASE_DUO_TOKEN"], timeoutMs: 180_000, viewport: VIEWPORT, body: checks });

@@ -3,7 +3,12 @@
 // flags, and the page-error watcher.
 
 import assert from "node:assert/strict";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import { fileURLToPath } from "node:url";
 import zlib from "node:zlib";
+import { chromium } from "playwright-core";
 
 /** Chromium's flags: headless, software GL (SwiftShader), nothing phoning home. */
 export const LAUNCH_ARGS = [
@@ -205,4 +210,58 @@ export async function waitForCrease(page, what, pred, ms) {
     }
     await sleep(100);
   }
+}
+
+/**
+ * One browser test's run, start to end (the rooms-of-actors tests use it): reads
+ * CREASE_HTTP and the env variables named in `need` (exits 2 naming any missing), launches
+ * Debian's Chromium (CHROMIUM, default /usr/bin/chromium) headless with a fresh profile at
+ * `viewport`, and runs `body({page, base, shots, env, check})` on its page: `check` is
+ * checkList's, `shots` the screenshot folder (CREASE_SHOTS, default
+ * ${CARGO_TARGET_DIR:-target}/browser-test), `env` the needed variables by name. Then checks
+ * that the page threw nothing, prints "`label`: N passed, N failed" and exits 1 on a failure;
+ * a watchdog ends a run past `timeoutMs`.
+ */
+export async function runBrowserTest({ label, need = [], timeoutMs, viewport = { width: 1024, height: 768 }, body }) {
+  const missing = ["CREASE_HTTP", ...need].filter((n) => !process.env[n]);
+  if (missing.length) {
+    console.error(`FAIL: set ${missing.join(" and ")} (see the test's header)`);
+    process.exit(2);
+  }
+  const env = Object.fromEntries(need.map((n) => [n, process.env[n]]));
+  const base = `http://${process.env.CREASE_HTTP}`;
+  const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
+  const shots = path.resolve(root, process.env.CREASE_SHOTS || path.join(process.env.CARGO_TARGET_DIR || "target", "browser-test"));
+  fs.mkdirSync(shots, { recursive: true });
+  const { check, results, failed, fail } = checkList();
+  const watchdog = setTimeout(() => {
+    console.error(`FAIL: the ${label} test did not finish within ${timeoutMs / 1000} s`);
+    process.exit(1);
+  }, timeoutMs);
+  const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-chromium-"));
+  const context = await chromium.launchPersistentContext(userDataDir, {
+    executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+    headless: true,
+    args: LAUNCH_ARGS,
+    viewport,
+  });
+  console.log(`chromium ${context.browser()?.version() ?? "(version unknown)"}; server ${base}`);
+  try {
+    const page = context.pages()[0] ?? (await context.newPage());
+    const pageErrors = watchPage(page, `${label} page`);
+    await body({ page, base, shots, env, check });
+    await check("no uncaught page errors", async () => {
+      assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);
+    });
+  } catch (e) {
+    fail();
+    results.push(`FAIL ${e && e.message ? e.message : e}`);
+    console.log(results.at(-1));
+  } finally {
+    await context.close().catch(() => {});
+    fs.rmSync(userDataDir, { recursive: true, force: true });
+    clearTimeout(watchdog);
+  }
+  console.log(`${label}: ${results.length - failed()} passed, ${failed()} failed`);
+  process.exit(failed() ? 1 : 0);
 }

@@ -18,28 +18,13 @@
 
 import assert from "node:assert/strict";
 import fs from "node:fs";
-import os from "node:os";
 import path from "node:path";
 import { fileURLToPath } from "node:url";
-import { chromium } from "playwright-core";
 import { parse as parseToml } from "smol-toml";
-import { LAUNCH_ARGS, capturePng, checkList, waitForCrease, watchPage } from "./common.mjs";
+import { capturePng, runBrowserTest, waitForCrease } from "./common.mjs";
 import { dist, fittedDistances, iwerVersion, loadPoses, mapTargets, mm, rms, routeIwer } from "./xr-common.mjs";
 
-const here = path.dirname(fileURLToPath(import.meta.url));
-const root = path.resolve(here, "../..");
-const httpAddr = process.env.CREASE_HTTP;
-const token = process.env.CREASE_TOKEN;
-if (!httpAddr || !token) {
-  console.error("FAIL: set CREASE_HTTP (host:port of crease-server's HTTP side) and CREASE_TOKEN");
-  process.exit(2);
-}
-const base = `http://${httpAddr}`;
-const shots = path.resolve(
-  root,
-  process.env.CREASE_SHOTS || path.join(process.env.CARGO_TARGET_DIR || "target", "browser-test"),
-);
-const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
+const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
 const poseDir = path.resolve(root, "../shared/data/hand");
 /** Each side's map, as the demo opens the room (crease-demo's both_hands_room). */
 const MAPS = {
@@ -54,7 +39,6 @@ const MAX_FOLLOW_MM = 15;
 const MAX_FOLLOW_TO_REST = 0.6;
 const MAX_ACK_RESIDUAL_MM = 15;
 const SETTLE_FRAMES = 8;
-const OVERALL_TIMEOUT_MS = 240_000;
 /** The hands' poses, phase by phase: one hand relaxed then pinching while the other points,
  * then the other way round. */
 const PHASES = [
@@ -63,33 +47,16 @@ const PHASES = [
   { right: "point", left: "pinch" },
 ];
 
-const { check, results, failed, fail } = checkList();
-
 const poses = await loadPoses(poseDir);
 if (!poses) process.exit(0);
 const maps = Object.fromEntries(Object.entries(MAPS).map(([side, p]) => [side, parseToml(fs.readFileSync(p, "utf8"))]));
 
-const watchdog = setTimeout(() => {
-  console.error(`FAIL: the two-hand WebXR test did not finish within ${OVERALL_TIMEOUT_MS / 1000} s`);
-  process.exit(1);
-}, OVERALL_TIMEOUT_MS);
-
-fs.mkdirSync(shots, { recursive: true });
-const shotFiles = PHASES.map((p) => `xr-hands-${p.right}-${p.left}.png`);
-for (const f of shotFiles) fs.rmSync(path.join(shots, f), { force: true });
-const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), "crease-chromium-"));
-const context = await chromium.launchPersistentContext(userDataDir, {
-  executablePath,
-  headless: true,
-  args: LAUNCH_ARGS,
-  viewport: VIEWPORT,
-});
-console.log(`chromium ${context.browser()?.version() ?? "(version unknown)"}; server ${base}; iwer ${iwerVersion()}`);
-
-let pageErrors = [];
-try {
-  const page = context.pages()[0] ?? (await context.newPage());
-  pageErrors = watchPage(page, "webxr hands page");
+/** The checks, on the harness's page (common.mjs runBrowserTest). */
+async function checks({ page, base, shots, env, check }) {
+  console.log(`iwer ${iwerVersion()}`);
+  const token = env.CREASE_TOKEN;
+  const shotFiles = PHASES.map((p) => `xr-hands-${p.right}-${p.left}.png`);
+  for (const f of shotFiles) fs.rmSync(path.join(shots, f), { force: true });
   await routeIwer(page);
   const encoding = process.env.CREASE_XR_ENCODING ? `&encoding=${process.env.CREASE_XR_ENCODING}` : "";
   await page.goto(`${base}/?room=${ROOM}${encoding}#token=${encodeURIComponent(token)}`, { waitUntil: "load" });
@@ -228,21 +195,6 @@ try {
     const c = await waitForCrease(page, "the session's end", (c) => !c.xr.active, 10_000);
     return `${c.xr.published} frames in the session`;
   });
-
-  await check("no uncaught page errors", async () => {
-    assert.deepEqual(pageErrors, [], `page errors:\n    ${pageErrors.join("\n    ")}`);
-  });
-} catch (e) {
-  fail();
-  results.push(`FAIL ${e && e.message ? e.message : e}`);
-  console.log(results.at(-1));
-} finally {
-  await context.close().catch(() => {});
-  fs.rmSync(userDataDir, { recursive: true, force: true });
-  clearTimeout(watchdog);
 }
 
-const saved = shotFiles.filter((f) => fs.existsSync(path.join(shots, f)));
-console.log(`screenshots: ${saved.length ? saved.map((f) => path.join(shots, f)).join(" ") : "none"}`);
-console.log(`webxr hands: ${results.length - failed()} passed, ${failed()} failed`);
-process.exit(failed() ? 1 : 0);
+await runBrowserTest({ label: "webxr hands", need: ["CREASE_TOKEN"], timeoutMs: 240_000, body: checks });
