@@ -749,7 +749,7 @@ fn stream_c3d_into_a_room_of_both_hands() {
         "ART C3D residual RMS: right {right:.2} mm, left {left:.2} mm; the right hand alone {alone:.2} mm"
     );
     assert!(
-        stdout.contains(&format!("actor \"right\": control residual RMS"))
+        stdout.contains("actor \"right\": control residual RMS")
             && stdout.contains("actor \"left\""),
         "{stdout}"
     );
