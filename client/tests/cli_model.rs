@@ -78,3 +78,84 @@ fn model_mirror_names_a_bad_plane_and_a_missing_file() {
     let stderr = refused(&[missing.as_os_str(), "--out".as_ref(), out.as_os_str()]);
     assert!(stderr.contains("nowhere.crease"), "stderr: {stderr}");
 }
+
+/// `crease model upload|list|delete` (issue 39) against a server with a models folder: the
+/// upload lands in the folder as the file was, is listed, and opens rooms; a file that is not
+/// a model is refused before it travels; delete empties the folder.
+#[test]
+fn model_upload_list_and_delete_through_the_server() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("models");
+    std::fs::create_dir_all(&folder).unwrap();
+    let file = dir.path().join("hand-v2.crease");
+    let model = crease_testkit::model::model();
+    model.save(&file).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let running = runtime.block_on(async {
+        let loopback = std::net::SocketAddr::from(([127, 0, 0, 1], 0));
+        let state = crease_server::AppState::new(
+            crease_server::registry::ModelRegistry::load_dir(&folder).unwrap(),
+            crease_server::Config {
+                grpc: loopback,
+                http: loopback,
+                admin_token: Some("adm".into()),
+                models_dir: Some(folder.clone()),
+                ..crease_server::Config::default()
+            },
+        );
+        crease_server::serve(state).await.unwrap()
+    });
+    let server = format!("http://{}", running.grpc);
+    let run = |args: &[&str]| {
+        crease()
+            .arg("model")
+            .args(args)
+            .args(["--server", &server])
+            .output()
+            .unwrap()
+    };
+    let path = file.to_str().unwrap();
+    let out = run(&["upload", path, "--admin-token", "adm"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said}");
+    assert!(said.contains("uploaded model \"hand-v2\""), "{said}");
+    assert_eq!(
+        std::fs::read(folder.join("hand-v2.crease")).unwrap(),
+        std::fs::read(&file).unwrap(),
+        "the folder holds the file as it was"
+    );
+    let out = run(&["list"]);
+    let listed = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && listed.starts_with("hand-v2\t"),
+        "{listed}"
+    );
+    // A file that is not a model is named before it travels; a wrong token by the server.
+    let junk = dir.path().join("junk.crease");
+    std::fs::write(&junk, b"not a model").unwrap();
+    let out = run(&["upload", junk.to_str().unwrap(), "--admin-token", "adm"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && said.contains("is not a crease model"),
+        "{said}"
+    );
+    let out = run(&["upload", path, "--name", "other", "--admin-token", "nope"]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && said.contains("wrong admin token"),
+        "{said}"
+    );
+    assert!(!folder.join("other.crease").exists());
+    let out = run(&["delete", "hand-v2", "--admin-token", "adm"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0);
+    let out = run(&["list"]);
+    assert!(out.status.success() && out.stdout.is_empty());
+    runtime
+        .block_on(running.shutdown(std::time::Duration::from_secs(1)))
+        .unwrap();
+}

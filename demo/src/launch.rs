@@ -242,6 +242,10 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     }
     let tls = config.server.tls.is_some();
     let mut server = config.server;
+    // Uploads go into the folder the models came from (issue 39).
+    if server.models_dir.is_none() {
+        server.models_dir = config.models.clone();
+    }
     // Takes go to the cache folder's `takes/` unless the operator chose a folder.
     if server.takes.is_none() {
         server.takes = Some(

@@ -83,6 +83,9 @@ struct Args {
     /// Most actors a room may hold (both hands of a performer are two).
     #[arg(long, default_value_t = Limits::default().actors_per_room)]
     max_actors: usize,
+    /// Largest model file an admin may upload (`crease model upload`), bytes.
+    #[arg(long, default_value_t = Limits::default().model_bytes)]
+    max_model_bytes: u64,
     /// Largest gRPC or WebSocket message accepted, bytes.
     #[arg(long, default_value_t = Limits::default().message_bytes)]
     max_message_bytes: usize,
@@ -151,6 +154,7 @@ impl From<Args> for Config {
                     subscribers_per_room: args.max_subscribers,
                     publish_hz: args.max_publish_hz,
                     actors_per_room: args.max_actors,
+                    model_bytes: args.max_model_bytes,
                     message_bytes: args.max_message_bytes,
                     connections: Caps {
                         per_address: args.max_connections_per_address,
@@ -164,6 +168,8 @@ impl From<Args> for Config {
                 web: args.web.or_else(launch::source_tree_web),
                 maps: args.maps,
                 takes: args.takes,
+                // launch::start sets it from `models` below.
+                models_dir: None,
                 tls: args
                     .tls_cert
                     .zip(args.tls_key)

@@ -558,6 +558,66 @@ async fn rooms_across_three_replicas_relay_forward_adopt_and_survive_a_nats_rest
         r.ready().await;
     }
 
+    // Issue 39: a model uploaded to C (written into C's folder, offered to the cluster) opens
+    // a room on A, which never had it; ListModels on B lists it among the cluster's.
+    let bytes = common::model().to_bytes().unwrap();
+    let sha = crease_server::registry::sha256_hex(&bytes);
+    let mut first = v1::ModelChunk {
+        name: "uploaded".into(),
+        size: bytes.len() as u64,
+        sha256: sha.clone(),
+        ..Default::default()
+    };
+    first.data = bytes[..bytes.len() / 2].to_vec();
+    let rest = v1::ModelChunk {
+        data: bytes[bytes.len() / 2..].to_vec(),
+        ..Default::default()
+    };
+    c.client()
+        .await
+        .upload_model(authed(tokio_stream::iter(vec![first, rest]), ADMIN))
+        .await
+        .unwrap();
+    assert!(models_c.join("uploaded.crease").is_file());
+    assert!(!models_ab.join("uploaded.crease").exists());
+    a.client()
+        .await
+        .open_room(authed(
+            v1::OpenRoomRequest {
+                room: "on-upload".into(),
+                model: "uploaded".into(),
+                ..Default::default()
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap();
+    let listed = b
+        .client()
+        .await
+        .list_models(v1::ListModelsRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert!(
+        listed
+            .cluster
+            .iter()
+            .any(|m| m.name == "uploaded" && m.sha256 == sha && m.bytes == bytes.len() as u64),
+        "{:?}",
+        listed.cluster
+    );
+    a.client()
+        .await
+        .close_room(authed(
+            v1::CloseRoomRequest {
+                room: "on-upload".into(),
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap();
+
     // A room opened on A is listed, with its owner, on B and C.
     let open = v1::OpenRoomRequest {
         room: "r".into(),

@@ -63,6 +63,79 @@ pub async fn list_models(client: &mut CreaseClient<Channel>) -> anyhow::Result<V
         .map_err(|s| anyhow::anyhow!("listing the models: {}", s.message()))
 }
 
+/// Bytes per `ModelChunk` of an upload (the server takes messages up to 4 MiB).
+pub const MODEL_CHUNK_BYTES: usize = 1 << 20;
+
+/// Uploads a model file's `bytes` as model `name` (`UploadModel`, issue 39; admin `token`):
+/// the first chunk names it and declares its size and SHA-256 (`sha256`, hex; the file's
+/// own unless a caller tests the server's check), then the bytes in chunks of
+/// [`MODEL_CHUNK_BYTES`]. Returns the model as the server loaded it.
+///
+/// # Errors
+/// The server's refusal (its message names what was wrong), or an unreachable server.
+pub async fn upload_model(
+    client: &mut CreaseClient<Channel>,
+    token: &str,
+    name: &str,
+    bytes: Vec<u8>,
+    sha256: &str,
+) -> anyhow::Result<v1::ModelInfo> {
+    let size = bytes.len() as u64;
+    let mut chunks: Vec<v1::ModelChunk> = bytes
+        .chunks(MODEL_CHUNK_BYTES)
+        .map(|c| v1::ModelChunk {
+            data: c.to_vec(),
+            ..Default::default()
+        })
+        .collect();
+    if chunks.is_empty() {
+        chunks.push(v1::ModelChunk::default());
+    }
+    chunks[0].name = name.to_owned();
+    chunks[0].size = size;
+    chunks[0].sha256 = sha256.to_owned();
+    client
+        .upload_model(authorized(tokio_stream::iter(chunks), token)?)
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("uploading model {name:?}: {}", s.message()))
+}
+
+/// Deletes model `name` from the server (`DeleteModel`, admin `token`).
+///
+/// # Errors
+/// The server's refusal (in use by a room, no such model), or an unreachable server.
+pub async fn delete_model(
+    client: &mut CreaseClient<Channel>,
+    token: &str,
+    name: &str,
+) -> anyhow::Result<()> {
+    client
+        .delete_model(authorized(
+            v1::DeleteModelRequest {
+                model: name.to_owned(),
+            },
+            token,
+        )?)
+        .await
+        .map(|_| ())
+        .map_err(|s| anyhow::anyhow!("deleting model {name:?}: {}", s.message()))
+}
+
+/// The server's models and, in a cluster, the cluster's stored ones (`ListModels`).
+///
+/// # Errors
+/// The server's refusal or an unreachable server.
+pub async fn list_all_models(
+    client: &mut CreaseClient<Channel>,
+) -> anyhow::Result<v1::ListModelsResponse> {
+    client
+        .list_models(v1::ListModelsRequest {})
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("listing the models: {}", s.message()))
+}
+
 /// The server's description of `room` (its model, settings and counters).
 ///
 /// # Errors

@@ -19,6 +19,8 @@ pub struct Limits {
     pub publish_hz: f64,
     /// Most actors a room may hold (`OpenRoomRequest.actors`, issue 38).
     pub actors_per_room: usize,
+    /// Largest model file `UploadModel` accepts, bytes (issue 39).
+    pub model_bytes: u64,
     /// TCP connections, per client address and in total, on each listener's count together
     /// ([`admission`]).
     pub connections: admission::Caps,
@@ -38,6 +40,7 @@ impl Default for Limits {
             // Two performers' hands and bodies with room to spare; each actor costs a
             // prediction per frame.
             actors_per_room: 8,
+            model_bytes: 512 << 20,
             // A classroom behind one NAT address stays well inside these; one client opening
             // sockets in a loop does not.
             connections: admission::Caps {
@@ -73,6 +76,9 @@ pub struct Config {
     pub maps: Option<std::path::PathBuf>,
     /// Folder rooms record their takes into (`StartTake`); `None`: no takes.
     pub takes: Option<std::path::PathBuf>,
+    /// The models folder the server loaded at start, where `UploadModel` writes and
+    /// `DeleteModel` removes (issue 39); `None`: models come only from the start.
+    pub models_dir: Option<std::path::PathBuf>,
 }
 
 /// A TLS certificate chain and its private key, PEM files.
@@ -134,6 +140,7 @@ impl Default for Config {
             tls: None,
             maps: None,
             takes: None,
+            models_dir: None,
         }
     }
 }

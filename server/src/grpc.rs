@@ -102,6 +102,16 @@ impl CreaseService {
         }
     }
 
+    /// As [`Self::require_admin`], for the model operations (issue 39).
+    fn require_models_admin<T>(&self, req: &Request<T>) -> Result<(), Status> {
+        if self.state.config().admin_token.is_none() {
+            return Err(Status::permission_denied(
+                "this server has no admin token: its models come from its folder at start only",
+            ));
+        }
+        self.require_admin(req)
+    }
+
     /// A stream slot for the request's client address (`Limits::streams`), or
     /// RESOURCE_EXHAUSTED naming the address and the cap.
     fn admit<T>(&self, req: &Request<T>) -> Result<Permit, Status> {
@@ -138,7 +148,38 @@ impl Crease for CreaseService {
                 .iter()
                 .map(|m| m.info.clone())
                 .collect(),
+            cluster: crate::model_api::cluster_models(&self.state)
+                .await
+                .into_iter()
+                .map(|(name, sha256, bytes)| v1::StoredModel {
+                    name,
+                    sha256,
+                    bytes,
+                })
+                .collect(),
         }))
+    }
+
+    async fn upload_model(
+        &self,
+        req: Request<tonic::Streaming<v1::ModelChunk>>,
+    ) -> Result<Response<v1::ModelInfo>, Status> {
+        self.require_models_admin(&req)?;
+        let model = crate::model_api::upload(&self.state, req.into_inner())
+            .await
+            .map_err(|e| status::model_op(&e))?;
+        Ok(Response::new(model.info.clone()))
+    }
+
+    async fn delete_model(
+        &self,
+        req: Request<v1::DeleteModelRequest>,
+    ) -> Result<Response<v1::DeleteModelResponse>, Status> {
+        self.require_models_admin(&req)?;
+        crate::model_api::delete(&self.state, &req.get_ref().model)
+            .await
+            .map_err(|e| status::model_op(&e))?;
+        Ok(Response::new(v1::DeleteModelResponse {}))
     }
 
     async fn get_model(

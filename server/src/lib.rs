@@ -32,6 +32,8 @@
 //! - [`takes`]: a room's recordings (issue 22) in the takes folder: the recorder in the
 //!   pipeline, its writer thread, listing and reading takes; [`take_service`]: the take
 //!   operations both transports call (start, stop, list, export, replay rooms).
+//! - [`model_api`]: models through the API (issue 39): uploads checked and written
+//!   atomically into the models folder, deletes, the cluster's models.
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
 //!   Prometheus metrics.
 //! - [`config`]: the server's [`config::Config`] and [`config::Limits`]; [`listen`]: binds the
@@ -54,6 +56,7 @@ pub mod ingest;
 pub mod listen;
 pub mod mailbox;
 pub mod metrics;
+pub mod model_api;
 pub mod performer;
 pub mod pipeline;
 pub mod registry;

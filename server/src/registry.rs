@@ -287,6 +287,13 @@ impl ModelRegistry {
         loaded
     }
 
+    /// Forgets model `name` (and its mirrored variants); rooms holding it keep their copy.
+    pub fn remove(&self, name: &str) -> Option<Arc<LoadedModel>> {
+        (self.mirrored.write().unwrap_or_else(|e| e.into_inner()))
+            .retain(|(model, _), _| model != name);
+        self.write().remove(name)
+    }
+
     /// The model named `name` mirrored across `plane` (`TrainedModel::mirrored`), built on the
     /// first call and shared after. Named `name~mirror-PLANE` in its `ModelInfo` and streams;
     /// never listed. Blocking (a copy of the model, and its detail layer's subdivision): call

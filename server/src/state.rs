@@ -215,6 +215,19 @@ impl AppState {
         ids
     }
 
+    /// The ids of this server's rooms (private ones too) with an actor on model `model`
+    /// (as trained: a mirrored actor's source), in order.
+    pub(crate) fn rooms_using(&self, model: &str) -> Vec<String> {
+        let mut using: Vec<String> = self
+            .table()
+            .values()
+            .filter(|r| r.actors().iter().any(|a| a.source().name == model))
+            .map(|r| r.id.clone())
+            .collect();
+        using.sort();
+        using
+    }
+
     /// How many private rooms (takes' replays) are open.
     pub fn private_rooms(&self) -> usize {
         self.table().values().filter(|r| r.is_private()).count()
@@ -295,6 +308,14 @@ impl AppState {
                     .ensure_model(&self.models, &a.model, sha256)
                     .await
                     .map_err(|e| in_actor(OpenRoomError::ModelUnavailable(e)))?,
+                (None, Some(cluster)) => cluster
+                    .named_model(&self.models, &a.model)
+                    .await
+                    .map_err(|e| in_actor(OpenRoomError::ModelUnavailable(e)))?
+                    .ok_or_else(|| OpenRoomError::NoActorModel {
+                        actor: a.name.clone(),
+                        model: a.model.clone(),
+                    })?,
                 _ => self
                     .models
                     .get(&a.model)
@@ -410,6 +431,11 @@ impl AppState {
                 .ensure_model(&self.models, &spec.model, sha256)
                 .await
                 .map_err(OpenRoomError::ModelUnavailable)?,
+            (None, Some(cluster)) => cluster
+                .named_model(&self.models, &spec.model)
+                .await
+                .map_err(OpenRoomError::ModelUnavailable)?
+                .ok_or_else(|| OpenRoomError::NoModel(spec.model.clone()))?,
             _ => self
                 .models
                 .get(&spec.model)

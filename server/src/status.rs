@@ -9,6 +9,7 @@ use axum::http::StatusCode;
 use tonic::Status;
 
 use crate::ingest::PublishError;
+use crate::model_api::ModelOpError;
 use crate::pipeline::BuildError;
 use crate::room::{ChannelRefused, RoomError};
 use crate::state::OpenRoomError;
@@ -133,5 +134,25 @@ pub fn take_http(e: &TakeOpError) -> StatusCode {
         TakeOpError::Open(_) => StatusCode::BAD_REQUEST,
         TakeOpError::Replays(_) => StatusCode::TOO_MANY_REQUESTS,
         TakeOpError::Panicked(_) => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+/// gRPC: a refused model upload or delete (issue 39).
+pub fn model_op(e: &ModelOpError) -> Status {
+    use ModelOpError as E;
+    let message = e.to_string();
+    match e {
+        E::NoFolder | E::NotInFolder(_) | E::InUse { .. } => Status::failed_precondition(message),
+        E::NoName
+        | E::BadName(_)
+        | E::BadDigest(_)
+        | E::TooLong { .. }
+        | E::Digest { .. }
+        | E::NotAModel { .. } => Status::invalid_argument(message),
+        E::TooLarge { .. } => Status::resource_exhausted(message),
+        E::Truncated { .. } | E::Stream(_) => Status::data_loss(message),
+        E::Exists { .. } => Status::already_exists(message),
+        E::NoModel(_) => Status::not_found(message),
+        E::Io { .. } => Status::internal(message),
     }
 }

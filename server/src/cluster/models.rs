@@ -157,3 +157,52 @@ pub(super) async fn open_object_store(
             }),
     }
 }
+
+/// The model `name`: the local one, or the store's copy of that name, fetched as [`ensure`]
+/// does against the digest in the store's metadata; `None` when neither has it.
+///
+/// # Errors
+/// A copy without a digest, or [`ensure`]'s.
+pub(crate) async fn named(
+    models: &ModelRegistry,
+    cluster: &Cluster,
+    name: &str,
+) -> Result<Option<Arc<LoadedModel>>, String> {
+    if let Some(model) = models.get(name) {
+        return Ok(Some(model));
+    }
+    let Ok(info) = cluster.models_store.info(name).await else {
+        return Ok(None);
+    };
+    let sha256 = info
+        .metadata
+        .get(SHA256)
+        .cloned()
+        .ok_or_else(|| format!("model {name:?}: the cluster's copy has no SHA-256: refused"))?;
+    ensure(models, cluster, name, &sha256).await.map(Some)
+}
+
+/// Every model of the cluster's object store: name, SHA-256 (from its metadata; empty when
+/// missing) and size, by name. A store that cannot be listed lists nothing (logged).
+pub(crate) async fn stored(cluster: &Cluster) -> Vec<(String, String, u64)> {
+    use futures_util::StreamExt;
+    let mut out = Vec::new();
+    match cluster.models_store.list().await {
+        Ok(mut list) => {
+            while let Some(item) = list.next().await {
+                match item {
+                    Ok(info) if !info.deleted => out.push((
+                        info.name.clone(),
+                        info.metadata.get(SHA256).cloned().unwrap_or_default(),
+                        info.size as u64,
+                    )),
+                    Ok(_) => {}
+                    Err(e) => tracing::warn!("listing the cluster's models: {e}"),
+                }
+            }
+        }
+        Err(e) => tracing::warn!("listing the cluster's models: {e}"),
+    }
+    out.sort();
+    out
+}

@@ -73,6 +73,20 @@ impl Cluster {
         models::ensure(models, self, name, sha256).await
     }
 
+    /// The model `name` for a room opened here: `models`' own, or (issue 39: uploaded to
+    /// another replica) the cluster store's copy of that name, checked against the digest
+    /// the store holds for it and loaded into `models`; `None` when neither has it.
+    ///
+    /// # Errors
+    /// A copy this replica cannot use ([`models`]).
+    pub async fn named_model(
+        &self,
+        models: &ModelRegistry,
+        name: &str,
+    ) -> Result<Option<Arc<LoadedModel>>, String> {
+        models::named(models, self, name).await
+    }
+
     /// The cluster side of room `id` on `models` (one per actor), which becomes the room's fan-out: as
     /// `owner` or relay, at registry `revision` with `entry` (a new room's is written whole by
     /// [`Cluster::register`]). [`Cluster::attach`] starts it once the room is in the server's
