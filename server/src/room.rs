@@ -82,6 +82,10 @@ pub struct Actor {
     /// The model as trained (`model` itself unless mirrored): what a cluster's registry names.
     source: Arc<LoadedModel>,
     pipeline: Pipeline,
+    /// Its palette header of each level named for its room (a room of several actors),
+    /// encoded once on first need and shared by every WebSocket subscriber
+    /// ([`Actor::named_palette_encoded`]).
+    named_palette: [std::sync::OnceLock<Result<prost::bytes::Bytes, String>>; 2],
 }
 
 impl Actor {
@@ -103,6 +107,27 @@ impl Actor {
     /// The model as trained: its model, or the one its model mirrors.
     pub fn source(&self) -> &Arc<LoadedModel> {
         &self.source
+    }
+
+    /// Its palette header at `level` named as actor `index` of `count`
+    /// (`crease_proto::name_actor`), protobuf-encoded: built and encoded by the first call
+    /// (blocking, megabytes at the detail level: call it on the blocking pool), shared after.
+    ///
+    /// # Errors
+    /// Why the model has no palette header at that level.
+    pub fn named_palette_encoded(
+        &self,
+        level: crease_proto::Level,
+        index: usize,
+        count: usize,
+    ) -> Result<prost::bytes::Bytes, String> {
+        self.named_palette[level as usize]
+            .get_or_init(|| {
+                let mut message = self.model.palette_topology(level)?;
+                crease_proto::name_actor(&mut message, &self.name, index, count);
+                Ok(prost::Message::encode_to_vec(&message).into())
+            })
+            .clone()
     }
 
     /// The actor as it runs, with its model as it uses it (`RoomInfo.actors`); `None` in a
@@ -230,6 +255,7 @@ impl Room {
                         model: parts.model,
                         source: parts.source,
                         pipeline,
+                        named_palette: Default::default(),
                     })
                 })
                 .collect::<Result<Vec<_>, BuildError>>()?;

@@ -207,21 +207,34 @@ async fn session(
         let frames =
             crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), channel, subscription);
         let model = Arc::clone(&room.model);
+        let named = Arc::clone(&room);
         tokio::spawn(async move {
             let mut frames = std::pin::pin!(frames);
             while let Some(Ok(msg)) = frames.next().await {
                 // A one-actor room's palette header is sent as the model encoded it (once, with
                 // the header, on the blocking pool: `first_messages`); an actor's header (it
-                // names the actor; megabytes at the detail level) is encoded on the blocking
-                // pool; the rest is small and encoded here.
+                // names the actor; megabytes at the detail level) as the actor encoded it
+                // (once, on the blocking pool: `Actor::named_palette_encoded`); the rest is
+                // small and encoded here.
                 let bytes = match &msg.body {
                     Some(v1::mesh_frame::Body::PaletteTopology(p)) if p.actor_count == 0 => model
                         .palette_topology_encoded(channel.level)
                         .unwrap_or_else(|_| msg.encode_to_vec().into()),
-                    Some(v1::mesh_frame::Body::PaletteTopology(_)) => {
-                        match tokio::task::spawn_blocking(move || msg.encode_to_vec()).await {
-                            Ok(bytes) => bytes.into(),
-                            Err(_) => break,
+                    Some(v1::mesh_frame::Body::PaletteTopology(p)) => {
+                        let (room, i, n) = (
+                            Arc::clone(&named),
+                            p.actor_index as usize,
+                            p.actor_count as usize,
+                        );
+                        let encoded = tokio::task::spawn_blocking(move || {
+                            room.actors()
+                                .get(i)
+                                .map(|a| a.named_palette_encoded(channel.level, i, n))
+                        })
+                        .await;
+                        match encoded {
+                            Ok(Some(Ok(bytes))) => bytes,
+                            _ => break,
                         }
                     }
                     _ => msg.encode_to_vec().into(),
