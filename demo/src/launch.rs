@@ -17,7 +17,8 @@ use crate::animation::{ActorAnimation, DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
 use crate::{
     DEMO_BETA, DEMO_BOTH_HANDS_ROOM, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL,
-    DEMO_PERFORMER_ROOM, DEMO_ROOM, PERFORMER_LEFT_POSES, WEBXR_LEFT_MAP, WEBXR_MAP,
+    DEMO_PERFORMER_ROOM, DEMO_ROOM, DEMO_VMC_ROOM, PERFORMER_LEFT_POSES, VMC_LEFT_MAP, VMC_MAP,
+    WEBXR_LEFT_MAP, WEBXR_MAP,
 };
 
 /// Everything `crease-server` is told: what to serve and how.
@@ -165,6 +166,13 @@ impl Started {
             host(http),
             http.port(),
         ));
+        lines.push(format!(
+            "demo: room {DEMO_VMC_ROOM:?} takes a VMC sender's hands (VSeeFace, VirtualMotionCapture, \
+             Warudo): `{} bridge vmc --server {scheme}://{}:{} --room {DEMO_VMC_ROOM} --token TOKEN`",
+            crease_command(),
+            host(grpc),
+            grpc.port()
+        ));
         if !token_chosen {
             lines.push(format!(
                 "demo: publish token {token} (enter it in the viewer to drag control points)"
@@ -294,6 +302,10 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
             .open_room(both_hands_room(&model, &token))
             .await
             .map_err(|e| LaunchError::Hands(e.to_string()))?;
+        state
+            .open_room(vmc_room(&model, &token))
+            .await
+            .map_err(|e| LaunchError::Hands(e.to_string()))?;
         let performer = state
             .open_room(performer_room(&model, &token))
             .await
@@ -387,6 +399,43 @@ fn both_hands_room(model: &crease_server::registry::LoadedModel, token: &str) ->
         actors: vec![
             actor("right", Side::Right, None, WEBXR_MAP),
             actor("left", Side::Left, Some(MirrorPlane::X), WEBXR_LEFT_MAP),
+        ],
+        token: RoomToken::Fixed(token.to_owned()),
+        placement: Placement::Local,
+        ..RoomSpec::default()
+    }
+}
+
+/// The VMC room [`DEMO_VMC_ROOM`] on the demo model (issue 39): both hands of a VMC sender's
+/// skeleton (`crease bridge vmc` sends Unity's bone names, in metres), `right` through
+/// [`VMC_MAP`], `left` on the model mirrored across x through [`VMC_LEFT_MAP`], one
+/// performer, as [`DEMO_HANDS_ROOM`] otherwise.
+fn vmc_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
+    let actor = |name: &str, side, mirror, map: &str, unity: &str| ActorSpec {
+        name: name.into(),
+        model: model.name.clone(),
+        side,
+        mirror,
+        performer: "vmc".into(),
+        options: hands_options(),
+        retarget: Some(crease_proto::room::retarget(
+            map.to_owned(),
+            crease_hand::vmc_map::vmc_markers(unity),
+            "m".into(),
+        )),
+        model_sha256: None,
+    };
+    RoomSpec {
+        id: DEMO_VMC_ROOM.into(),
+        actors: vec![
+            actor("right", Side::Right, None, VMC_MAP, "Right"),
+            actor(
+                "left",
+                Side::Left,
+                Some(MirrorPlane::X),
+                VMC_LEFT_MAP,
+                "Left",
+            ),
         ],
         token: RoomToken::Fixed(token.to_owned()),
         placement: Placement::Local,

@@ -57,6 +57,16 @@ pub const DEMO_BOTH_HANDS_ROOM: &str = "both-hands";
 /// The joint map of [`DEMO_BOTH_HANDS_ROOM`]'s left actor: [`WEBXR_MAP`]'s mixes under the
 /// mirrored model's landmark names (`bench/mocap/webxr-back-left.toml`).
 pub const WEBXR_LEFT_MAP: &str = include_str!("../../bench/mocap/webxr-back-left.toml");
+/// The demo's VMC room (issue 39): `crease bridge vmc --room vmc` drives it from any VMC
+/// sender (VSeeFace, VirtualMotionCapture, Warudo, ...) with no map of the user's: both hands
+/// of the sender's skeleton, the right onto the demo hand through [`VMC_MAP`], the left onto
+/// it mirrored across x through [`VMC_LEFT_MAP`], one performer.
+pub const DEMO_VMC_ROOM: &str = "vmc";
+/// Unity's right-hand bones onto the demo hand's `back` landmarks
+/// (`bench/mocap/vmc-back.toml`, written by hand/tests/vmc_map.rs).
+pub const VMC_MAP: &str = include_str!("../../bench/mocap/vmc-back.toml");
+/// Unity's left-hand bones onto the demo hand mirrored (`bench/mocap/vmc-back-left.toml`).
+pub const VMC_LEFT_MAP: &str = include_str!("../../bench/mocap/vmc-back-left.toml");
 /// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
 /// control point is followed closely.
 pub const DEMO_BETA: f32 = 3.0;

@@ -310,6 +310,38 @@ fn demo_trains_animates_and_serves() {
             .collect();
         assert_eq!(actors[1].3, swapped);
         assert!(crease_demo::WEBXR_LEFT_MAP.contains("hand_right = "));
+        // ... and the VMC room (issue 39): both hands of a VMC skeleton, by Unity's bone
+        // names, through the shipped maps.
+        let vmc = client
+            .get_room(v1::GetRoomRequest {
+                room: crease_demo::DEMO_VMC_ROOM.into(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let sides: Vec<(String, String, Vec<String>)> = vmc
+            .actors
+            .iter()
+            .map(|a| {
+                let spec = a.actor.clone().unwrap();
+                (spec.name, spec.mirror, spec.retarget.unwrap().markers)
+            })
+            .collect();
+        assert_eq!(
+            sides,
+            [
+                (
+                    "right".to_owned(),
+                    String::new(),
+                    crease_hand::vmc_map::vmc_markers("Right")
+                ),
+                (
+                    "left".to_owned(),
+                    "x".to_owned(),
+                    crease_hand::vmc_map::vmc_markers("Left")
+                ),
+            ]
+        );
 
         // And the room of two actors (issue 38): one stream with both hands, the left one on
         // the mirrored model, through different pose loops.

@@ -194,7 +194,7 @@ fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
 /// Least-squares affine weights (summing to 1) of `columns` (per sample, the candidate points)
 /// reproducing `targets`, with a ridge (module docs). Solved as the KKT system of the
 /// constrained problem by Gaussian elimination with partial pivoting, in f64.
-fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64> {
+pub(crate) fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64> {
     let k = columns[0].len();
     let mut a = vec![vec![0.0f64; k + 1]; k + 1];
     let mut rhs = vec![0.0f64; k + 1];
@@ -246,7 +246,7 @@ fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64> {
 
 /// Weights rounded to [`DECIMALS`], the rounding's remainder given to the largest, terms that
 /// round to zero dropped.
-fn rounded(terms: Vec<(usize, f64)>) -> Vec<(usize, f32)> {
+pub(crate) fn rounded(terms: Vec<(usize, f64)>) -> Vec<(usize, f32)> {
     let scale = 10f64.powi(DECIMALS);
     let mut out: Vec<(usize, f64)> = terms
         .into_iter()
@@ -318,7 +318,24 @@ pub fn joint_map_toml(
     calibration_frames: usize,
     comment: &str,
 ) -> String {
-    let names = capture_markers();
+    map_toml(
+        mixes,
+        &capture_markers(),
+        registration,
+        calibration_frames,
+        comment,
+    )
+}
+
+/// [`joint_map_toml`] for mixes whose terms index `names` (another capture's markers:
+/// `crate::vmc_map`'s).
+pub fn map_toml(
+    mixes: &[Mix],
+    names: &[String],
+    registration: &[&str],
+    calibration_frames: usize,
+    comment: &str,
+) -> String {
     let mut s = String::new();
     for line in comment.lines() {
         let _ = writeln!(s, "{}", format!("# {line}").trim_end());

@@ -25,7 +25,8 @@
 //! - [`webxr`]: the WebXR generic hand (../shared/data/hand) bound to the sweeps from its
 //!   joints; WebXR joint matrices <-> joint angles; the iwer poses.
 //! - [`joint_map`]: a tracked hand's WebXR joints as mocap markers, and the marker maps that
-//!   put a layout's landmarks on them (fitted on the sweep hand).
+//!   put a layout's landmarks on them (fitted on the sweep hand); [`vmc_map`]: the same for a
+//!   VMC sender's humanoid hand bones (issue 39).
 //! - [`dataset`]: the data-set generator of `crease handgen` (poses, control-point layouts,
 //!   meshes at both resolutions, joint angles, manifests, contact sheet).
 //! - [`render`]: a software rasteriser and PNG writer for contact sheets and picture strips
@@ -41,6 +42,7 @@ pub mod rig;
 pub mod skeleton;
 pub mod surface;
 pub mod sweeps;
+pub mod vmc_map;
 pub mod webxr;
 
 /// The cubic smoothstep `3x² - 2x³` of `x` clamped to `[0, 1]`: the fall-offs and activations
