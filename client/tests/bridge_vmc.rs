@@ -454,40 +454,7 @@ fn repo() -> PathBuf {
 
 /// python-osc in a venv under target/ (made once); `Err` says why not.
 fn python_osc() -> Result<PathBuf, String> {
-    let venv = repo().join("target/vmc-venv");
-    let python = venv.join("bin/python");
-    let ok = |py: &Path| {
-        Command::new(py)
-            .args([
-                "-c",
-                "import importlib.metadata as m; assert m.version('python-osc') == '1.10.2'",
-            ])
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    if ok(&python) {
-        return Ok(python);
-    }
-    let run = |cmd: &mut Command| -> Result<(), String> {
-        let out = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
-        if out.status.success() {
-            Ok(())
-        } else {
-            Err(format!(
-                "{cmd:?}: {}",
-                String::from_utf8_lossy(&out.stderr).trim()
-            ))
-        }
-    };
-    run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
-    run(Command::new(venv.join("bin/pip"))
-        .args(["install", "-q", "-r"])
-        .arg(repo().join("tests/python/requirements-vmc.txt")))?;
-    if ok(&python) {
-        Ok(python)
-    } else {
-        Err("python-osc 1.10.2 is not importable after installing it".into())
-    }
+    crease_testkit::python::python_osc(&repo())
 }
 
 /// The sender's motion (tests/python/vmc_sender.py's docstring), recomputed: Unity positions of

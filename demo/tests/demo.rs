@@ -12,7 +12,7 @@ use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
 use crease_demo::{
     DEMO_BOTH_HANDS_ROOM, DEMO_HANDS_ROOM, DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM,
-    DemoAnimation, demo_model,
+    DEMO_VMC_ROOM, DemoAnimation, demo_model,
 };
 use crease_hand::rig::{HandRig, Layers};
 use crease_hand::skeleton::{HandPose, NamedPose};
@@ -196,6 +196,22 @@ fn demo_trains_animates_and_serves() {
     assert!(
         hands.contains(&format!("/?room={DEMO_HANDS_ROOM}")) && hands.contains("track my hands"),
         "the WebXR room's line: {hands}"
+    );
+    // The rooms of actors' line, the VMC room's (its bridge command), the publish token's.
+    let mut vmc_line = String::new();
+    let token = loop {
+        let mut line = String::new();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "server exited");
+        if line.contains(&format!("room {DEMO_VMC_ROOM:?}")) {
+            vmc_line = line.clone();
+        }
+        if let Some(t) = line.trim().strip_prefix("demo: publish token ") {
+            break t.split_whitespace().next().unwrap().to_owned();
+        }
+    };
+    assert!(
+        vmc_line.contains("bridge vmc"),
+        "the VMC room's line: {vmc_line:?}"
     );
 
     let runtime = tokio::runtime::Runtime::new().unwrap();
@@ -410,6 +426,8 @@ fn demo_trains_animates_and_serves() {
         );
     });
 
+    runtime.block_on(a_vmc_sender_drives_room_vmc(&grpc, &vmc_line, &token));
+
     // The viewer page and readiness over plain HTTP.
     let get = |path: &str| {
         use std::io::{Read, Write};
@@ -468,4 +486,149 @@ fn demo_trains_animates_and_serves() {
         assert!(event.get("level").is_some(), "{line}");
     }
     assert!(rest.contains("\"message\":\"shutting down\""), "{rest}");
+}
+
+/// Issue 39: a VMC sender that is not ours (tests/python/vmc_hands_sender.py: python-osc, a
+/// VSeeFace-like humanoid with both hands) drives the demo's room `vmc` through the command
+/// the banner printed (`vmc_line`, the publish token put in) and the shipped maps, in three
+/// poses: per pose every bundle acknowledged and the marker residual printed (the frame's
+/// worst hand); the right hand's mesh follows (its index finger's nail far from the fist's
+/// when the finger points, and the relaxed hand's far from the fist's).
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
+async fn a_vmc_sender_drives_room_vmc(grpc: &str, vmc_line: &str, token: &str) {
+    let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let python = match crease_testkit::python::python_osc(&repo) {
+        Ok(p) => p,
+        Err(why) => {
+            eprintln!("skipping the VMC sender: {why}");
+            return;
+        }
+    };
+    let command = vmc_line
+        .split('`')
+        .nth(1)
+        .unwrap_or_else(|| panic!("no `command` in the banner line: {vmc_line}"))
+        .replace("TOKEN", token);
+    let words: Vec<&str> = command.split_whitespace().collect();
+    if words[0] == "cargo" {
+        eprintln!("skipping the VMC sender: no crease binary beside crease-server ({command})");
+        return;
+    }
+    let mut client = CreaseClient::connect(format!("http://{grpc}"))
+        .await
+        .unwrap();
+    let info = client
+        .get_model(v1::GetModelRequest {
+            model: DEMO_MODEL.into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let nail = info
+        .control_points
+        .iter()
+        .find(|c| c.name == "index_nail")
+        .unwrap()
+        .vertex as usize;
+    let mut sub = client
+        .subscribe(v1::SubscribeRequest {
+            room: DEMO_VMC_ROOM.into(),
+            level: v1::Level::Base as i32,
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut topologies = Vec::new();
+    for _ in 0..2 {
+        let Some(v1::mesh_frame::Body::Topology(t)) = sub.message().await.unwrap().unwrap().body
+        else {
+            panic!("no topology");
+        };
+        topologies.push(crease_proto::read_topology(&t).unwrap());
+    }
+    let mut decoder = FrameDecoder::new(topologies[0].vertex_count);
+    let (mut streamed, mut positions) = (Vec::new(), Vec::new());
+    let mut nails = Vec::new();
+    for pose in ["relaxed", "fist", "point"] {
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let bridge = Command::new(words[0])
+            .args(&words[1..])
+            .args(["--listen", &format!("127.0.0.1:{port}"), "--idle-exit", "1"])
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(700));
+        let sent = Command::new(&python)
+            .arg(repo.join("tests/python/vmc_hands_sender.py"))
+            .args([
+                "--port",
+                &port.to_string(),
+                "--pose",
+                pose,
+                "--frames",
+                "90",
+            ])
+            .output()
+            .unwrap();
+        assert!(
+            sent.status.success(),
+            "{}",
+            String::from_utf8_lossy(&sent.stderr)
+        );
+        let out = bridge.wait_with_output().unwrap();
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{command}: {said}");
+        let done = said
+            .lines()
+            .find(|l| l.starts_with("vmc: done: "))
+            .unwrap_or_default();
+        assert!(
+            done.contains("90 published (90 acked, 0 refused"),
+            "{pose}: {said}"
+        );
+        let residual: f64 = done
+            .split("marker residual RMS ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|r| r.parse().ok())
+            .unwrap_or_else(|| panic!("{pose}: no residual in {done}"));
+        eprintln!(
+            "VMC room, pose {pose}: marker residual RMS {:.1} mm (the worse hand)",
+            1000.0 * residual
+        );
+        assert!(residual < 0.02, "{pose}: residual {residual} m");
+        // The right hand's last mesh of the pose.
+        loop {
+            let next = tokio::time::timeout(Duration::from_millis(500), sub.message()).await;
+            let Ok(msg) = next else { break };
+            if let Some(v1::mesh_frame::Body::Frame(f)) = msg.unwrap().unwrap().body
+                && let Some(right) = f.actors.iter().find(|a| a.actor == 0)
+            {
+                decoder.decode(&right.data).unwrap();
+            }
+        }
+        decoder.positions(&mut streamed);
+        topologies[0].to_model_order(&streamed, &mut positions);
+        nails.push(positions[nail]);
+    }
+    let size = (info.bounds.as_ref().map(|b| {
+        let (lo, hi) = (b.min.unwrap(), b.max.unwrap());
+        Vec3::new(hi.x - lo.x, hi.y - lo.y, hi.z - lo.z).max_element()
+    }))
+    .unwrap();
+    let (relaxed_fist, fist_point) = (nails[0].distance(nails[1]), nails[1].distance(nails[2]));
+    eprintln!(
+        "VMC room: index nail moves {:.0} mm from relaxed to fist, {:.0} mm from fist to point",
+        1000.0 * relaxed_fist,
+        1000.0 * fist_point
+    );
+    assert!(
+        relaxed_fist > 0.1 * size && fist_point > 0.1 * size,
+        "the mesh follows the poses: {relaxed_fist} and {fist_point} (hand {size})"
+    );
 }

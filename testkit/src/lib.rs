@@ -8,6 +8,7 @@
 //!   bending tube trained in-process, and its poses.
 //! - [`server`] (feature `server`): a crease server in this process on free loopback ports,
 //!   returned as a [`server::Served`] guard that stops it when dropped.
+//! - [`python`]: the venv with python-osc that the VMC tests send with.
 //!
 //! Who can use it (ARCHITECTURE.md: a dev-dependency may not depend on the crate under test):
 //! the kit depends on `crease-core`, `crease-train` and `crease-server` (and, through the
@@ -25,5 +26,6 @@
 pub mod mesh;
 #[cfg(feature = "model")]
 pub mod model;
+pub mod python;
 #[cfg(feature = "server")]
 pub mod server;
