@@ -194,7 +194,7 @@ fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
 /// Least-squares affine weights (summing to 1) of `columns` (per sample, the candidate points)
 /// reproducing `targets`, with a ridge (module docs). Solved as the KKT system of the
 /// constrained problem by Gaussian elimination with partial pivoting, in f64.
-pub(crate) fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64> {
+fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64> {
     let k = columns[0].len();
     let mut a = vec![vec![0.0f64; k + 1]; k + 1];
     let mut rhs = vec![0.0f64; k + 1];
@@ -246,7 +246,7 @@ pub(crate) fn fit_weights(columns: &[Vec<DVec3>], targets: &[DVec3]) -> Vec<f64>
 
 /// Weights rounded to [`DECIMALS`], the rounding's remainder given to the largest, terms that
 /// round to zero dropped.
-pub(crate) fn rounded(terms: Vec<(usize, f64)>) -> Vec<(usize, f32)> {
+fn rounded(terms: Vec<(usize, f64)>) -> Vec<(usize, f32)> {
     let scale = 10f64.powi(DECIMALS);
     let mut out: Vec<(usize, f64)> = terms
         .into_iter()
@@ -265,22 +265,41 @@ pub(crate) fn rounded(terms: Vec<(usize, f64)>) -> Vec<(usize, f32)> {
 
 /// The mixes of `layout`'s landmarks (on `rig`'s rest mesh) fitted over `hands` (module docs).
 pub fn fit_joint_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<Mix> {
+    fit_mixes(
+        layout,
+        rig,
+        &hands.markers,
+        &hands.meshes,
+        |anchor, palmar| {
+            let side = if palmar { Side::Palmar } else { Side::Dorsal };
+            candidates(anchor)
+                .into_iter()
+                .map(|j| side.marker(j))
+                .collect()
+        },
+    )
+}
+
+/// The mixes of `layout`'s landmarks over a capture's markers: per pose `markers` (that
+/// capture's, in its order) and the posed mesh `meshes`; `candidates(anchor, palmar)` the
+/// markers a landmark may mix (module docs). Shared by the WebXR and the VMC maps.
+pub(crate) fn fit_mixes(
+    layout: Layout,
+    rig: &HandRig,
+    markers: &[Vec<Vec3>],
+    meshes: &[Vec<Vec3>],
+    candidates: impl Fn(LandmarkAnchor, bool) -> Vec<usize>,
+) -> Vec<Mix> {
     let normals = rig.rest().vertex_normals();
     landmark_anchors(layout, rig.skeleton(), rig.rest(), &normals)
         .into_iter()
         .map(|(landmark, anchor, palmar)| {
-            let side = if palmar { Side::Palmar } else { Side::Dorsal };
-            let markers: Vec<usize> = candidates(anchor)
-                .into_iter()
-                .map(|j| side.marker(j))
-                .collect();
-            let columns: Vec<Vec<DVec3>> = hands
-                .markers
+            let picked = candidates(anchor, palmar);
+            let columns: Vec<Vec<DVec3>> = markers
                 .iter()
-                .map(|m| markers.iter().map(|&i| m[i].as_dvec3()).collect())
+                .map(|m| picked.iter().map(|&i| m[i].as_dvec3()).collect())
                 .collect();
-            let targets: Vec<DVec3> = hands
-                .meshes
+            let targets: Vec<DVec3> = meshes
                 .iter()
                 .map(|mesh| mesh[landmark.vertex as usize].as_dvec3())
                 .collect();
@@ -288,7 +307,7 @@ pub fn fit_joint_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<M
             Mix {
                 name: landmark.name,
                 vertex: landmark.vertex,
-                terms: rounded(markers.into_iter().zip(w).collect()),
+                terms: rounded(picked.into_iter().zip(w).collect()),
             }
         })
         .collect()
@@ -296,10 +315,19 @@ pub fn fit_joint_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<M
 
 /// Distances of each mix to its landmark vertex, per pose of `hands`: `[pose][landmark]`.
 pub fn mix_errors(mixes: &[Mix], hands: &PosedHands) -> Vec<Vec<f32>> {
-    hands
-        .markers
+    errors_over(mixes, &hands.markers, &hands.meshes)
+}
+
+/// Distances of each mix of a capture's `markers` (per pose) to its landmark vertex of the
+/// posed `meshes`: `[pose][landmark]`.
+pub(crate) fn errors_over(
+    mixes: &[Mix],
+    markers: &[Vec<Vec3>],
+    meshes: &[Vec<Vec3>],
+) -> Vec<Vec<f32>> {
+    markers
         .iter()
-        .zip(&hands.meshes)
+        .zip(meshes)
         .map(|(markers, mesh)| {
             mixes
                 .iter()

@@ -25,10 +25,10 @@
 //! landmarks sit on the skin and the markers inside the hand: how far a mix lands from its
 //! landmark is what `hand/tests/vmc_map.rs` measures on poses the fit never saw.
 
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 
-use crate::dataset::{LandmarkAnchor, Layout, landmark_anchors};
-use crate::joint_map::{Mix, PosedHands, Side, fit_weights, rounded};
+use crate::dataset::{LandmarkAnchor, Layout};
+use crate::joint_map::{Mix, PosedHands, Side, errors_over, fit_mixes};
 use crate::rig::HandRig;
 use crate::skeleton::Digit;
 use crate::webxr::webxr_index;
@@ -132,43 +132,18 @@ fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
 /// The mixes of `layout`'s landmarks (on `rig`'s rest mesh) over VMC markers, fitted on
 /// `hands` (module docs).
 pub fn fit_vmc_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<Mix> {
-    let normals = rig.rest().vertex_normals();
-    let markers = vmc_hands(hands);
-    landmark_anchors(layout, rig.skeleton(), rig.rest(), &normals)
-        .into_iter()
-        .map(|(landmark, anchor, _palmar)| {
-            let picked = candidates(anchor);
-            let columns: Vec<Vec<DVec3>> = markers
-                .iter()
-                .map(|m| picked.iter().map(|&i| m[i].as_dvec3()).collect())
-                .collect();
-            let targets: Vec<DVec3> = hands
-                .meshes
-                .iter()
-                .map(|mesh| mesh[landmark.vertex as usize].as_dvec3())
-                .collect();
-            let w = fit_weights(&columns, &targets);
-            Mix {
-                name: landmark.name,
-                vertex: landmark.vertex,
-                terms: rounded(picked.into_iter().zip(w).collect()),
-            }
-        })
-        .collect()
+    fit_mixes(
+        layout,
+        rig,
+        &vmc_hands(hands),
+        &hands.meshes,
+        |anchor, _| candidates(anchor),
+    )
 }
 
 /// Distances of each VMC mix to its landmark vertex, per pose of `hands`: `[pose][landmark]`.
 pub fn vmc_mix_errors(mixes: &[Mix], hands: &PosedHands) -> Vec<Vec<f32>> {
-    vmc_hands(hands)
-        .iter()
-        .zip(&hands.meshes)
-        .map(|(markers, mesh)| {
-            mixes
-                .iter()
-                .map(|m| m.apply(markers).distance(mesh[m.vertex as usize]))
-                .collect()
-        })
-        .collect()
+    errors_over(mixes, &vmc_hands(hands), &hands.meshes)
 }
 
 #[cfg(test)]
