@@ -146,16 +146,16 @@ fn valid_name(name: &str) -> bool {
 ///
 /// # Errors
 /// [`ModelOpError`]: what was wrong with the upload, or the folder.
-pub async fn upload(
+pub async fn upload<E: std::fmt::Display>(
     state: &Arc<AppState>,
-    mut chunks: impl Stream<Item = Result<v1::ModelChunk, tonic::Status>> + Unpin,
+    mut chunks: impl Stream<Item = Result<v1::ModelChunk, E>> + Unpin,
 ) -> Result<Arc<LoadedModel>, ModelOpError> {
     let folder = state
         .config()
         .models_dir
         .clone()
         .ok_or(ModelOpError::NoFolder)?;
-    let stream_error = |e: tonic::Status| ModelOpError::Stream(e.message().to_owned());
+    let stream_error = |e: E| ModelOpError::Stream(e.to_string());
     let first = chunks
         .next()
         .await
