@@ -269,14 +269,7 @@ fn actors_glb(state: &AppState, take: &take::Take) -> Result<Vec<u8>, String> {
     let parts: Vec<_> = recordings
         .iter()
         .zip(&models)
-        .map(|(r, m)| {
-            let part = gltf_export::SkinnedPart {
-                name: Some(&r.name),
-                rig: &m.model.rig,
-                transforms: &r.transforms,
-            };
-            (part, r.skinning.unwrap_or(m.model.skinning))
-        })
+        .map(|(r, m)| gltf_export::SkinnedPart::of(&r.name, &m.model, r.skinning, &r.transforms))
         .collect();
     gltf_export::skinned_parts_recording_to_glb(&parts, "take", &take::keyframe_times(take))
         .map_err(|e| format!("export: {e}"))

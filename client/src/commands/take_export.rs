@@ -53,14 +53,7 @@ pub fn actors_glb(take: &Take, model: &TrainedModel) -> anyhow::Result<Vec<u8>> 
     let parts: Vec<_> = recordings
         .iter()
         .zip(&models)
-        .map(|(r, m)| {
-            let part = gltf_export::SkinnedPart {
-                name: Some(&r.name),
-                rig: &m.rig,
-                transforms: &r.transforms,
-            };
-            (part, r.skinning.unwrap_or(m.skinning))
-        })
+        .map(|(r, m)| gltf_export::SkinnedPart::of(&r.name, m, r.skinning, &r.transforms))
         .collect();
     Ok(gltf_export::skinned_parts_recording_to_glb(
         &parts,

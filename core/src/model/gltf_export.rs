@@ -186,6 +186,25 @@ pub struct SkinnedPart<'a> {
     pub transforms: &'a [RigidTransform],
 }
 
+impl<'a> SkinnedPart<'a> {
+    /// Actor `name`'s part on `model` (mirrored as its room ran it) with its `transforms`,
+    /// and how it skins: `skinning` where its room chose, else the model's default. What
+    /// [`skinned_parts_recording_to_glb`] takes per actor of a take.
+    pub fn of(
+        name: &'a str,
+        model: &'a super::TrainedModel,
+        skinning: Option<Skinning>,
+        transforms: &'a [RigidTransform],
+    ) -> (SkinnedPart<'a>, Skinning) {
+        let part = SkinnedPart {
+            name: Some(name),
+            rig: &model.rig,
+            transforms,
+        };
+        (part, skinning.unwrap_or(model.skinning))
+    }
+}
+
 /// Several recordings of one take (a room of actors, issue 38) as one skinned glTF: one
 /// skinned mesh per part, each with its own joints and skin, and one animation `name` whose
 /// keyframes at `times` seconds move every part's joints. Each part is checked and refused as
