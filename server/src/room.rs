@@ -176,6 +176,9 @@ pub struct Room {
     /// Set when the room leaves the server's room table: a publisher holding the room (a
     /// WebSocket session) is refused from then on, as one looking it up would be.
     closed: AtomicBool,
+    /// Becomes `true` with `closed`: what a subscriber's stream waits on to end
+    /// ([`Room::closed`]).
+    closed_signal: tokio::sync::watch::Sender<bool>,
     /// Frames the pipeline ran through (counted here, after the pipeline: the session is
     /// entered once per frame, before it).
     published: AtomicU64,
@@ -283,6 +286,7 @@ impl Room {
                 mailbox: Mailbox::default(),
                 private: false,
                 closed: AtomicBool::new(false),
+                closed_signal: tokio::sync::watch::Sender::new(false),
                 published: AtomicU64::new(0),
             })
         })
@@ -342,6 +346,17 @@ impl Room {
     /// Marks the room closed (it left the room table).
     pub(crate) fn mark_closed(&self) {
         self.closed.store(true, Ordering::Release);
+        self.closed_signal.send_replace(true);
+    }
+
+    /// Resolves once the room is closed (at once if it already is): a subscriber's stream ends
+    /// then, as `CloseRoom` promises, though its task still holds the room.
+    pub fn closed(&self) -> impl std::future::Future<Output = ()> + Send + 'static {
+        let mut rx = self.closed_signal.subscribe();
+        async move {
+            // An error means the room itself is gone: closed as well.
+            let _ = rx.wait_for(|closed| *closed).await;
+        }
     }
 
     /// In a cluster, a relay's room: forwards `frame` (its token checked here) to the room's

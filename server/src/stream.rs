@@ -214,7 +214,15 @@ pub fn subscribe(
         let rx = &mut sub.frames.rx;
         // The current frame first (if any), then every change.
         rx.mark_changed();
-        while rx.changed().await.is_ok() {
+        // A closed room ends the stream (after a frame already waiting).
+        let closed = room.closed();
+        tokio::pin!(closed);
+        loop {
+            tokio::select! {
+                biased;
+                changed = rx.changed() => if changed.is_err() { break },
+                () = &mut closed => break,
+            }
             let Some(update) = rx.borrow_and_update().clone() else {
                 continue;
             };

@@ -247,10 +247,31 @@ async fn uploaded_models_open_rooms_and_bad_uploads_leave_nothing() {
     assert_eq!(e.code(), Code::FailedPrecondition, "{e:?}");
     assert!(e.message().contains("in use by room up"), "{}", e.message());
     assert_eq!(files(dir.path()), ["tube.crease"]);
+    // A subscriber of the room: its stream ends when the room closes (CloseRoom's promise),
+    // though the server's task for it holds the room.
+    let mut sub = client
+        .subscribe(v1::SubscribeRequest {
+            room: "up".into(),
+            level: v1::Level::Base as i32,
+            encoding: v1::Encoding::Vertices as i32,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let first = sub.message().await.unwrap().unwrap();
+    assert!(
+        matches!(first.body, Some(v1::mesh_frame::Body::Topology(_))),
+        "{first:?}"
+    );
     client
         .close_room(authed(v1::CloseRoomRequest { room: "up".into() }, ADMIN))
         .await
         .unwrap();
+    let ended = tokio::time::timeout(std::time::Duration::from_secs(10), async {
+        while sub.message().await.unwrap().is_some() {}
+    })
+    .await;
+    assert!(ended.is_ok(), "the subscription outlived its room's close");
     client
         .delete_model(authed(delete("tube"), ADMIN))
         .await

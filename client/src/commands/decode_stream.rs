@@ -26,6 +26,11 @@ pub struct DecodeStreamArgs {
     /// model vertex order; a `.obj` file name writes a mesh instead.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// Write every frame, not only the last: `--out` gets frame after frame (x, y, z per vertex
+    /// as little-endian f32, model vertex order; a one-actor stream only), and the summary
+    /// lists their `seqs`: the reference another decoder's frames are compared with.
+    #[arg(long)]
+    pub every_frame: bool,
 }
 
 /// The messages of a capture (module docs).
@@ -77,6 +82,17 @@ pub fn run(args: &DecodeStreamArgs) -> anyhow::Result<()> {
     let mut reader = StreamReader::new(first)?;
     let mut frames = 0usize;
     let mut seq = 0u64;
+    let mut every = Vec::new();
+    let mut seqs = Vec::new();
+    let mut positions = Vec::new();
+    if args.every_frame
+        && args
+            .out
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("obj"))
+    {
+        bail!("--every-frame writes raw f32 positions: give --out a name that is not .obj");
+    }
     for (k, msg) in rest.iter().enumerate() {
         let Some(v1::mesh_frame::Body::Frame(f)) = &msg.body else {
             bail!("message {}: not a Frame", k + 1);
@@ -86,6 +102,11 @@ pub fn run(args: &DecodeStreamArgs) -> anyhow::Result<()> {
             .with_context(|| format!("message {} (frame seq {})", k + 1, f.seq))?;
         frames += 1;
         seq = f.seq;
+        if args.every_frame {
+            reader.model_positions(&mut positions);
+            every.extend(positions.iter().flat_map(|p| p.to_array()));
+            seqs.push(f.seq);
+        }
     }
     if frames == 0 {
         bail!(
@@ -93,9 +114,14 @@ pub fn run(args: &DecodeStreamArgs) -> anyhow::Result<()> {
             args.capture.display()
         );
     }
-    let mut positions = Vec::new();
     reader.model_positions(&mut positions);
-    write_positions(&args.out, &positions, &reader)?;
+    if args.every_frame {
+        let bytes: Vec<u8> = every.iter().flat_map(|c: &f32| c.to_le_bytes()).collect();
+        std::fs::write(&args.out, bytes)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+    } else {
+        write_positions(&args.out, &positions, &reader)?;
+    }
     let level = match &first.body {
         Some(v1::mesh_frame::Body::Topology(t)) => t.level,
         Some(v1::mesh_frame::Body::PaletteTopology(t)) => t.level,
@@ -110,6 +136,7 @@ pub fn run(args: &DecodeStreamArgs) -> anyhow::Result<()> {
             "frames": frames,
             "seq": seq,
             "vertex_count": positions.len(),
+            "seqs": if args.every_frame { Some(&seqs) } else { None },
         })
     );
     Ok(())
