@@ -544,21 +544,31 @@ class Client:
         transforms, with every frame's seq, capture and arrival times."""
         return parse_take(self.take_bytes(take))
 
-    def take_glb(self, take: str) -> bytes:
-        """A take as a skinned, animated glTF binary (the server's ``/api/takes/ID/glb``): needs
-        the client's ``http`` address."""
+    def rooms(self) -> list[str]:
+        """The rooms the server (or its cluster) lists (the HTTP ``/api/rooms``; private rooms are
+        not listed): needs the client's ``http`` address."""
+        import json
+
+        return list(json.loads(self._http_get("/api/rooms", "the room list"))["rooms"])
+
+    def _http_get(self, path: str, what: str) -> bytes:
         if not self.http:
-            raise ValueError("take_glb needs the server's HTTP address: Client(..., http='http://host:port')")
-        url = f"{self.http}/api/takes/{urllib.request.quote(take)}/glb"
+            raise ValueError(f"{what} needs the server's HTTP address: Client(..., http='http://host:port')")
+        url = f"{self.http}{path}"
         try:
             with urllib.request.urlopen(url, timeout=self._timeout) as r:
                 return r.read()
         except urllib.error.HTTPError as e:
             body = e.read().decode("utf-8", "replace").strip()
             code = {404: "NOT_FOUND", 400: "INVALID_ARGUMENT", 409: "FAILED_PRECONDITION"}.get(e.code, f"HTTP_{e.code}")
-            raise CreaseError(code, f"take {take!r} as glTF ({url}): {body or e.reason}") from None
+            raise CreaseError(code, f"{what} ({url}): {body or e.reason}") from None
         except urllib.error.URLError as e:
-            raise CreaseError("UNAVAILABLE", f"take {take!r} as glTF ({url}): {e.reason}") from None
+            raise CreaseError("UNAVAILABLE", f"{what} ({url}): {e.reason}") from None
+
+    def take_glb(self, take: str) -> bytes:
+        """A take as a skinned, animated glTF binary (the server's ``/api/takes/ID/glb``): needs
+        the client's ``http`` address."""
+        return self._http_get(f"/api/takes/{urllib.request.quote(take)}/glb", f"take {take!r} as glTF")
 
 
 def wait_ready(client: Client, timeout: float = 30.0) -> None:
