@@ -169,7 +169,9 @@ def main() -> None:
     time.sleep(0.2)
     ref.stop()
     obj = bpy.data.objects[name]
-    keys = obj.data.shape_keys.key_blocks
+    check(obj.data.shape_keys is None, "the live object got shape keys (they would hide its frames)")
+    rec = bpy.data.objects[f"{name} recording"]
+    keys = rec.data.shape_keys.key_blocks
     recorded = [k for k in keys if k.name.startswith("crease ")]
     check(len(recorded) >= 30, f"{len(recorded)} shape keys recorded in 1.5 s")
     compared = 0
@@ -182,14 +184,15 @@ def main() -> None:
         check(np.array_equal(co.reshape(-1, 3), ref.frames[seq]), f"shape key {k.name} differs from frame {seq}")
         compared += 1
     check(compared >= 5, f"only {compared} shape keys compared")
-    check(obj.data.shape_keys.animation_data.action is not None, "the shape keys are not animated")
+    check(rec.data.shape_keys.animation_data.action is not None, "the shape keys are not animated")
     print(f"blender: recorded {len(recorded)} frames as shape keys; {compared} compared with the client's decode: equal", flush=True)
 
     # The live hand, rendered (the README's picture).
-    for k in keys:
-        k.value = 0.0
-    obj.data.shape_keys.animation_data_clear()
+    bpy.data.objects.remove(rec)
+    run_ticks(addon, 0.5)
     render(obj, OUT / "blender-live-hand.png")
+    # The scene, for tests/blender/screenshot.py (the panel beside the live hand, in Blender's UI).
+    bpy.ops.wm.save_as_mainfile(filepath=str(OUT / "live.blend"))
     check(bpy.ops.crease.stop() == {"FINISHED"}, "crease.stop")
     check(watcher.applied > 0, "nothing applied")
 

@@ -2,7 +2,12 @@
 # A gRPC client that is not ours, end to end: builds crease-server and crease, starts the server
 # on its embedded demo (free ports), checks `crease watch` on room demo, then runs
 # tests/python/test_grpc_client.py (grpcio + grpcio-reflection from PyPI, pinned in
-# requirements.txt) against it. Called by .ci/run; runs alone from anywhere:
+# requirements.txt) against it; then the crease Python package (issue 39): `pip install
+# ./clients/python` into a fresh venv (its dependencies pinned by
+# clients/python/requirements-lock.txt), its unit tests (the codec and palette test vectors) and
+# clients/python/tests/test_server.py against the same server, with a glove13 hand trained here
+# and the Qualisys recording retargeted onto it (../shared/data; without it the README example's
+# test skips). Called by .ci/run; runs alone from anywhere:
 #   bash tests/python/run.sh
 # Uses ${CARGO_TARGET_DIR:-target} for the build, the venv (pyenv/), the demo cache
 # (demo-cache/, trained once, ~25 s) and the server log (python-test/server.log).
@@ -49,7 +54,10 @@ echo
 
 build_binaries
 
-start_demo_server
+admin_token="python-test-admin"
+rm -rf "$work/models" "$work/takes" "$work/package"
+mkdir -p "$work/models" "$work/takes" "$work/package"
+start_demo_server --models "$work/models" --demo --takes "$work/takes" --admin-token "$admin_token"
 
 echo "== crease watch --room demo"
 watch_out="$(timeout 120 "$bin/crease" watch --server "http://$grpc_addr" --room demo --frames 30)" || {
@@ -66,6 +74,36 @@ fi
 
 echo "== python grpcio client"
 "$venv/bin/python" tests/python/test_grpc_client.py --grpc "$grpc_addr"
+
+echo "== the crease Python package: pip install ./clients/python into a fresh venv"
+pkg_venv="$target/crease-py"
+rm -rf "$pkg_venv"
+python3 -m venv "$pkg_venv"
+"$pkg_venv/bin/python" -m pip install --disable-pip-version-check --no-input -q -r clients/python/requirements-lock.txt
+"$pkg_venv/bin/python" -m pip install --disable-pip-version-check --no-input -q ./clients/python
+"$pkg_venv/bin/python" -c 'import crease, crease.v1.crease_pb2 as pb; print("crease", crease.__version__, "stubs:", pb.DESCRIPTOR.name)'
+
+work_abs="$(cd "$work" && pwd)"
+bin_abs="$(cd "$bin" && pwd)"
+echo "== a glove13 hand (crease handgen + train), uploaded by the tests"
+"$bin/crease" handgen --train 14 --test 1 --base-only --out "$work/package/hg" >/dev/null
+"$bin/crease" train --examples "$work/package/hg/train-glove13.toml" --bones 30 --method local \
+    --no-detail --out "$work/package/glove13.crease" | tail -n 1
+export CREASE_GLOVE_MODEL="$work_abs/package/glove13.crease"
+data="../shared/data/mocap/qualisys-hand-glove-recording.tsv"
+if [[ -f "$data" ]]; then
+    echo "== the Qualisys recording retargeted onto it (crease retarget)"
+    "$bin/crease" retarget --tsv "$data" --map bench/mocap/qualisys-glove13.toml \
+        --model "$work/package/glove13.crease" --out "$work/package/qualisys.csv" | tail -n 1
+    export CREASE_QUALISYS_CSV="$work_abs/package/qualisys.csv"
+else
+    echo "skipping the README example's test: $data is absent (../shared/data)"
+fi
+
+echo "== the crease Python package's tests (clients/python/tests)"
+CREASE_GRPC="$grpc_addr" CREASE_HTTP="$http_addr" CREASE_ADMIN_TOKEN="$admin_token" \
+    CREASE_CLI="$bin_abs/crease" CREASE_WORK="$work_abs/package/work" \
+    "$pkg_venv/bin/python" -m unittest discover -s clients/python/tests -v
 
 echo "== stop crease-server"
 stop_server

@@ -146,18 +146,29 @@ def tick() -> float | None:
     """The timer: every watcher's latest frame onto its object; unregistered when none is left."""
     for w in list(_watchers.values()):
         w.tick()
+    # The panel's frame count: redraw the 3D viewports' sidebars too (the viewport itself
+    # redraws on the mesh's update).
+    for window in bpy.context.window_manager.windows if bpy.context.window_manager else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
     return TICK if _watchers else None
 
 
-def record_to_shape_keys(obj: bpy.types.Object, frames: list, start: int) -> int:
-    """Recorded frames as shape keys of ``obj``, each keyed to 1 on its scene frame (``start`` +
-    its index) and 0 on the frames beside it. Returns how many keys were made."""
+def record_to_shape_keys(obj: bpy.types.Object, frames: list, start: int) -> bpy.types.Object | None:
+    """Recorded frames as a new object beside ``obj`` (its mesh copied; the live object keeps no
+    shape keys, which would hide the frames written into its vertices), with a shape key per
+    frame keyed to 1 on its scene frame (``start`` + its index) and 0 on the frames beside it."""
     if not frames:
-        return 0
-    if obj.data.shape_keys is None:
-        obj.shape_key_add(name="Basis", from_mix=False)
+        return None
+    rec = obj.copy()
+    rec.data = obj.data.copy()
+    rec.name = rec.data.name = f"{obj.name} recording"
+    for collection in obj.users_collection:
+        collection.objects.link(rec)
+    rec.shape_key_add(name="Basis", from_mix=False)
     for i, (seq, vertices) in enumerate(frames):
-        key = obj.shape_key_add(name=f"crease {seq}", from_mix=False)
+        key = rec.shape_key_add(name=f"crease {seq}", from_mix=False)
         key.data.foreach_set("co", vertices.reshape(-1))
         f = start + i
         for frame, value in ((f - 1, 0.0), (f, 1.0), (f + 1, 0.0)):
@@ -165,7 +176,7 @@ def record_to_shape_keys(obj: bpy.types.Object, frames: list, start: int) -> int
             key.keyframe_insert("value", frame=frame)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = start, start + len(frames) - 1
-    return len(frames)
+    return rec
 
 
 class CreaseSettings(bpy.types.PropertyGroup):
@@ -276,8 +287,8 @@ class CREASE_OT_record(bpy.types.Operator):
             return {"FINISHED"}
         frames, w.recording = w.recording, None
         obj = bpy.data.objects[object_name(s)]
-        n = record_to_shape_keys(obj, frames, context.scene.frame_current)
-        s.status = f"recorded {n} frames as shape keys"
+        rec = record_to_shape_keys(obj, frames, context.scene.frame_current)
+        s.status = f"recorded {len(frames)} frames as shape keys of {rec.name!r}" if rec else "recorded nothing"
         return {"FINISHED"}
 
 
