@@ -49,6 +49,19 @@ class CodecVectors(unittest.TestCase):
                     frames += 1
         self.assertGreaterEqual(frames, 8)
 
+    def test_the_table_dequantiser_equals_the_arithmetic_one_bit_for_bit(self) -> None:
+        rng = np.random.default_rng(3)
+        tables = codec.DequantTables()
+        for stream in self.vectors["streams"]:
+            header, lanes = codec.LaneDecoder().decode(bytes.fromhex(stream["frames"][0]["frame_hex"]))
+            # Every 16-bit value on every axis, in this stream's box.
+            lanes = np.zeros((65536, 4), dtype=np.uint16)
+            lanes[:, :3] = np.arange(65536, dtype=np.uint16)[:, None]
+            rng.shuffle(lanes)
+            out = np.empty((65536, 3), dtype=np.float32)
+            tables.positions_into(lanes, header, out)
+            np.testing.assert_array_equal(out.view(np.uint32), codec.dequantise(lanes, header).view(np.uint32))
+
     def test_triangles_decode_as_the_index_codec_gives_them(self) -> None:
         for case in self.vectors["indices"]:
             with self.subTest(case=case["name"]):

@@ -124,6 +124,28 @@ def dequantise(lanes: np.ndarray, header: FrameHeader) -> np.ndarray:
     return (header.min.astype(np.float64) + q * header.step.astype(np.float64)).astype(np.float32)
 
 
+class DequantTables:
+    """``dequantise`` by table: per axis the 65,536 values ``fround(min + q * step)`` of a box,
+    computed once per box (a stream's box is fixed), then a gather per frame. Equal to
+    ``dequantise`` bit for bit, several times faster on large meshes."""
+
+    def __init__(self) -> None:
+        self._key: tuple[bytes, bytes] | None = None
+        self._tables = np.empty((3, 0), dtype=np.float32)
+
+    def positions_into(self, lanes: np.ndarray, header: FrameHeader, out: np.ndarray) -> None:
+        """Writes the lanes' positions into ``out`` (``(n, 3)`` float32)."""
+        key = (header.min.tobytes(), header.step.tobytes())
+        if key != self._key:
+            q = np.arange(65536, dtype=np.float64)
+            lo = header.min.astype(np.float64)[:, None]
+            step = header.step.astype(np.float64)[:, None]
+            self._tables = (lo + q[None, :] * step).astype(np.float32)
+            self._key = key
+        for k in range(3):
+            np.take(self._tables[k], lanes[:, k], out=out[:, k])
+
+
 def oct_decode(w: np.ndarray) -> np.ndarray:
     """Unit normals from ``w`` lanes (u in the low byte, v in the high, each an i8 of c * 127), as
     ``core::codec::oct_decode`` (float64, rounded to float32 at the end)."""
@@ -151,7 +173,7 @@ class LaneDecoder:
         self._seq: int | None = None
 
     def decode(self, frame: bytes) -> tuple[FrameHeader, np.ndarray]:
-        """The frame's header and its ``(n, 4)`` u16 lanes (owned by the caller)."""
+        """The frame's header and its ``(n, 4)`` u16 lanes (read-only; valid for good)."""
         header, payload = parse_frame(frame)
         try:
             lanes = decode_payload(payload, header.vertex_count)
@@ -169,7 +191,10 @@ class LaneDecoder:
             self._lanes, self._seq = None, None
             raise
         self._lanes, self._seq = lanes, header.seq
-        return header, lanes.copy()
+        # The decoder's own lanes, read-only: the next delta makes a new array from them.
+        view = lanes.view()
+        view.flags.writeable = False
+        return header, view
 
 
 def decode_indices(data: bytes, triangle_count: int, vertex_count: int) -> np.ndarray:

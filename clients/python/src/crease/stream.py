@@ -52,21 +52,21 @@ class _VertexActor:
         order = np.asarray(t.vertex_order, dtype=np.int64)
         if len(order) and (len(order) != t.vertex_count or not np.array_equal(np.sort(order), np.arange(t.vertex_count))):
             raise StreamError(f"Topology.vertex_order: {len(order)} entries, not a permutation of {t.vertex_count} vertices")
-        self.order = order if len(order) else None
+        # Streamed vertex i is model vertex order[i]: model vertex v is streamed vertex inv[v].
+        self.inv = np.argsort(order) if len(order) else None
         # The triangles index the streamed order; in model ids they are order[tris].
-        triangles = self.order[tris].astype(np.uint32) if self.order is not None else tris
+        triangles = order[tris].astype(np.uint32) if len(order) else tris
         self.topology = Topology(t.model, _LEVELS.get(t.level, "base"), "vertices", t.vertex_count, triangles, t.actor)
         self.lanes = codec.LaneDecoder()
+        self.tables = codec.DequantTables()
 
     def decode_into(self, data: bytes, out: np.ndarray) -> None:
         header, lanes = self.lanes.decode(data)
         if header.vertex_count != self.topology.vertex_count:
             raise StreamError(f"frame {header.seq}: {header.vertex_count} vertices, the topology has {self.topology.vertex_count}")
-        positions = codec.dequantise(lanes, header)
-        if self.order is None:
-            out[:] = positions
-        else:
-            out[self.order] = positions
+        if self.inv is not None:
+            lanes = lanes[self.inv]  # model vertex order
+        self.tables.positions_into(lanes, header, out)
 
 
 class _PaletteActor:
@@ -132,8 +132,10 @@ class MeshStream:
             raise StreamError(f"frame {message.frame.seq} before the stream's topology")
         frame = message.frame
         if len(self.actors) == 1 and not frame.actors:
-            self.actors[0].decode_into(frame.data, self._meshes[0])
-            return frame.seq, self._meshes[0].copy()
+            # A fresh array per frame (the caller may keep it), written whole.
+            mesh = np.empty_like(self._meshes[0])
+            self.actors[0].decode_into(frame.data, mesh)
+            return frame.seq, mesh
         for part in frame.actors:
             if part.actor >= len(self.actors):
                 raise StreamError(f"frame {frame.seq}: actor index {part.actor}, the room has {len(self.actors)}")
