@@ -111,6 +111,31 @@ struct Args {
     /// This replica's id in the cluster (unique). Default: the host name and a random suffix.
     #[arg(long, value_name = "ID", requires = "nats", env = "CREASE_REPLICA_ID")]
     replica_id: Option<String>,
+    /// NATS credentials file (decentralised auth: a user JWT and its nkey seed, as `nsc`
+    /// writes them).
+    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_NATS_CREDS")]
+    nats_creds: Option<PathBuf>,
+    /// NATS user name; the password comes from the environment (CREASE_NATS_PASSWORD) or
+    /// --nats-password-file, never the command line.
+    #[arg(long, value_name = "USER", requires = "nats", env = "CREASE_NATS_USER")]
+    nats_user: Option<String>,
+    /// A file whose first line is the NATS password.
+    #[arg(long, value_name = "FILE", requires = "nats_user")]
+    nats_password_file: Option<PathBuf>,
+    /// TLS to NATS: the CA certificate (PEM) that signed the NATS server's.
+    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_NATS_TLS_CA")]
+    nats_tls_ca: Option<PathBuf>,
+    /// Mutual TLS to NATS: this replica's certificate (PEM); with --nats-tls-key.
+    #[arg(long, value_name = "FILE", requires_all = ["nats", "nats_tls_key"], env = "CREASE_NATS_TLS_CERT")]
+    nats_tls_cert: Option<PathBuf>,
+    /// Mutual TLS to NATS: this replica's private key (PEM).
+    #[arg(long, value_name = "FILE", requires = "nats_tls_cert", env = "CREASE_NATS_TLS_KEY")]
+    nats_tls_key: Option<PathBuf>,
+    /// The cluster's shared key (at least 32 bytes: hex, e.g. `openssl rand -hex 32`, or raw):
+    /// every replica tags its frames, forwarded controls and room entries with it, and believes
+    /// only tagged ones (ARCHITECTURE.md, "A cluster that trusts only its own").
+    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_CLUSTER_KEY_FILE")]
+    cluster_key_file: Option<PathBuf>,
     /// The owner's lease in milliseconds: a replica silent this long loses its rooms to others.
     #[arg(long, value_name = "MS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_LEASE.as_millis() as u64)]
     lease_ms: u64,
@@ -184,6 +209,15 @@ impl From<Args> for Config {
             banner_in_log: args.log_format == LogFormat::Json,
             cluster: args.nats.map(|url| crease_server::cluster::ClusterOptions {
                 lease: std::time::Duration::from_millis(args.lease_ms.max(100)),
+                auth: crease_server::cluster::trust::NatsAuth {
+                    creds: args.nats_creds,
+                    user: args.nats_user,
+                    password: std::env::var("CREASE_NATS_PASSWORD").ok(),
+                    password_file: args.nats_password_file,
+                    tls_ca: args.nats_tls_ca,
+                    tls_client: args.nats_tls_cert.zip(args.nats_tls_key),
+                },
+                key_file: args.cluster_key_file,
                 ..crease_server::cluster::ClusterOptions::new(&url, args.replica_id)
             }),
             ..Config::default()

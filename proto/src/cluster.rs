@@ -54,6 +54,8 @@ pub fn room_entry(p: EntryParts<'_>) -> v1::RoomEntry {
         lease_ms: p.lease_ms,
         renewed_unix_ms: p.renewed_unix_ms,
         adoptions: 0,
+        epoch: 1,
+        tag: Vec::new(),
         retarget: s.retarget.cloned(),
         refine: s.refine.map(v1::Refine::from),
         skinning: v1::Skinning::from(s.skinning) as i32,

@@ -15,6 +15,7 @@ use futures_util::StreamExt;
 use futures_util::future::BoxFuture;
 use prost::Message as _;
 
+use super::trust::{self, Refusal};
 use super::{Cluster, Host, subject};
 
 /// How long a relay waits for the owner's ack. A forwarded frame normally takes about a
@@ -47,13 +48,17 @@ pub async fn forward(
     room: String,
     frame: v1::ControlFrame,
 ) -> Result<v1::PublishAck, String> {
-    let request = forwarded_control(frame, &cluster.replica);
+    let request = forwarded_control(frame, &cluster.replica).encode_to_vec();
+    let subject = subject::control(&room);
+    let headers =
+        trust::control_headers(cluster.key.as_ref(), &subject, &cluster.replica, &request);
     let reply = cluster
         .client
         .send_request(
-            subject::control(&room),
+            subject.clone(),
             async_nats::Request::new()
-                .payload(request.encode_to_vec().into())
+                .payload(request.into())
+                .headers(headers)
                 .timeout(Some(FORWARD_TIMEOUT)),
         )
         .await
@@ -63,6 +68,31 @@ pub async fn forward(
             )
         })?;
     cluster.metrics.forwarded_controls.inc();
+    // The ack must be an owner's (its tag, with a key) of an epoch not older than one seen.
+    let believed = trust::check_ack(
+        cluster.key.as_ref(),
+        &subject,
+        reply.headers.as_ref(),
+        &reply.payload,
+    )
+    .and_then(|(_, epoch)| match cluster.link(&room) {
+        Some(link) if epoch < link.epoch_seen() => Err(Refusal::Stale),
+        Some(link) => {
+            link.note_epoch(epoch);
+            Ok(())
+        }
+        None => Ok(()),
+    });
+    if let Err(refusal) = believed {
+        let m = &cluster.metrics;
+        match refusal {
+            Refusal::Forged => m.refused_forged_frames.inc(),
+            Refusal::Stale => m.refused_stale_frames.inc(),
+        };
+        return Err(format!(
+            "room {room:?}: the reply to the forwarded frame is not its owner's ({refusal:?}): ignored"
+        ));
+    }
     v1::PublishAck::decode(reply.payload.as_ref())
         .map_err(|e| format!("room {room:?}: the owner's reply is not a PublishAck: {e}"))
 }
@@ -70,7 +100,8 @@ pub async fn forward(
 /// Owner: serves the frames relays forward into `room` until the task is aborted (the room
 /// changed owner or closed).
 pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: String) {
-    let Ok(mut sub) = cluster.client.subscribe(subject::control(&room)).await else {
+    let subject = subject::control(&room);
+    let Ok(mut sub) = cluster.client.subscribe(subject.clone()).await else {
         tracing::error!(%room, "cannot subscribe to forwarded controls");
         return;
     };
@@ -78,6 +109,16 @@ pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: Stri
         let Some(reply) = msg.reply else {
             continue;
         };
+        if !trust::check_control(
+            cluster.key.as_ref(),
+            &subject,
+            msg.headers.as_ref(),
+            &msg.payload,
+        ) {
+            // Not a replica's: no answer (the sender times out), counted.
+            cluster.metrics.refused_controls.inc();
+            continue;
+        }
         let forwarded = v1::ForwardedControl::decode(msg.payload.as_ref());
         let ack = match forwarded.map(read_forwarded_control) {
             Ok(Ok(mut frame)) => {
@@ -93,9 +134,18 @@ pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: Stri
                 ),
             ),
         };
+        let payload = ack.encode_to_vec();
+        let epoch = cluster.link(&room).map_or(0, |l| l.entry().0.epoch);
+        let headers = trust::ack_headers(
+            cluster.key.as_ref(),
+            &subject,
+            &cluster.replica,
+            epoch,
+            &payload,
+        );
         let _ = cluster
             .client
-            .publish(reply, ack.encode_to_vec().into())
+            .publish_with_headers(reply, headers, payload.into())
             .await;
     }
 }

@@ -58,6 +58,7 @@ impl Cluster {
     async fn renew(&self, link: &Arc<RoomLink>) {
         let (mut entry, revision) = link.entry();
         entry.renewed_unix_ms = now_unix_ms();
+        self.seal(link.room(), &mut entry);
         match self
             .rooms_kv
             .update(link.room(), entry.encode_to_vec().into(), revision)
@@ -66,6 +67,7 @@ impl Cluster {
             Ok(rev) => {
                 link.set_entry(entry, rev);
                 link.set_confirmed(true);
+                link.renewed();
             }
             Err(e) if e.kind() == kv::UpdateErrorKind::WrongLastRevision => {
                 tracing::warn!(room = %link.room(), "lease lost: {e}");
@@ -88,7 +90,10 @@ impl Cluster {
         let mut entry = known.entry.clone();
         let previous = std::mem::replace(&mut entry.owner, self.replica.clone());
         entry.adoptions += 1;
+        // A new ownership epoch (entries before issue 40 have none: 0 counts as 1).
+        entry.epoch = entry.epoch.max(1) + 1;
         entry.renewed_unix_ms = now_unix_ms();
+        self.seal(id, &mut entry);
         let silent = known.seen.elapsed();
         match self
             .rooms_kv

@@ -24,6 +24,7 @@ use prost::Message as _;
 use tokio::sync::{Notify, mpsc};
 use tokio::task::JoinHandle;
 
+use super::trust::{self, EpochGate, Refusal};
 use super::{Cluster, Host, subject};
 use crate::fanout::{Channel, Fanout, LocalFanout, Receiver};
 use crate::frames::{FramePool, MeshUpdate};
@@ -72,6 +73,12 @@ pub struct RoomLink {
     revision: AtomicU64,
     /// The registry entry, as this replica last wrote or read it.
     entry: Mutex<v1::RoomEntry>,
+    /// The newest ownership epoch seen of the room (the registry's, believed frames'): older
+    /// frames and acks are refused (`trust`).
+    gate: EpochGate,
+    /// When this replica last renewed (or took) its lease as owner: past a lease since, it
+    /// sends no frame (it may have been paused or cut off, and replaced meanwhile).
+    renewed: Mutex<Instant>,
     /// Other replicas' interest per channel: replica -> until when.
     remote: Mutex<[HashMap<String, Instant>; Channel::COUNT]>,
     key_wanted: [AtomicBool; Channel::COUNT],
@@ -124,7 +131,13 @@ impl RoomLink {
             owner: AtomicBool::new(owner),
             confirmed: AtomicBool::new(owner),
             revision: AtomicU64::new(revision),
+            gate: {
+                let gate = EpochGate::default();
+                gate.note(entry.epoch);
+                gate
+            },
             entry: Mutex::new(entry),
+            renewed: Mutex::new(Instant::now()),
             remote: Mutex::new(std::array::from_fn(|_| HashMap::new())),
             key_wanted: std::array::from_fn(|_| AtomicBool::new(false)),
             out,
@@ -171,8 +184,24 @@ impl RoomLink {
 
     /// Records the registry's `entry` at `revision` (a renewal, or what the watch saw).
     pub(crate) fn set_entry(&self, entry: v1::RoomEntry, revision: u64) {
+        self.gate.note(entry.epoch);
         *lock(&self.entry) = entry;
         self.revision.store(revision, Ordering::Release);
+    }
+
+    /// The owner renewed its lease just now.
+    pub(crate) fn renewed(&self) {
+        *lock(&self.renewed) = Instant::now();
+    }
+
+    /// The newest ownership epoch this replica has seen of the room.
+    pub(crate) fn epoch_seen(&self) -> u64 {
+        self.gate.seen()
+    }
+
+    /// Notes an epoch a believed message (an ack) carried.
+    pub(crate) fn note_epoch(&self, epoch: u64) {
+        self.gate.note(epoch);
     }
 
     /// Whether the owner's lease is confirmed since the last reconnection.
@@ -198,6 +227,7 @@ impl RoomLink {
         for w in &self.key_wanted {
             w.store(true, Ordering::Release);
         }
+        self.renewed();
         self.confirmed.store(true, Ordering::Release);
         if !self.owner.swap(true, Ordering::AcqRel) {
             self.start_owner(host);
@@ -294,6 +324,13 @@ impl RoomLink {
             if !(self.is_owner() && self.is_confirmed() && self.cluster.is_connected()) {
                 continue;
             }
+            // Fencing (issue 40): an owner whose last renewal is a lease old was paused or cut
+            // off and may have been replaced; it sends nothing until it renews (or learns it
+            // lost the room). Relays drop a replaced owner's epoch anyway.
+            if lock(&self.renewed).elapsed() >= self.cluster.lease {
+                metrics.fenced_frames.inc();
+                continue;
+            }
             let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
             let msg = if update.actor_count() > 1 {
                 // A room of several actors: every actor's frame of the instant in one message.
@@ -317,10 +354,19 @@ impl RoomLink {
             let payload = msg.encode_to_vec();
             metrics.nats_frames_out.inc();
             metrics.nats_bytes_out.inc_by(payload.len() as u64);
+            let subject = &subjects[channel.index()];
+            let epoch = lock(&self.entry).epoch;
+            let headers = trust::frame_headers(
+                self.cluster.key.as_ref(),
+                subject,
+                &self.cluster.replica,
+                epoch,
+                &payload,
+            );
             if self
                 .cluster
                 .client
-                .publish(subjects[channel.index()].clone(), payload.into())
+                .publish_with_headers(subject.clone(), headers, payload.into())
                 .await
                 .is_err()
             {
@@ -391,7 +437,16 @@ impl RoomLink {
         let mut asked: Option<Instant> = None;
         // Joining mid-stream: the next frame is most likely a delta.
         let _ = client.publish(key_subject.clone(), "".into()).await;
+        let subject = subject::frames(&self.room, channel);
         while let Some(msg) = sub.next().await {
+            if let Err(refusal) = self.believe_frame(&subject, &msg) {
+                let m = &self.cluster.metrics;
+                match refusal {
+                    Refusal::Forged => m.refused_forged_frames.inc(),
+                    Refusal::Stale => m.refused_stale_frames.inc(),
+                };
+                continue;
+            }
             let bytes = msg.payload.len() as u64;
             // A small frame decodes in tens of microseconds (the horse: 12 KB, ~30 µs), less
             // than a hand-off to the blocking pool costs in latency; a large one (a detail
@@ -417,6 +472,30 @@ impl RoomLink {
                 Err(e) => tracing::error!(room = %self.room, "relay task: {e}"),
             }
         }
+    }
+
+    /// Relay: whether a frame from NATS is the room's owner's (`trust`): its tag holds (with a
+    /// cluster key), its epoch is not older than one seen, and at the registry's epoch it
+    /// names the registry's owner (a newer epoch is an adoption this replica has not read
+    /// yet).
+    fn believe_frame(&self, subject: &str, msg: &async_nats::Message) -> Result<(), Refusal> {
+        let (owner, epoch) = trust::check_frame(
+            self.cluster.key.as_ref(),
+            subject,
+            msg.headers.as_ref(),
+            &msg.payload,
+        )?;
+        {
+            let entry = lock(&self.entry);
+            if epoch <= entry.epoch && owner != entry.owner {
+                return Err(if epoch < entry.epoch {
+                    Refusal::Stale
+                } else {
+                    Refusal::Forged
+                });
+            }
+        }
+        self.gate.admit(epoch)
     }
 
     /// Relay: decodes one of the owner's frames and fans it out (blocking: run it on the

@@ -22,6 +22,19 @@ pub struct ClusterMetrics {
     pub forwarded_controls: Counter,
     /// Rooms this replica adopted from a dead owner.
     pub adoptions: Counter,
+    /// Frames (and acks) from NATS refused for a missing or bad tag, or an owner the room's
+    /// epoch does not name (issue 40: a forger).
+    pub refused_forged_frames: Counter,
+    /// Frames from NATS refused for an ownership epoch older than one seen (a paused or
+    /// partitioned owner that was replaced).
+    pub refused_stale_frames: Counter,
+    /// Room entries in the registry ignored for a missing or bad seal.
+    pub refused_entries: Counter,
+    /// Forwarded control frames refused for a missing or bad tag.
+    pub refused_controls: Counter,
+    /// Frames this replica, as owner, did not send because its lease was not renewed within a
+    /// lease (it was paused or cut off, and may have been replaced).
+    pub fenced_frames: Counter,
     /// 1 while connected to NATS.
     pub nats_connected: Gauge,
 }
@@ -65,6 +78,31 @@ impl ClusterMetrics {
                 "adoptions",
                 "Rooms adopted from a dead owner",
                 &self.adoptions,
+            ),
+            (
+                "refused_forged_frames",
+                "Frames and acks from NATS refused: no or a bad tag, or an owner its epoch does not name",
+                &self.refused_forged_frames,
+            ),
+            (
+                "refused_stale_frames",
+                "Frames and acks from NATS refused: an ownership epoch older than one seen",
+                &self.refused_stale_frames,
+            ),
+            (
+                "refused_entries",
+                "Room entries ignored: no or a bad seal",
+                &self.refused_entries,
+            ),
+            (
+                "refused_controls",
+                "Forwarded control frames refused: no or a bad tag",
+                &self.refused_controls,
+            ),
+            (
+                "fenced_frames",
+                "Frames not sent as owner: the lease was not renewed within a lease",
+                &self.fenced_frames,
             ),
         ];
         for (name, help, counter) in counters {

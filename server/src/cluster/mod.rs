@@ -35,6 +35,7 @@ pub mod metrics;
 pub mod models;
 pub mod registry;
 pub mod relay;
+pub mod trust;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -98,6 +99,12 @@ pub struct ClusterOptions {
     pub replica: String,
     /// The owner's lease.
     pub lease: Duration,
+    /// How this replica authenticates to NATS (issue 40).
+    pub auth: trust::NatsAuth,
+    /// The file of the cluster's shared key (`--cluster-key-file`): frames, controls and room
+    /// entries are tagged with it and believed only with a good tag (`trust` module docs).
+    /// None: believed as they come.
+    pub key_file: Option<std::path::PathBuf>,
 }
 
 impl ClusterOptions {
@@ -112,6 +119,8 @@ impl ClusterOptions {
             url: url.to_owned(),
             replica,
             lease: DEFAULT_LEASE,
+            auth: trust::NatsAuth::default(),
+            key_file: None,
         }
     }
 }
@@ -141,6 +150,13 @@ pub enum ClusterError {
         /// What failed.
         source: async_nats::ConnectError,
     },
+    /// The NATS authentication options could not be applied (a credentials or password
+    /// file).
+    #[error("NATS authentication: {0}")]
+    Auth(String),
+    /// The cluster key file was refused.
+    #[error("{0}")]
+    Key(trust::KeyError),
     /// A JetStream bucket could not be opened or created (is JetStream enabled, `-js`?).
     #[error(
         "JetStream bucket {bucket}: {message} (is JetStream enabled on the NATS server, `nats-server -js`?)"
@@ -205,6 +221,8 @@ pub struct Cluster {
     links: Mutex<BTreeMap<String, Arc<RoomLink>>>,
     /// The connection's events, until [`Cluster::start`] hands them to the watcher.
     events: Mutex<Option<Events>>,
+    /// The cluster's shared key (`trust`).
+    pub(crate) key: Option<trust::ClusterKey>,
     /// The cluster metrics.
     pub metrics: ClusterMetrics,
 }
@@ -232,8 +250,17 @@ pub async fn connect(
     options: ClusterOptions,
     metrics: ClusterMetrics,
 ) -> Result<Arc<Cluster>, ClusterError> {
+    let key = match &options.key_file {
+        Some(path) => Some(trust::ClusterKey::from_file(path).map_err(ClusterError::Key)?),
+        None => None,
+    };
     let (events_tx, events) = tokio::sync::mpsc::unbounded_channel();
-    let client = async_nats::ConnectOptions::new()
+    let connect = options
+        .auth
+        .apply(async_nats::ConnectOptions::new())
+        .await
+        .map_err(ClusterError::Auth)?;
+    let client = connect
         .name(format!("crease-server {}", options.replica))
         .max_reconnects(None)
         .event_callback(move |event| {
@@ -252,7 +279,13 @@ pub async fn connect(
     let rooms_kv = registry::open_kv(&js).await?;
     let models_store = models::open_object_store(&js).await?;
     metrics.nats_connected.set(1);
-    tracing::info!(replica = %options.replica, url = %options.url, "joined the cluster");
+    tracing::info!(
+        replica = %options.replica,
+        url = %options.url,
+        auth = %options.auth.describe(),
+        key = key.is_some(),
+        "joined the cluster"
+    );
     Ok(Arc::new(Cluster {
         replica: options.replica,
         client,
@@ -266,6 +299,7 @@ pub async fn connect(
         refused: Mutex::new(BTreeMap::new()),
         links: Mutex::new(BTreeMap::new()),
         events: Mutex::new(Some(events)),
+        key,
         metrics,
     }))
 }
@@ -283,6 +317,20 @@ impl Cluster {
         if let Some(events) = lock(&self.events).take() {
             tokio::spawn(Arc::clone(&self).follow_connection(events));
         }
+    }
+
+    /// Seals room `id`'s `entry` with the cluster key, if there is one (`trust`), before it is
+    /// written.
+    pub(crate) fn seal(&self, id: &str, entry: &mut crease_proto::v1::RoomEntry) {
+        if let Some(key) = &self.key {
+            key.seal_entry(id, entry);
+        }
+    }
+
+    /// Whether room `id`'s `entry`, as read from the registry, is believed: always without a
+    /// key, with one only when its seal holds.
+    pub(crate) fn believed(&self, id: &str, entry: &crease_proto::v1::RoomEntry) -> bool {
+        self.key.as_ref().is_none_or(|k| k.check_entry(id, entry))
     }
 
     /// Whether this replica is connected to NATS.

@@ -117,7 +117,7 @@ impl Cluster {
                 Some(actor_entry(actor, a.source().sha256()))
             })
             .collect();
-        let entry = room_entry(EntryParts {
+        let mut entry = room_entry(EntryParts {
             settings: room.settings_parts(true),
             model_sha256: room.model.sha256(),
             owner: &self.replica,
@@ -127,6 +127,7 @@ impl Cluster {
             renewed_unix_ms: now_unix_ms(),
             actors: &actors,
         });
+        self.seal(id, &mut entry);
         let revision = self
             .rooms_kv
             .create(id, entry.encode_to_vec().into())
@@ -194,6 +195,11 @@ impl Cluster {
                     tracing::warn!(room = %e.key, "registry: not a RoomEntry, ignored");
                     return;
                 };
+                if !self.believed(&e.key, &entry) {
+                    self.metrics.refused_entries.inc();
+                    tracing::warn!(room = %e.key, owner = %entry.owner, revision = e.revision, "registry: an entry without the cluster key's seal, ignored");
+                    return;
+                }
                 if let Some(link) = self.link(&e.key) {
                     let (_, mine) = link.entry();
                     if e.revision >= mine {
