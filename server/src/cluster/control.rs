@@ -120,7 +120,17 @@ pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: Stri
             continue;
         }
         let forwarded = v1::ForwardedControl::decode(msg.payload.as_ref());
+        let lapsed = cluster.link(&room).is_some_and(|l| l.lease_lapsed());
         let ack = match forwarded.map(read_forwarded_control) {
+            // Fencing: an owner whose lease lapsed (it was paused or cut off) predicts nothing
+            // for the cluster until it renews, or learns that another replica adopted the room.
+            Ok(Ok(_)) if lapsed => error_ack(
+                0,
+                frame_error(
+                    ErrorCode::Unavailable,
+                    format!("room {room:?}: its owner's lease lapsed; retry in a moment"),
+                ),
+            ),
             Ok(Ok(mut frame)) => {
                 room.clone_into(&mut frame.room);
                 Arc::clone(&host).publish_forwarded(frame).await

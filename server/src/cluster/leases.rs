@@ -9,6 +9,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use async_nats::jetstream::kv;
+use crease_proto::v1;
 use prost::Message as _;
 
 use super::registry::{Known, now_unix_ms};
@@ -70,10 +71,42 @@ impl Cluster {
                 link.renewed();
             }
             Err(e) if e.kind() == kv::UpdateErrorKind::WrongLastRevision => {
+                // Written over by something that cannot seal it (with a cluster key): the
+                // lease is still this replica's; it writes its own entry back over the forgery.
+                if let Some(forged) = self.forged_revision(link.room()).await {
+                    match self
+                        .rooms_kv
+                        .update(link.room(), entry.encode_to_vec().into(), forged)
+                        .await
+                    {
+                        Ok(rev) => {
+                            tracing::warn!(room = %link.room(), "an unsealed entry overwrote this replica's: written back");
+                            link.set_entry(entry, rev);
+                            link.set_confirmed(true);
+                            link.renewed();
+                        }
+                        Err(e) => tracing::debug!(room = %link.room(), "lease renewal over a forgery: {e}"),
+                    }
+                    return;
+                }
                 tracing::warn!(room = %link.room(), "lease lost: {e}");
                 link.yield_ownership();
             }
             Err(e) => tracing::debug!(room = %link.room(), "lease renewal: {e}"),
+        }
+    }
+
+    /// The revision of room `id`'s current entry when it is one this replica does not believe
+    /// (no or a bad seal, with a cluster key): a forgery to write over. None otherwise.
+    async fn forged_revision(&self, id: &str) -> Option<u64> {
+        self.key.as_ref()?;
+        let current = self.rooms_kv.entry(id).await.ok()??;
+        if current.operation != kv::Operation::Put {
+            return None;
+        }
+        match v1::RoomEntry::decode(current.value.as_ref()) {
+            Ok(entry) if self.believed(id, &entry) => None,
+            _ => Some(current.revision),
         }
     }
 
@@ -95,11 +128,23 @@ impl Cluster {
         entry.renewed_unix_ms = now_unix_ms();
         self.seal(id, &mut entry);
         let silent = known.seen.elapsed();
-        match self
+        let mut result = self
             .rooms_kv
             .update(id, entry.encode_to_vec().into(), known.revision)
-            .await
+            .await;
+        // An unsealed entry on top of the last believed one (with a cluster key) does not hold
+        // the room: adopt over it.
+        if result
+            .as_ref()
+            .is_err_and(|e| e.kind() == kv::UpdateErrorKind::WrongLastRevision)
+            && let Some(forged) = self.forged_revision(id).await
         {
+            result = self
+                .rooms_kv
+                .update(id, entry.encode_to_vec().into(), forged)
+                .await;
+        }
+        match result {
             Ok(revision) => {
                 self.note(id, entry.clone(), revision);
                 link.become_owner(host, entry, revision);

@@ -194,6 +194,12 @@ impl RoomLink {
         *lock(&self.renewed) = Instant::now();
     }
 
+    /// Whether this replica, as owner, last renewed its lease a lease ago or longer (fencing:
+    /// it was paused or cut off, and may have been replaced).
+    pub(crate) fn lease_lapsed(&self) -> bool {
+        lock(&self.renewed).elapsed() >= self.cluster.lease
+    }
+
     /// The newest ownership epoch this replica has seen of the room.
     pub(crate) fn epoch_seen(&self) -> u64 {
         self.gate.seen()
@@ -327,7 +333,7 @@ impl RoomLink {
             // Fencing (issue 40): an owner whose last renewal is a lease old was paused or cut
             // off and may have been replaced; it sends nothing until it renews (or learns it
             // lost the room). Relays drop a replaced owner's epoch anyway.
-            if lock(&self.renewed).elapsed() >= self.cluster.lease {
+            if self.lease_lapsed() {
                 metrics.fenced_frames.inc();
                 continue;
             }
