@@ -113,7 +113,12 @@ struct Args {
     replica_id: Option<String>,
     /// NATS credentials file (decentralised auth: a user JWT and its nkey seed, as `nsc`
     /// writes them).
-    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_NATS_CREDS")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "nats",
+        env = "CREASE_NATS_CREDS"
+    )]
     nats_creds: Option<PathBuf>,
     /// NATS user name; the password comes from the environment (CREASE_NATS_PASSWORD) or
     /// --nats-password-file, never the command line.
@@ -123,18 +128,33 @@ struct Args {
     #[arg(long, value_name = "FILE", requires = "nats_user")]
     nats_password_file: Option<PathBuf>,
     /// TLS to NATS: the CA certificate (PEM) that signed the NATS server's.
-    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_NATS_TLS_CA")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "nats",
+        env = "CREASE_NATS_TLS_CA"
+    )]
     nats_tls_ca: Option<PathBuf>,
     /// Mutual TLS to NATS: this replica's certificate (PEM); with --nats-tls-key.
     #[arg(long, value_name = "FILE", requires_all = ["nats", "nats_tls_key"], env = "CREASE_NATS_TLS_CERT")]
     nats_tls_cert: Option<PathBuf>,
     /// Mutual TLS to NATS: this replica's private key (PEM).
-    #[arg(long, value_name = "FILE", requires = "nats_tls_cert", env = "CREASE_NATS_TLS_KEY")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "nats_tls_cert",
+        env = "CREASE_NATS_TLS_KEY"
+    )]
     nats_tls_key: Option<PathBuf>,
     /// The cluster's shared key (at least 32 bytes: hex, e.g. `openssl rand -hex 32`, or raw):
     /// every replica tags its frames, forwarded controls and room entries with it, and believes
     /// only tagged ones (ARCHITECTURE.md, "A cluster that trusts only its own").
-    #[arg(long, value_name = "FILE", requires = "nats", env = "CREASE_CLUSTER_KEY_FILE")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "nats",
+        env = "CREASE_CLUSTER_KEY_FILE"
+    )]
     cluster_key_file: Option<PathBuf>,
     /// The owner's lease in milliseconds: a replica silent this long loses its rooms to others.
     #[arg(long, value_name = "MS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_LEASE.as_millis() as u64)]
@@ -243,5 +263,12 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         .enable_all()
         .max_blocking_threads(blocking)
         .build()?;
-    runtime.block_on(launch::run(args.into(), launch::shutdown_signal()))
+    // An error that stops the server is said once, as a sentence (its Display, not a debug
+    // dump), in the log and on stderr, and the exit status is 1.
+    if let Err(e) = runtime.block_on(launch::run(args.into(), launch::shutdown_signal())) {
+        tracing::error!("{e}");
+        eprintln!("crease-server: {e}");
+        std::process::exit(1);
+    }
+    Ok(())
 }

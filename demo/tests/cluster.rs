@@ -12,202 +12,23 @@
 //! Skips, saying why, when `nats-server` is not installed (`.ci/run` installs it).
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
+mod cluster_kit;
 #[path = "../../server/tests/common/mod.rs"]
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::{
-    authed, bent, check_decoded, control_frame, http_get, metric, model_with_detail, predicted,
-};
+use common::{authed, bent, check_decoded, control_frame, http_get, model_with_detail, predicted};
 use crease_core::codec::FrameDecoder;
 use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_proto::v1;
-use crease_proto::v1::crease_client::CreaseClient;
 use futures_util::StreamExt;
 use prost::Message;
 
-const ADMIN: &str = "cluster-admin";
-
-/// A port that was free a moment ago.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn nats_binary() -> Option<PathBuf> {
-    [
-        "/usr/sbin/nats-server",
-        "/usr/bin/nats-server",
-        "/usr/local/bin/nats-server",
-    ]
-    .iter()
-    .map(PathBuf::from)
-    .find(|p| p.is_file())
-    .or_else(|| {
-        let out = Command::new("sh")
-            .args(["-c", "command -v nats-server"])
-            .output()
-            .ok()?;
-        let path = String::from_utf8(out.stdout).ok()?.trim().to_owned();
-        (!path.is_empty()).then(|| PathBuf::from(path))
-    })
-}
-
-/// A `nats-server` child with JetStream, on a fixed port and store (so it can be restarted).
-struct Nats {
-    bin: PathBuf,
-    port: u16,
-    store: PathBuf,
-    child: Child,
-}
-
-impl Nats {
-    fn start(bin: &Path, port: u16, store: &Path) -> Nats {
-        let child = Command::new(bin)
-            .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
-            .arg(store)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(
-                Instant::now() < deadline,
-                "nats-server did not listen on {port}"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        Nats {
-            bin: bin.to_owned(),
-            port,
-            store: store.to_owned(),
-            child,
-        }
-    }
-
-    fn url(&self) -> String {
-        format!("nats://127.0.0.1:{}", self.port)
-    }
-
-    fn restart(&mut self) {
-        self.child.kill().unwrap();
-        self.child.wait().unwrap();
-        *self = Nats::start(&self.bin.clone(), self.port, &self.store.clone());
-    }
-}
-
-impl Drop for Nats {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// A `crease-server` replica.
-struct Replica {
-    id: String,
-    child: Child,
-    grpc: String,
-    http: std::net::SocketAddr,
-    log: PathBuf,
-}
-
-impl Replica {
-    fn start(id: &str, models: &Path, nats: &str, dir: &Path) -> Replica {
-        let (grpc, http) = (free_port(), free_port());
-        let log = dir.join(format!("{id}.log"));
-        let child = Command::new(env!("CARGO_BIN_EXE_crease-server"))
-            .arg("--models")
-            .arg(models)
-            .args(["--nats", nats, "--replica-id", id])
-            .args(["--grpc", &format!("127.0.0.1:{grpc}")])
-            .args(["--http", &format!("127.0.0.1:{http}")])
-            .env("CREASE_ADMIN_TOKEN", ADMIN)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .unwrap();
-        Replica {
-            id: id.to_owned(),
-            child,
-            grpc: format!("http://127.0.0.1:{grpc}"),
-            http: format!("127.0.0.1:{http}").parse().unwrap(),
-            log,
-        }
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    async fn ready(&mut self) {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
-                panic!("replica {} exited ({status}):\n{}", self.id, self.log());
-            }
-            if std::net::TcpStream::connect(self.http).is_ok()
-                && http_get(self.http, "/readyz").await.0 == 200
-            {
-                return;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "replica {} not ready:\n{}",
-                self.id,
-                self.log()
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
-    }
-
-    async fn client(&self) -> CreaseClient<tonic::transport::Channel> {
-        CreaseClient::connect(self.grpc.clone()).await.unwrap()
-    }
-
-    /// `/api/rooms` as JSON.
-    async fn rooms(&self) -> serde_json::Value {
-        let (status, body) = http_get(self.http, "/api/rooms").await;
-        assert_eq!(status, 200, "{body}");
-        serde_json::from_str(&body).unwrap()
-    }
-
-    /// The owner of `room` as this replica's `/api/rooms` says.
-    async fn owner_of(&self, room: &str) -> Option<String> {
-        let rooms = self.rooms().await;
-        rooms["cluster"].as_array()?.iter().find_map(|r| {
-            (r["room"] == room).then(|| r["owner"].as_str().unwrap_or_default().to_owned())
-        })
-    }
-
-    async fn metric(&self, name: &str) -> f64 {
-        let (_, body) = http_get(self.http, "/metrics").await;
-        metric(&body, name)
-    }
-
-    fn kill9(&mut self) {
-        self.child.kill().unwrap();
-        self.child.wait().unwrap();
-    }
-}
-
-impl Drop for Replica {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+use cluster_kit::{ADMIN, Nats, Replica, free_port, nats_binary, until};
 
 /// What a viewer decoded: per publisher seq, whether the frame matched the prediction.
 #[derive(Default)]
@@ -518,19 +339,6 @@ impl Publisher {
 }
 
 /// Polls `f` until it is true, up to `limit`; the time it took.
-async fn until<F: std::future::Future<Output = bool>>(
-    limit: Duration,
-    what: &str,
-    mut f: impl FnMut() -> F,
-) -> Duration {
-    let start = Instant::now();
-    while !f().await {
-        assert!(start.elapsed() < limit, "{what}: not within {limit:?}");
-        tokio::time::sleep(Duration::from_millis(25)).await;
-    }
-    start.elapsed()
-}
-
 fn frames(seen: &Shared) -> usize {
     seen.lock().unwrap().frames.len()
 }

@@ -85,7 +85,9 @@ impl Cluster {
                             link.set_confirmed(true);
                             link.renewed();
                         }
-                        Err(e) => tracing::debug!(room = %link.room(), "lease renewal over a forgery: {e}"),
+                        Err(e) => {
+                            tracing::debug!(room = %link.room(), "lease renewal over a forgery: {e}")
+                        }
                     }
                     return;
                 }

@@ -222,7 +222,11 @@ impl ClusterKey {
     pub fn seal_entry(&self, id: &str, entry: &mut v1::RoomEntry) {
         entry.tag.clear();
         let bytes = entry.encode_to_vec();
-        entry.tag = self.mac(&[b"entry", id.as_bytes(), &bytes]).finalize().into_bytes().to_vec();
+        entry.tag = self
+            .mac(&[b"entry", id.as_bytes(), &bytes])
+            .finalize()
+            .into_bytes()
+            .to_vec();
     }
 
     /// Whether room `id`'s entry carries a seal of this key.
@@ -278,7 +282,10 @@ pub fn check_frame(
     payload: &[u8],
 ) -> Result<(String, u64), Refusal> {
     let h = headers.ok_or(Refusal::Forged)?;
-    let owner = h.get(OWNER).map(|v| v.as_str().to_owned()).ok_or(Refusal::Forged)?;
+    let owner = h
+        .get(OWNER)
+        .map(|v| v.as_str().to_owned())
+        .ok_or(Refusal::Forged)?;
     let epoch: u64 = h
         .get(EPOCH)
         .and_then(|v| v.as_str().parse().ok())
@@ -332,7 +339,12 @@ pub fn check_control(
         return false;
     };
     key.verify(
-        &[b"control", subject.as_bytes(), relay.as_str().as_bytes(), payload],
+        &[
+            b"control",
+            subject.as_bytes(),
+            relay.as_str().as_bytes(),
+            payload,
+        ],
         tag.as_str(),
     )
 }
@@ -368,7 +380,10 @@ pub fn check_ack(
     payload: &[u8],
 ) -> Result<(String, u64), Refusal> {
     let h = headers.ok_or(Refusal::Forged)?;
-    let owner = h.get(OWNER).map(|v| v.as_str().to_owned()).ok_or(Refusal::Forged)?;
+    let owner = h
+        .get(OWNER)
+        .map(|v| v.as_str().to_owned())
+        .ok_or(Refusal::Forged)?;
     let epoch: u64 = h
         .get(EPOCH)
         .and_then(|v| v.as_str().parse().ok())
@@ -376,7 +391,10 @@ pub fn check_ack(
     if let Some(key) = key {
         let tag = h.get(TAG).map(|v| v.as_str()).ok_or(Refusal::Forged)?;
         let e = epoch.to_le_bytes();
-        if !key.verify(&[b"ack", subject.as_bytes(), owner.as_bytes(), &e, payload], tag) {
+        if !key.verify(
+            &[b"ack", subject.as_bytes(), owner.as_bytes(), &e, payload],
+            tag,
+        ) {
             return Err(Refusal::Forged);
         }
     }
@@ -420,10 +438,12 @@ impl EpochGate {
 
 fn hex_encode(bytes: &[u8]) -> String {
     use std::fmt::Write as _;
-    bytes.iter().fold(String::with_capacity(2 * bytes.len()), |mut s, b| {
-        let _ = write!(s, "{b:02x}");
-        s
-    })
+    bytes
+        .iter()
+        .fold(String::with_capacity(2 * bytes.len()), |mut s, b| {
+            let _ = write!(s, "{b:02x}");
+            s
+        })
 }
 
 fn hex_decode(s: &str) -> Option<Vec<u8>> {
@@ -453,8 +473,14 @@ mod tests {
             Ok(("a".to_owned(), 3))
         );
         // Another payload, subject, key, or an epoch rewritten: forged.
-        for (subject, payload) in [("crease.frames.r.base", &b"payloaD"[..]), ("crease.frames.s.base", b"payload")] {
-            assert_eq!(check_frame(Some(&k), subject, Some(&h), payload), Err(Refusal::Forged));
+        for (subject, payload) in [
+            ("crease.frames.r.base", &b"payloaD"[..]),
+            ("crease.frames.s.base", b"payload"),
+        ] {
+            assert_eq!(
+                check_frame(Some(&k), subject, Some(&h), payload),
+                Err(Refusal::Forged)
+            );
         }
         let other = ClusterKey::new(&[8u8; 32]).unwrap();
         assert_eq!(
@@ -481,7 +507,9 @@ mod tests {
     fn the_tag_is_hmac_sha256_of_the_length_prefixed_parts() {
         // An independent computation: RFC 4231 test case 2's key and message through the same
         // HMAC, the message as one part behind its 8-byte length.
-        let k = ClusterKey { key: b"Jefe".to_vec() };
+        let k = ClusterKey {
+            key: b"Jefe".to_vec(),
+        };
         let msg = b"what do ya want for nothing?";
         let mut framed = (msg.len() as u64).to_le_bytes().to_vec();
         framed.extend_from_slice(msg);
@@ -521,8 +549,18 @@ mod tests {
     fn controls_and_acks_are_tagged_both_ways() {
         let k = key();
         let h = control_headers(Some(&k), "crease.control.r", "b", b"frame");
-        assert!(check_control(Some(&k), "crease.control.r", Some(&h), b"frame"));
-        assert!(!check_control(Some(&k), "crease.control.r", Some(&h), b"framE"));
+        assert!(check_control(
+            Some(&k),
+            "crease.control.r",
+            Some(&h),
+            b"frame"
+        ));
+        assert!(!check_control(
+            Some(&k),
+            "crease.control.r",
+            Some(&h),
+            b"framE"
+        ));
         assert!(!check_control(Some(&k), "crease.control.r", None, b"frame"));
         assert!(check_control(None, "crease.control.r", None, b"frame"));
         let a = ack_headers(Some(&k), "crease.control.r", "a", 5, b"ack");
