@@ -82,10 +82,50 @@ fn pki(dir: &Path) -> Pki {
     }
 }
 
-const USER: &str = "crease";
+/// The replicas' NATS user, as deploy/k8s/cluster-secrets.example.yaml names it.
+const USER: &str = "crease-replica";
 const PASSWORD: &str = "correct horse battery staple";
+const OBSERVER: &str = "crease-observer";
+const OBSERVER_PASSWORD: &str = "watch only";
 
-/// A nats-server configuration: JetStream, mutual TLS, one user.
+/// The `authorization` block of the shipped NATS configuration
+/// (deploy/k8s/cluster-secrets.example.yaml: its users and their subject permissions), with
+/// this test's passwords for the bcrypt placeholders: the cluster runs under the permissions
+/// the deployment ships.
+fn shipped_authorization() -> String {
+    let example = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/k8s/cluster-secrets.example.yaml"),
+    )
+    .unwrap();
+    let conf: String = example
+        .lines()
+        .skip_while(|l| !l.trim_start().starts_with("nats.conf: |"))
+        .skip(1)
+        .take_while(|l| l.starts_with("    ") || l.trim().is_empty())
+        .map(|l| format!("{}\n", l.get(4..).unwrap_or("")))
+        .collect();
+    let at = conf
+        .find("authorization {")
+        .expect("an authorization block");
+    let block = &conf[at..];
+    let replaced = block
+        .replace(
+            "\"$2a$11$REPLACE.WITH.A.BCRYPT.HASH.OF.THE.REPLICAS.PASSWORD\"",
+            &format!("\"{PASSWORD}\""),
+        )
+        .replace(
+            "\"$2a$11$REPLACE.WITH.A.BCRYPT.HASH.OF.THE.OBSERVERS.PASSWORD\"",
+            &format!("\"{OBSERVER_PASSWORD}\""),
+        );
+    assert!(
+        replaced.contains(USER) && replaced.contains(OBSERVER),
+        "{replaced}"
+    );
+    assert!(!replaced.contains("REPLACE"), "{replaced}");
+    replaced
+}
+
+/// A nats-server configuration: JetStream, mutual TLS, the shipped users and permissions.
 fn nats_config(dir: &Path, port: u16, pki: &Pki) -> PathBuf {
     let conf = format!(
         r#"
@@ -98,14 +138,13 @@ tls {{
   verify: true
   timeout: 3
 }}
-authorization {{
-  users = [ {{ user: "{USER}", password: "{PASSWORD}" }} ]
-}}
+{authorization}
 "#,
         store = dir.join("js").display(),
         cert = pki.server_cert.display(),
         key = pki.server_key.display(),
         ca = pki.ca.display(),
+        authorization = shipped_authorization(),
     );
     let path = dir.join("nats.conf");
     std::fs::write(&path, conf).unwrap();
@@ -113,9 +152,9 @@ authorization {{
 }
 
 /// An insider: a NATS client with the cluster's NATS credentials, without its key.
-async fn insider(nats: &Nats, pki: &Pki) -> async_nats::Client {
+async fn insider(nats: &Nats, pki: &Pki, user: &str, password: &str) -> async_nats::Client {
     async_nats::ConnectOptions::new()
-        .user_and_password(USER.into(), PASSWORD.into())
+        .user_and_password(user.into(), password.into())
         .add_root_certificates(pki.ca.clone())
         .add_client_certificate(pki.client_cert.clone(), pki.client_key.clone())
         .require_tls(true)
@@ -333,8 +372,12 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
     }
 
     // Two trusted replicas serve a room across them.
+    // B has no model of its own: it fetches the room's from the cluster's object store, under
+    // the shipped permissions.
+    let empty = dir.path().join("models-b");
+    std::fs::create_dir_all(&empty).unwrap();
     let mut a = Replica::start_with("A", &models, &nats.url(), dir.path(), &trusted);
-    let mut b = Replica::start_with("B", &models, &nats.url(), dir.path(), &trusted);
+    let mut b = Replica::start_with("B", &empty, &nats.url(), dir.path(), &trusted);
     a.ready().await;
     b.ready().await;
     assert!(a.log().contains("mutual TLS"), "{}", a.log());
@@ -352,7 +395,7 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
     .await;
 
     // An insider: NATS access, no cluster key.
-    let mallory = insider(&nats, &pki).await;
+    let mallory = insider(&nats, &pki, USER, PASSWORD).await;
     let mut sniff = mallory.subscribe("crease.frames.trusted.>").await.unwrap();
     let real = sniff.next().await.unwrap();
     drop(sniff);
@@ -385,6 +428,30 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
         || async { b.metric("crease_cluster_refused_forged_frames_total").await >= before + 10.0 },
     )
     .await;
+
+    // An observer (the shipped read-only user) may watch frames but NATS refuses its
+    // publications: the server closes nothing, the frames never reach a replica.
+    let observer = insider(&nats, &pki, OBSERVER, OBSERVER_PASSWORD).await;
+    let mut watched = observer.subscribe("crease.frames.trusted.>").await.unwrap();
+    tokio::time::timeout(Duration::from_secs(5), watched.next())
+        .await
+        .expect("the observer sees frames")
+        .unwrap();
+    let relayed = b.metric("crease_cluster_relayed_frames_total").await;
+    let refused = b.metric("crease_cluster_refused_forged_frames_total").await;
+    for _ in 0..5 {
+        let _ = observer
+            .publish(real.subject.clone(), forged.clone().into())
+            .await;
+    }
+    let _ = observer.flush().await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(
+        b.metric("crease_cluster_refused_forged_frames_total").await,
+        refused,
+        "the observer's frames reached B (NATS should refuse its publications)"
+    );
+    assert!(b.metric("crease_cluster_relayed_frames_total").await > relayed);
 
     // (3) A forged registry entry for a new room, and one handing room `trusted` to mallory.
     let js = async_nats::jetstream::new(mallory.clone());

@@ -857,20 +857,32 @@ fn the_nats_url_names_the_nats_service_and_its_jetstream_statefulset() {
         "nats.yaml: targetPort {target} is not the container's port {port}"
     );
     let nats_args: Vec<&str> = nats.at("args").seq().iter().map(Node::str).collect();
-    assert!(
-        nats_args.contains(&"-js"),
-        "nats.yaml: JetStream off (args {nats_args:?})"
-    );
-    let store = nats_args
-        .iter()
-        .position(|a| *a == "-sd")
-        .and_then(|i| nats_args.get(i + 1))
-        .expect("nats.yaml: -sd DIR (the JetStream store)");
+    // JetStream and its store: on the command line (`-js -sd DIR`) or in the configuration
+    // file (`-c FILE`, from the nats-config Secret: issue 40).
+    let conf = nats_conf();
+    let store: &str = if let Some(i) = nats_args.iter().position(|a| *a == "-c") {
+        assert_eq!(
+            nats_args.get(i + 1).copied(),
+            Some("/etc/nats/nats.conf"),
+            "nats.yaml: -c names the mounted nats-config Secret's file"
+        );
+        conf_value(&conf, "store_dir").expect("nats.conf: jetstream { store_dir: DIR }")
+    } else {
+        assert!(
+            nats_args.contains(&"-js"),
+            "nats.yaml: JetStream off (args {nats_args:?})"
+        );
+        nats_args
+            .iter()
+            .position(|a| *a == "-sd")
+            .and_then(|i| nats_args.get(i + 1))
+            .expect("nats.yaml: -sd DIR (the JetStream store)")
+    };
     let mounted = nats
         .at("volumeMounts")
         .seq()
         .iter()
-        .find(|m| m.at("mountPath").str() == *store)
+        .find(|m| m.at("mountPath").str() == store)
         .unwrap_or_else(|| panic!("nats.yaml: the store {store} is not a mounted volume"));
     let claim = mounted.at("name").str();
     assert!(
@@ -887,6 +899,166 @@ fn the_nats_url_names_the_nats_service_and_its_jetstream_statefulset() {
         .find(|e| e.at("name").str() == "CREASE_REPLICA_ID")
         .expect("deployment.yaml: CREASE_REPLICA_ID");
     assert_eq!(id.at("valueFrom.fieldRef.fieldPath").str(), "metadata.name");
+}
+
+/// The NATS configuration shipped in cluster-secrets.example.yaml (the `nats.conf` block
+/// scalar of the nats-config Secret, read as text: the YAML reader here refuses block scalars).
+fn nats_conf() -> String {
+    let text = read("deploy/k8s/cluster-secrets.example.yaml");
+    text.lines()
+        .skip_while(|l| l.trim() != "nats.conf: |")
+        .skip(1)
+        .take_while(|l| l.starts_with("    ") || l.trim().is_empty())
+        .map(|l| format!("{}\n", l.get(4..).unwrap_or("")))
+        .collect()
+}
+
+/// The value of `key:` in the NATS configuration (the first occurrence).
+fn conf_value<'a>(conf: &'a str, key: &str) -> Option<&'a str> {
+    let at = conf.find(&format!("{key}:"))? + key.len() + 1;
+    conf[at..]
+        .split(|c: char| c.is_whitespace() || c == '}' || c == ',')
+        .find(|w| !w.is_empty())
+}
+
+/// The keys of Secret `name` in cluster-secrets.example.yaml (its `stringData` keys).
+fn example_secret_keys(name: &str) -> Vec<String> {
+    let text = read("deploy/k8s/cluster-secrets.example.yaml");
+    let doc = text
+        .split("\n---\n")
+        .find(|d| d.lines().any(|l| l.trim() == format!("name: {name}")))
+        .unwrap_or_else(|| panic!("cluster-secrets.example.yaml: no Secret {name}"));
+    doc.lines()
+        .skip_while(|l| l.trim() != "stringData:")
+        .skip(1)
+        .filter(|l| l.starts_with("  ") && !l.starts_with("    "))
+        .filter_map(|l| l.trim().split_once(':').map(|(k, _)| k.to_owned()))
+        .collect()
+}
+
+/// The Secret and key a file path of `pod` (a pod template's spec) comes from: the mount
+/// above it (read-only), its volume's Secret, the file's name as the key.
+fn secret_file(pod: &Node, container: &Node, path: &str, what: &str) -> (String, String) {
+    let mount = container
+        .at("volumeMounts")
+        .seq()
+        .iter()
+        .find(|m| path.starts_with(&format!("{}/", m.at("mountPath").str())))
+        .unwrap_or_else(|| panic!("{what} {path}: under no volumeMount"))
+        .clone();
+    let key = &path[mount.at("mountPath").str().len() + 1..];
+    let volume = pod
+        .at("volumes")
+        .seq()
+        .iter()
+        .find(|v| v.at("name").str() == mount.at("name").str())
+        .unwrap_or_else(|| panic!("{what}: no volume {}", mount.at("name").str()))
+        .clone();
+    let secret = volume
+        .opt("secret")
+        .unwrap_or_else(|| {
+            panic!(
+                "{what} {path}: volume {} is not a Secret",
+                mount.at("name").str()
+            )
+        })
+        .at("secretName")
+        .str()
+        .to_owned();
+    (secret, key.to_owned())
+}
+
+#[test]
+fn the_cluster_trusts_only_its_own_every_credential_comes_from_a_secret() {
+    // The replicas: a password, mutual TLS and the cluster key, each a file of a mounted
+    // Secret that cluster-secrets.example.yaml defines, with the key the file is named after.
+    let deployment = resource("deployment.yaml", "Deployment");
+    let pod = deployment.at("spec.template.spec");
+    let c = container();
+    let args = container_args(&c);
+    let help = help_flags();
+    for flag in [
+        "--nats-password-file",
+        "--nats-tls-ca",
+        "--nats-tls-cert",
+        "--nats-tls-key",
+        "--cluster-key-file",
+    ] {
+        let path =
+            flag_value(&args, flag).unwrap_or_else(|| panic!("deployment.yaml: {flag} (issue 40)"));
+        assert!(help.contains(flag), "{flag} is not in crease-server --help");
+        let (secret, key) = secret_file(pod, &c, &path, flag);
+        assert!(
+            example_secret_keys(&secret).contains(&key),
+            "{flag} {path}: cluster-secrets.example.yaml's Secret {secret} has no key {key}"
+        );
+        let mount = c
+            .at("volumeMounts")
+            .seq()
+            .iter()
+            .find(|m| path.starts_with(m.at("mountPath").str()))
+            .unwrap()
+            .clone();
+        assert_eq!(
+            mount.opt("readOnly").map(Node::str),
+            Some("true"),
+            "{flag}: mounted read-only"
+        );
+    }
+    // Its NATS user is the shipped configuration's replica user, which may publish the
+    // cluster's subjects; the observer may publish nothing.
+    let conf = nats_conf();
+    let user = flag_value(&args, "--nats-user").expect("deployment.yaml: --nats-user");
+    let block = &conf[conf
+        .find(&format!("user: {user}"))
+        .unwrap_or_else(|| panic!("nats.conf: no user {user}"))..];
+    let permissions = &block[..block.find("\n        }").unwrap_or(block.len())];
+    assert!(
+        permissions.contains("publish: [\"crease.>\""),
+        "{permissions}"
+    );
+    assert!(
+        conf.contains("publish: { deny: \">\" }"),
+        "nats.conf: the observer may publish"
+    );
+    assert!(
+        conf.contains("verify: true"),
+        "nats.conf: client certificates not required"
+    );
+
+    // NATS: its configuration file and its TLS files from the Secrets the example defines.
+    let set = resource("nats.yaml", "StatefulSet");
+    let nats_pod = set.at("spec.template.spec");
+    let nats = &nats_pod.at("containers").seq()[0];
+    let (secret, key) = secret_file(nats_pod, nats, "/etc/nats/nats.conf", "nats.yaml -c");
+    assert_eq!(
+        (secret.as_str(), key.as_str()),
+        ("nats-config", "nats.conf")
+    );
+    assert!(example_secret_keys("nats-config").contains(&"nats.conf".to_owned()));
+    for file in ["cert_file", "key_file", "ca_file"] {
+        let path = conf_value(&conf, file).unwrap_or_else(|| panic!("nats.conf: tls {{ {file} }}"));
+        let (secret, key) = secret_file(nats_pod, nats, path, file);
+        assert!(
+            example_secret_keys(&secret).contains(&key),
+            "nats.conf {file} {path}: Secret {secret} has no key {key}"
+        );
+    }
+    // And deploy/README.md documents them.
+    let readme = read("deploy/README.md");
+    for word in [
+        "--nats-user",
+        "--nats-password-file",
+        "--nats-tls-cert",
+        "--cluster-key-file",
+        "crease.>",
+        "cluster-secrets.example.yaml",
+    ] {
+        assert!(
+            readme.contains(word),
+            "deploy/README.md does not mention {word}"
+        );
+    }
 }
 
 #[test]
