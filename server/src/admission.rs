@@ -323,6 +323,46 @@ impl axum::serve::Listener for AdmittedListener {
     }
 }
 
+/// The HTTPS listener's connections under the connection caps (issue 40): axum-server's accept
+/// loop hands each TCP connection here before its TLS handshake (the inner acceptor of its
+/// `RustlsAcceptor`). A refused one is closed at once: a TLS client cannot be answered in
+/// HTTP before its handshake, and a handshake is what a flood would make the server pay for.
+#[derive(Clone, Debug)]
+pub struct AdmissionAcceptor {
+    admission: Arc<Admission>,
+}
+
+impl AdmissionAcceptor {
+    /// Connections admitted through `admission`.
+    pub fn new(admission: Arc<Admission>) -> Self {
+        Self { admission }
+    }
+}
+
+impl<S> axum_server::accept::Accept<TcpStream, S> for AdmissionAcceptor {
+    type Stream = AdmittedStream;
+    type Service = S;
+    type Future = std::future::Ready<std::io::Result<(AdmittedStream, S)>>;
+
+    fn accept(&self, stream: TcpStream, service: S) -> Self::Future {
+        let admitted = stream.peer_addr().and_then(|addr| {
+            self.admission.admit(addr.ip()).map_err(|refused| {
+                std::io::Error::new(std::io::ErrorKind::ConnectionRefused, refused.to_string())
+            })
+        });
+        std::future::ready(admitted.map(|permit| {
+            let _ = stream.set_nodelay(true);
+            (
+                AdmittedStream {
+                    stream,
+                    _permit: permit,
+                },
+                service,
+            )
+        }))
+    }
+}
+
 /// The client's address, as the HTTP handlers see it (`ConnectInfo<Peer>`), from either HTTP
 /// server (plain: [`AdmittedListener`]; TLS: axum-server's).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

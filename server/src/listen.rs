@@ -94,9 +94,11 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
                 closing.await;
                 stop.graceful_shutdown(Some(HTTPS_DRAIN));
             });
-            let server = axum_server::from_tcp_rustls(http_listener.into_std()?, config)?;
-            // The connection caps are not applied here (axum-server accepts on its own); the
-            // stream caps are, as everywhere.
+            // The connection caps before the handshake (`admission::AdmissionAcceptor`), the
+            // stream caps as everywhere.
+            let acceptor = axum_server::tls_rustls::RustlsAcceptor::new(config)
+                .acceptor(admission::AdmissionAcceptor::new(state.connections()));
+            let server = axum_server::from_tcp(http_listener.into_std()?)?.acceptor(acceptor);
             tokio::spawn(
                 server
                     .handle(handle)

@@ -130,3 +130,114 @@ async fn grpc_and_https_over_tls() {
         t.elapsed()
     );
 }
+
+/// One TLS connection to `addr` trusting `cert` (DER), or the handshake's error.
+async fn tls_connect(
+    addr: std::net::SocketAddr,
+    cert: &rustls::pki_types::CertificateDer<'static>,
+) -> std::io::Result<tokio_rustls::client::TlsStream<tokio::net::TcpStream>> {
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    let mut roots = rustls::RootCertStore::empty();
+    roots.add(cert.clone()).unwrap();
+    let config = rustls::ClientConfig::builder()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(Arc::new(config));
+    let tcp = tokio::net::TcpStream::connect(addr).await?;
+    let name = rustls::pki_types::ServerName::try_from("localhost").unwrap();
+    tokio::time::timeout(
+        std::time::Duration::from_secs(5),
+        connector.connect(name, tcp),
+    )
+    .await
+    .map_err(|_| std::io::Error::other("handshake timed out"))?
+}
+
+/// `GET path` over `stream` (keep-alive), the whole response as text.
+async fn https_get(
+    stream: &mut tokio_rustls::client::TlsStream<tokio::net::TcpStream>,
+    path: &str,
+) -> String {
+    stream
+        .write_all(
+            format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+                .as_bytes(),
+        )
+        .await
+        .unwrap();
+    let mut text = String::new();
+    let _ = stream.read_to_string(&mut text).await;
+    text
+}
+
+/// The connection caps hold for HTTPS too (issue 40): axum-server accepts TLS connections
+/// itself, so they are admitted before the handshake. An address over its cap is closed
+/// without a handshake while its first connections stay served; one slot freed, it connects.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn https_connections_are_capped_per_address_before_the_handshake() {
+    use crease_server::Limits;
+    use crease_server::admission::Caps;
+    let dir = tempfile::tempdir().unwrap();
+    let key = rcgen::KeyPair::generate().unwrap();
+    let cert = rcgen::CertificateParams::new(vec!["localhost".to_owned()])
+        .unwrap()
+        .self_signed(&key)
+        .unwrap();
+    let (cert_path, key_path) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
+    std::fs::write(&cert_path, cert.pem()).unwrap();
+    std::fs::write(&key_path, key.serialize_pem()).unwrap();
+    let state = AppState::new(
+        ModelRegistry::default(),
+        Config {
+            grpc: "127.0.0.1:0".parse().unwrap(),
+            http: "127.0.0.1:0".parse().unwrap(),
+            tls: Some(TlsFiles {
+                cert: cert_path,
+                key: key_path,
+            }),
+            limits: Limits {
+                connections: Caps {
+                    per_address: 2,
+                    total: 100,
+                },
+                ..Limits::default()
+            },
+            ..Config::default()
+        },
+    );
+    let running = crease_server::serve(Arc::clone(&state)).await.unwrap();
+    let der = cert.der().clone();
+    let first = tls_connect(running.http, &der).await.unwrap();
+    let mut second = tls_connect(running.http, &der).await.unwrap();
+    // The third from the same address: closed before any handshake.
+    let third = tls_connect(running.http, &der).await;
+    assert!(third.is_err(), "a third HTTPS connection was admitted");
+    // The admitted ones are served.
+    let text = https_get(&mut second, "/healthz").await;
+    assert!(text.starts_with("HTTP/1.1 200"), "{text}");
+    drop(second);
+    drop(first);
+    // Slots given back: a new connection is served and the refusal was counted.
+    let mut text = String::new();
+    for _ in 0..50 {
+        if let Ok(mut s) = tls_connect(running.http, &der).await {
+            text = https_get(&mut s, "/metrics").await;
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let refused: f64 = text
+        .lines()
+        .find(|l| l.starts_with("crease_admission_refused_total{kind=\"connections\"}"))
+        .unwrap_or_else(|| panic!("no connection refusals in /metrics:\n{text}"))
+        .rsplit(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(refused >= 1.0, "{refused}");
+    running
+        .shutdown(std::time::Duration::from_secs(5))
+        .await
+        .unwrap();
+}
