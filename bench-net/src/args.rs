@@ -44,8 +44,15 @@ pub enum ScenarioChoice {
 #[derive(Clone, Debug, clap::Args)]
 #[command(after_long_help = AFTER_HELP)]
 pub struct BenchNetArgs {
-    /// The trained model (the horse for issue 6's figures: see --help).
-    #[arg(long, value_name = "FILE")]
+    /// The trained model (the horse for issue 6's figures: see --help). With --chaos, default:
+    /// the demo hand in the demo's cache folder (`crease demo` leaves it there).
+    #[arg(
+        long,
+        value_name = "FILE",
+        required_unless_present = "chaos",
+        default_value_os_t = PathBuf::new(),
+        hide_default_value = true
+    )]
     pub model: PathBuf,
     /// Folder of meshes (the model's topology) whose control vertices make the control frames,
     /// looped. Default: the horse gallop in ../shared/data beside the checkout.
@@ -136,6 +143,25 @@ pub struct BenchNetArgs {
     /// Soak: seconds between samples of the server.
     #[arg(long, default_value_t = 5.0, requires = "soak")]
     pub sample_seconds: f64,
+    /// Chaos soak instead of bench (issue 40): MINUTES of a spawned cluster (`nats-server`
+    /// with JetStream and three replicas) under load while a fault is injected every 20-40 s
+    /// (a replica killed and restarted, a room's owner paused past its lease, NATS restarted,
+    /// a publisher moved); checks frame order, split brain (NATS epochs), recovery gaps, takes
+    /// and RSS growth, and fails on any violation or on fewer than MINUTES x 2 faults.
+    #[arg(long, value_name = "MINUTES", conflicts_with_all = ["server", "replicas", "soak"])]
+    pub chaos: Option<f64>,
+    /// Chaos: rooms (opened on the replicas in turn, one publisher each).
+    #[arg(long, default_value_t = 20, requires = "chaos")]
+    pub chaos_rooms: usize,
+    /// Chaos: viewers spread over the replicas (besides three checkers per room).
+    #[arg(long, default_value_t = 200, requires = "chaos")]
+    pub chaos_viewers: usize,
+    /// Chaos: the replicas' lease (`crease-server --lease-ms`); a pause lasts 2.5 leases.
+    #[arg(long, value_name = "MS", default_value_t = 2000, requires = "chaos")]
+    pub chaos_lease_ms: u64,
+    /// Chaos: the longest a room may go without a frame once a fault has ended, seconds.
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, requires = "chaos")]
+    pub chaos_max_gap: f64,
 }
 
 /// One load shape: rooms, each with its publisher and subscribers.

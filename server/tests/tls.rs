@@ -132,6 +132,7 @@ async fn grpc_and_https_over_tls() {
 }
 
 /// One TLS connection to `addr` trusting `cert` (DER), or the handshake's error.
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 async fn tls_connect(
     addr: std::net::SocketAddr,
     cert: &rustls::pki_types::CertificateDer<'static>,
@@ -154,6 +155,7 @@ async fn tls_connect(
 }
 
 /// `GET path` over `stream` (keep-alive), the whole response as text.
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 async fn https_get(
     stream: &mut tokio_rustls::client::TlsStream<tokio::net::TcpStream>,
     path: &str,
