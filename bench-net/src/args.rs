@@ -160,7 +160,12 @@ pub struct BenchNetArgs {
     #[arg(long, value_name = "MS", default_value_t = 2000, requires = "chaos")]
     pub chaos_lease_ms: u64,
     /// Chaos: the longest a room may go without a frame once a fault has ended, seconds.
-    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, requires = "chaos")]
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 10.0,
+        requires = "chaos"
+    )]
     pub chaos_max_gap: f64,
 }
 

@@ -257,18 +257,7 @@ pub fn frame_headers(
     epoch: u64,
     payload: &[u8],
 ) -> HeaderMap {
-    let mut h = HeaderMap::new();
-    h.insert(OWNER, owner);
-    h.insert(EPOCH, epoch.to_string().as_str());
-    if let Some(key) = key {
-        let e = epoch.to_le_bytes();
-        h.insert(
-            TAG,
-            key.tag(&[b"frame", subject.as_bytes(), owner.as_bytes(), &e, payload])
-                .as_str(),
-        );
-    }
-    h
+    owned_headers(b"frame", key, subject, owner, epoch, payload)
 }
 
 /// A frame's owner and epoch, if its headers hold (module docs): the tag, with a key.
@@ -276,6 +265,41 @@ pub fn frame_headers(
 /// # Errors
 /// [`Refusal::Forged`].
 pub fn check_frame(
+    key: Option<&ClusterKey>,
+    subject: &str,
+    headers: Option<&HeaderMap>,
+    payload: &[u8],
+) -> Result<(String, u64), Refusal> {
+    check_owned(b"frame", key, subject, headers, payload)
+}
+
+/// Owner and epoch headers, tagged (with a key) under `domain` (`frame`, `ack`): a tag made
+/// for one kind of message never holds for another.
+fn owned_headers(
+    domain: &[u8],
+    key: Option<&ClusterKey>,
+    subject: &str,
+    owner: &str,
+    epoch: u64,
+    payload: &[u8],
+) -> HeaderMap {
+    let mut h = HeaderMap::new();
+    h.insert(OWNER, owner);
+    h.insert(EPOCH, epoch.to_string().as_str());
+    if let Some(key) = key {
+        let e = epoch.to_le_bytes();
+        h.insert(
+            TAG,
+            key.tag(&[domain, subject.as_bytes(), owner.as_bytes(), &e, payload])
+                .as_str(),
+        );
+    }
+    h
+}
+
+/// The owner and epoch of headers made by [`owned_headers`] under `domain`, if they hold.
+fn check_owned(
+    domain: &[u8],
     key: Option<&ClusterKey>,
     subject: &str,
     headers: Option<&HeaderMap>,
@@ -294,7 +318,7 @@ pub fn check_frame(
         let tag = h.get(TAG).map(|v| v.as_str()).ok_or(Refusal::Forged)?;
         let e = epoch.to_le_bytes();
         if !key.verify(
-            &[b"frame", subject.as_bytes(), owner.as_bytes(), &e, payload],
+            &[domain, subject.as_bytes(), owner.as_bytes(), &e, payload],
             tag,
         ) {
             return Err(Refusal::Forged);
@@ -357,16 +381,7 @@ pub fn ack_headers(
     epoch: u64,
     payload: &[u8],
 ) -> HeaderMap {
-    let mut h = frame_headers(None, subject, owner, epoch, payload);
-    if let Some(key) = key {
-        let e = epoch.to_le_bytes();
-        h.insert(
-            TAG,
-            key.tag(&[b"ack", subject.as_bytes(), owner.as_bytes(), &e, payload])
-                .as_str(),
-        );
-    }
-    h
+    owned_headers(b"ack", key, subject, owner, epoch, payload)
 }
 
 /// An ack's owner and epoch, if its headers hold.
@@ -379,26 +394,7 @@ pub fn check_ack(
     headers: Option<&HeaderMap>,
     payload: &[u8],
 ) -> Result<(String, u64), Refusal> {
-    let h = headers.ok_or(Refusal::Forged)?;
-    let owner = h
-        .get(OWNER)
-        .map(|v| v.as_str().to_owned())
-        .ok_or(Refusal::Forged)?;
-    let epoch: u64 = h
-        .get(EPOCH)
-        .and_then(|v| v.as_str().parse().ok())
-        .ok_or(Refusal::Forged)?;
-    if let Some(key) = key {
-        let tag = h.get(TAG).map(|v| v.as_str()).ok_or(Refusal::Forged)?;
-        let e = epoch.to_le_bytes();
-        if !key.verify(
-            &[b"ack", subject.as_bytes(), owner.as_bytes(), &e, payload],
-            tag,
-        ) {
-            return Err(Refusal::Forged);
-        }
-    }
-    Ok((owner, epoch))
+    check_owned(b"ack", key, subject, headers, payload)
 }
 
 /// The newest ownership epoch a replica has seen of a room: from the registry and from frames
@@ -570,6 +566,11 @@ mod tests {
         );
         assert_eq!(
             check_ack(Some(&k), "crease.control.r", Some(&a), b"acK"),
+            Err(Refusal::Forged)
+        );
+        // An ack's tag is not a frame's.
+        assert_eq!(
+            check_frame(Some(&k), "crease.control.r", Some(&a), b"ack"),
             Err(Refusal::Forged)
         );
     }
