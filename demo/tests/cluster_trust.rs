@@ -696,3 +696,148 @@ async fn a_paused_owner_gets_no_frame_to_a_viewer_after_the_adopters_first() {
     }
     eprintln!("frames held back by paused owners (fenced): {fenced}");
 }
+
+/// A JWT of NATS's decentralised auth (nats-io/jwt v2 claims): `nats` is the claims' `nats`
+/// object, signed by `issuer` (an operator signs accounts and itself, an account its users).
+fn nats_jwt(issuer: &nkeys::KeyPair, subject: &str, name: &str, nats: serde_json::Value) -> String {
+    use base64::Engine as _;
+    let b64 = base64::engine::general_purpose::URL_SAFE_NO_PAD;
+    let header = b64.encode(br#"{"typ":"JWT","alg":"ed25519-nkey"}"#);
+    let iat = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
+    let claims = serde_json::json!({
+        "jti": format!("{name}-{iat}"),
+        "iat": iat,
+        "iss": issuer.public_key(),
+        "name": name,
+        "sub": subject,
+        "nats": nats,
+    });
+    let body = b64.encode(claims.to_string());
+    let signed = format!("{header}.{body}");
+    let signature = issuer.sign(signed.as_bytes()).unwrap();
+    format!("{signed}.{}", b64.encode(signature))
+}
+
+/// A user's credentials file (as `nsc` writes it): its JWT, signed by `account`, and its seed.
+fn creds_file(path: &Path, account: &nkeys::KeyPair, name: &str) {
+    let user = nkeys::KeyPair::new_user();
+    let jwt = nats_jwt(
+        account,
+        &user.public_key(),
+        name,
+        serde_json::json!({"type": "user", "version": 2, "pub": {}, "sub": {},
+            "subs": -1, "data": -1, "payload": -1}),
+    );
+    let seed = user.seed().unwrap();
+    std::fs::write(
+        path,
+        format!(
+            "-----BEGIN NATS USER JWT-----\n{jwt}\n------END NATS USER JWT------\n\n\
+             -----BEGIN USER NKEY SEED-----\n{seed}\n------END USER NKEY SEED------\n"
+        ),
+    )
+    .unwrap();
+}
+
+/// `--nats-creds`: NATS in operator mode (an operator, an account with JetStream, its users'
+/// JWTs made here with nkeys); a replica with a user's credentials file of that account joins
+/// and serves a room across to another; one whose user is signed by an account NATS does not
+/// know is refused and says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn nats_credentials_files_of_an_operators_account_admit_replicas() {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let operator = nkeys::KeyPair::new_operator();
+    let account = nkeys::KeyPair::new_account();
+    let op_jwt = nats_jwt(
+        &operator,
+        &operator.public_key(),
+        "crease-operator",
+        serde_json::json!({"type": "operator", "version": 2}),
+    );
+    let limits = serde_json::json!({
+        "subs": -1, "data": -1, "payload": -1, "imports": -1, "exports": -1,
+        "wildcards": true, "conn": -1, "leaf": -1,
+        "mem_storage": -1, "disk_storage": -1, "streams": -1, "consumer": -1,
+    });
+    let acc_jwt = nats_jwt(
+        &operator,
+        &account.public_key(),
+        "crease",
+        serde_json::json!({"type": "account", "version": 2, "limits": limits}),
+    );
+    // JetStream needs a system account.
+    let system = nkeys::KeyPair::new_account();
+    let sys_jwt = nats_jwt(
+        &operator,
+        &system.public_key(),
+        "SYS",
+        serde_json::json!({"type": "account", "version": 2}),
+    );
+    let port = free_port();
+    let conf = format!(
+        "listen: \"127.0.0.1:{port}\"\njetstream {{ store_dir: \"{store}\" }}\noperator: \"{op_jwt}\"\n\
+         system_account: {sys}\nresolver: MEMORY\n\
+         resolver_preload: {{\n  {acc}: \"{acc_jwt}\"\n  {sys}: \"{sys_jwt}\"\n}}\n",
+        store = dir.path().join("js").display(),
+        acc = account.public_key(),
+        sys = system.public_key(),
+    );
+    let config = dir.path().join("nats.conf");
+    std::fs::write(&config, conf).unwrap();
+    let nats = Nats::start_with(&nats_bin, port, &dir.path().join("js"), Some(&config));
+    let model = Arc::new(model_with_detail());
+    let models = models_dir(dir.path(), &model);
+    let (good, stranger) = (
+        dir.path().join("replica.creds"),
+        dir.path().join("stranger.creds"),
+    );
+    creds_file(&good, &account, "replica");
+    creds_file(&stranger, &nkeys::KeyPair::new_account(), "stranger");
+    let args = |creds: &Path| vec!["--nats-creds".to_owned(), creds.display().to_string()];
+
+    let mut refused = Replica::start_with("S", &models, &nats.url(), dir.path(), &args(&stranger));
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while refused.child.try_wait().unwrap().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "replica S still running:\n{}",
+            refused.log()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let log = refused.log();
+    assert!(
+        log.to_lowercase().contains("authorization violation"),
+        "replica S's log does not say NATS refused it:\n{log}"
+    );
+    eprintln!(
+        "replica S refused: {}",
+        log.lines().last().unwrap_or_default()
+    );
+
+    let mut a = Replica::start_with("A", &models, &nats.url(), dir.path(), &args(&good));
+    let mut b = Replica::start_with("B", &models, &nats.url(), dir.path(), &args(&good));
+    a.ready().await;
+    b.ready().await;
+    assert!(a.log().contains("credentials"), "{}", a.log());
+    let token = open_room(&a, "creds").await;
+    until(Duration::from_secs(10), "room listed on B", || async {
+        b.owner_of("creds").await.as_deref() == Some("A")
+    })
+    .await;
+    let (seen_b, viewer_b) = viewer(&b, "creds");
+    let publishing = publisher(&a, &model, "creds", &token, Arc::new(Mutex::new(0)));
+    until(Duration::from_secs(20), "frames relayed to B", || async {
+        seen_b.lock().unwrap().seqs.len() >= 20
+    })
+    .await;
+    publishing.abort();
+    viewer_b.abort();
+}
