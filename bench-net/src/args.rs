@@ -10,6 +10,24 @@ pub(crate) const DEFAULT_GALLOP: &str = concat!(
     "/../../shared/data/horse/gallop"
 );
 
+/// The demo hand's file (`crease_demo::hand_model::CACHE_FILE`) in the demo's cache folder,
+/// found as `crease_demo::hand_model::default_cache_dir` finds it: `$CREASE_CACHE_DIR`, else
+/// `$XDG_CACHE_HOME/crease`, else `$HOME/.cache/crease`, else `.crease-cache`. The chaos
+/// soak's model when --model is not given.
+pub(crate) fn demo_model() -> PathBuf {
+    let env = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty());
+    let dir = if let Some(dir) = env("CREASE_CACHE_DIR") {
+        PathBuf::from(dir)
+    } else if let Some(dir) = env("XDG_CACHE_HOME") {
+        PathBuf::from(dir).join("crease")
+    } else if let Some(home) = env("HOME") {
+        PathBuf::from(home).join(".cache").join("crease")
+    } else {
+        PathBuf::from(".crease-cache")
+    };
+    dir.join("demo-hand-v1.crease")
+}
+
 /// Issue 6's first scenario: one room watched by 100 viewers (the p99 target is set for it).
 const ONE_ROOM: (usize, usize) = (1, 100);
 /// Issue 6's second scenario: 20 rooms of 5 viewers (as many streams, 20x the predictions).
@@ -50,7 +68,7 @@ pub struct BenchNetArgs {
         long,
         value_name = "FILE",
         required_unless_present = "chaos",
-        default_value_os_t = PathBuf::new(),
+        default_value_os_t = demo_model(),
         hide_default_value = true
     )]
     pub model: PathBuf,

@@ -23,11 +23,14 @@
 //! - `load`: publishers, subscribers, one scenario's run;
 //! - `server`: the spawned or running server under test, CPU from `/proc`;
 //! - `report`: the figures and the table (its types re-exported here);
-//! - `soak`: `--soak MINUTES`, the server held under churn and faults (and its `/proc` probe).
+//! - `soak`: `--soak MINUTES`, the server held under churn and faults (and its `/proc` probe);
+//! - `chaos`: `--chaos MINUTES`, a spawned cluster (NATS and three replicas) under load while
+//!   replicas are killed and paused, NATS restarted and publishers moved (issue 40).
 //!
 //! This module has the control frames and the run over the scenarios.
 
 mod args;
+mod chaos;
 mod load;
 mod report;
 mod server;
@@ -53,6 +56,9 @@ use server::Target;
 pub fn run(args: &BenchNetArgs) -> anyhow::Result<()> {
     if let Some(minutes) = args.soak {
         return soak::run(args, minutes);
+    }
+    if let Some(minutes) = args.chaos {
+        return chaos::run(args, minutes);
     }
     if !(args.rate.is_finite() && args.rate > 0.0 && args.rate <= 1000.0) {
         bail!(

@@ -56,8 +56,9 @@ pub(super) struct Watch {
     previous: Option<u64>,
     /// A decode failure not yet healed by a keyframe on its subscription: when it happened.
     unhealed: Option<f64>,
-    /// How long a decode failure may go without a keyframe.
-    heal_within: f64,
+    /// `--chaos-max-gap`: how long a decode failure may go without a keyframe, and how long
+    /// the wait for the first frame may be before it counts as a gap.
+    max_gap: f64,
     /// Frames received.
     pub frames: u64,
     /// Gaps longer than [`STOPPED_S`].
@@ -66,7 +67,7 @@ pub(super) struct Watch {
     pub out_of_order: Vec<OutOfOrder>,
     /// Frames that did not decode.
     pub decode_errors: u64,
-    /// Decode failures that no keyframe followed within `heal_within` on their subscription.
+    /// Decode failures that no keyframe followed within `max_gap` on their subscription.
     pub unhealed_decodes: u64,
     /// Subscriptions (the first and every resubscription).
     pub subscriptions: u64,
@@ -74,14 +75,15 @@ pub(super) struct Watch {
 
 impl Watch {
     /// A checker started at `t`; a decode failure must be healed by a keyframe within
-    /// `heal_within` seconds.
-    pub(super) fn new(t: f64, heal_within: f64) -> Watch {
+    /// `max_gap` seconds, and the first frame must come within `max_gap` (the wait for it
+    /// is not a gap otherwise: the publishers are starting).
+    pub(super) fn new(t: f64, max_gap: f64) -> Watch {
         Watch {
             newest: None,
             last_new: t,
             previous: None,
             unhealed: None,
-            heal_within,
+            max_gap,
             frames: 0,
             gaps: Vec::new(),
             out_of_order: Vec::new(),
@@ -106,7 +108,13 @@ impl Watch {
 
     /// A frame of seq `seq` came at `t`; `decoded`: it decoded; `key`: it is a keyframe.
     /// Returns the ordering violation, if it is one.
-    pub(super) fn frame(&mut self, t: f64, seq: u64, decoded: bool, key: bool) -> Option<OutOfOrder> {
+    pub(super) fn frame(
+        &mut self,
+        t: f64,
+        seq: u64,
+        decoded: bool,
+        key: bool,
+    ) -> Option<OutOfOrder> {
         self.frames += 1;
         let mut violation = None;
         if let Some(previous) = self.previous
@@ -118,7 +126,7 @@ impl Watch {
         }
         self.previous = Some(seq);
         if self.newest.is_none_or(|n| seq > n) {
-            if t - self.last_new > STOPPED_S {
+            if t - self.last_new > self.stopped() {
                 self.gaps.push(Gap {
                     from: self.last_new,
                     to: t,
@@ -135,7 +143,7 @@ impl Watch {
             self.unhealed = None;
         }
         if let Some(since) = self.unhealed
-            && t - since > self.heal_within
+            && t - since > self.max_gap
         {
             self.unhealed_decodes += 1;
             self.unhealed = None;
@@ -143,10 +151,19 @@ impl Watch {
         violation
     }
 
+    /// How long without a new frame is a gap now.
+    fn stopped(&self) -> f64 {
+        if self.newest.is_some() {
+            STOPPED_S
+        } else {
+            self.max_gap
+        }
+    }
+
     /// The run ended at `t`: a gap still open is recorded (`open`), as is a decode failure
-    /// still unhealed after `heal_within`.
+    /// still unhealed after `max_gap`.
     pub(super) fn finish(&mut self, t: f64) {
-        if t - self.last_new > STOPPED_S {
+        if t - self.last_new > self.stopped() {
             self.gaps.push(Gap {
                 from: self.last_new,
                 to: t,
@@ -155,15 +172,10 @@ impl Watch {
             self.last_new = t;
         }
         if let Some(since) = self.unhealed.take()
-            && t - since > self.heal_within
+            && t - since > self.max_gap
         {
             self.unhealed_decodes += 1;
         }
-    }
-
-    /// The longest gap, seconds (0 without one).
-    pub(super) fn longest(&self) -> f64 {
-        self.gaps.iter().map(Gap::seconds).fold(0.0, f64::max)
     }
 }
 
@@ -228,7 +240,7 @@ pub(super) fn recoveries<'a>(
     }
     let mut by_kind: BTreeMap<FaultKind, Vec<f64>> = BTreeMap::new();
     let mut keys: Vec<_> = worst.into_iter().collect();
-    keys.sort_by(|a, b| a.0.cmp(&b.0));
+    keys.sort_by_key(|a| a.0);
     for ((f, _), seconds) in keys {
         by_kind.entry(faults[f].kind).or_default().push(seconds);
     }
@@ -293,6 +305,15 @@ pub(super) struct EpochCheck {
 }
 
 impl EpochCheck {
+    /// Per room, the owner of its newest epoch seen.
+    pub(super) fn owners(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.rooms.iter().filter_map(|(room, epochs)| {
+            epochs
+                .last_key_value()
+                .map(|(_, owner)| (room.as_str(), owner.as_str()))
+        })
+    }
+
     /// A frame of `room` from `owner` in `epoch` (`None`: headers missing) seen at `t`;
     /// returns the violation, if it is one.
     pub(super) fn frame(
@@ -421,11 +442,17 @@ mod tests {
         w.finish(20.0);
         assert_eq!(w.gaps.len(), 2);
         assert!(w.gaps[1].open);
-        assert_eq!(w.longest(), 16.0);
-        // The time before the first frame is a gap too.
+        assert_eq!(w.gaps[1].seconds(), 16.0);
+        // The wait for the first frame is a gap only when longer than the max gap.
+        let mut first = Watch::new(0.0, 10.0);
+        first.frame(2.0, 1, true, true);
+        assert!(first.gaps.is_empty());
         let mut late = Watch::new(0.0, 10.0);
         late.frame(12.0, 1, true, true);
         assert_eq!(late.gaps[0].seconds(), 12.0);
+        let mut never = Watch::new(0.0, 10.0);
+        never.finish(30.0);
+        assert!(never.gaps[0].open && !never.seen_any());
     }
 
     #[test]
@@ -543,6 +570,9 @@ mod tests {
         assert!(e.frame(8.0, "a", None).is_none());
         assert_eq!((e.frames, e.unlabelled, e.split.len()), (8, 1, 2));
         assert_eq!(e.handovers, 1);
+        let mut owners: Vec<_> = e.owners().collect();
+        owners.sort_unstable();
+        assert_eq!(owners, vec![("a", "r2"), ("b", "r1")]);
     }
 
     #[test]
