@@ -841,3 +841,93 @@ async fn nats_credentials_files_of_an_operators_account_admit_replicas() {
     publishing.abort();
     viewer_b.abort();
 }
+
+/// A relay stopped with a publisher's frames in its socket (SIGSTOP), whose publisher moves to
+/// another replica and goes on: when the relay resumes it must not forward what it read from
+/// before (the owner would predict frames older than the ones it has since, and every viewer
+/// would see the room jump back). Found by the chaos soak (`crease bench-net --chaos`).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_resumed_relay_forwards_nothing_from_before_its_pause() {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
+    let model = Arc::new(model_with_detail());
+    let models = models_dir(dir.path(), &model);
+    let mut replicas: Vec<Replica> = ["A", "B", "C"]
+        .iter()
+        .map(|id| Replica::start_with(id, &models, &nats.url(), dir.path(), &[]))
+        .collect();
+    for r in &mut replicas {
+        r.ready().await;
+    }
+    let token = open_room(&replicas[0], "resumed").await;
+    for r in &replicas {
+        until(Duration::from_secs(10), "room listed", || async {
+            r.owner_of("resumed").await.is_some()
+        })
+        .await;
+    }
+    let viewers: Vec<_> = [&replicas[0], &replicas[2]]
+        .iter()
+        .map(|r| viewer(r, "resumed"))
+        .collect();
+    let next = Arc::new(Mutex::new(0u64));
+    let counts = || -> Vec<usize> {
+        viewers
+            .iter()
+            .map(|(s, _)| s.lock().unwrap().seqs.len())
+            .collect()
+    };
+    for run in 0..3 {
+        // The publisher goes through B (a relay; A owns the room).
+        let through_b = publisher(&replicas[1], &model, "resumed", &token, Arc::clone(&next));
+        let before = counts();
+        until(Duration::from_secs(10), "frames through B", || async {
+            counts().iter().zip(&before).all(|(n, b)| *n >= b + 20)
+        })
+        .await;
+        let pid = replicas[1].child.id().to_string();
+        assert!(
+            std::process::Command::new("kill")
+                .args(["-STOP", &pid])
+                .status()
+                .unwrap()
+                .success()
+        );
+        // Frames keep going into B's socket for a while, then the publisher moves to C.
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        through_b.abort();
+        let through_c = publisher(&replicas[2], &model, "resumed", &token, Arc::clone(&next));
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        assert!(
+            std::process::Command::new("kill")
+                .args(["-CONT", &pid])
+                .status()
+                .unwrap()
+                .success()
+        );
+        let resumed = counts();
+        until(
+            Duration::from_secs(10),
+            "frames after B resumed",
+            || async { counts().iter().zip(&resumed).all(|(n, b)| *n >= b + 50) },
+        )
+        .await;
+        through_c.abort();
+        eprintln!(
+            "run {run}: B paused 3 s with its publisher's frames buffered; B did not forward {} of them",
+            replicas[1]
+                .metric("crease_cluster_stale_forwards_total")
+                .await
+        );
+    }
+    for ((seen, task), id) in viewers.into_iter().zip(["A", "C"]) {
+        task.abort();
+        let seqs = seen.lock().unwrap().seqs.clone();
+        increasing(&seqs).unwrap_or_else(|e| panic!("viewer on {id}: {e}"));
+        eprintln!("viewer on {id}: {} frames, seq only increasing", seqs.len());
+    }
+}

@@ -48,6 +48,14 @@ pub async fn forward(
     room: String,
     frame: v1::ControlFrame,
 ) -> Result<v1::PublishAck, String> {
+    // Read after this process was stopped, the frame may be older than what the owner has
+    // predicted since: not forwarded (`stall`).
+    if cluster.stall.stale() {
+        cluster.metrics.stale_forwards.inc();
+        return Err(format!(
+            "room {room:?}: this replica was stalled and the frame may be from before; not forwarded (the next ones are)"
+        ));
+    }
     let request = forwarded_control(frame, &cluster.replica).encode_to_vec();
     let subject = subject::control(&room);
     let headers =

@@ -35,6 +35,8 @@ pub struct ClusterMetrics {
     /// Frames this replica, as owner, did not send because its lease was not renewed within a
     /// lease (it was paused or cut off, and may have been replaced).
     pub fenced_frames: Counter,
+    /// Control frames this replica did not forward because it had just been stalled.
+    pub stale_forwards: Counter,
     /// 1 while connected to NATS.
     pub nats_connected: Gauge,
 }
@@ -98,6 +100,11 @@ impl ClusterMetrics {
                 "refused_controls",
                 "Forwarded control frames refused: no or a bad tag",
                 &self.refused_controls,
+            ),
+            (
+                "stale_forwards",
+                "Control frames not forwarded: read right after this process was stalled",
+                &self.stale_forwards,
             ),
             (
                 "fenced_frames",

@@ -35,6 +35,7 @@ pub mod metrics;
 pub mod models;
 pub mod registry;
 pub mod relay;
+pub mod stall;
 pub mod trust;
 
 use std::collections::BTreeMap;
@@ -223,6 +224,8 @@ pub struct Cluster {
     events: Mutex<Option<Events>>,
     /// The cluster's shared key (`trust`).
     pub(crate) key: Option<trust::ClusterKey>,
+    /// The watchdog that tells a relay its process was stalled (`stall`).
+    pub(crate) stall: Arc<stall::StallWatch>,
     /// The cluster metrics.
     pub metrics: ClusterMetrics,
 }
@@ -300,6 +303,7 @@ pub async fn connect(
         links: Mutex::new(BTreeMap::new()),
         events: Mutex::new(Some(events)),
         key,
+        stall: stall::StallWatch::start(),
         metrics,
     }))
 }
