@@ -592,6 +592,15 @@ impl RoomLink {
 
 impl Fanout for RoomLink {
     fn publish(&self, channel: Channel, frame: Arc<MeshUpdate>) {
+        // A frame this replica predicted is the room's only while it owns it: one that
+        // finishes after another replica adopted the room (this one was stopped mid-frame)
+        // would reach the local viewers after the adopter's newer ones, and so would one of an
+        // owner whose lease lapsed while connected (paused, not cut off: a cut-off owner keeps
+        // serving its own clients). Found by the chaos soak.
+        if !self.is_owner() || (self.cluster.is_connected() && self.lease_lapsed()) {
+            self.cluster.metrics.fenced_frames.inc();
+            return;
+        }
         if self.is_owner()
             && self.is_confirmed()
             && self.cluster.is_connected()
