@@ -8,7 +8,37 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use super::faults::FaultKind;
+/// A kind of fault.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum FaultKind {
+    /// A replica killed and restarted.
+    Kill,
+    /// A room's owner paused past its lease.
+    Pause,
+    /// NATS restarted.
+    Nats,
+    /// A publisher moved to another replica.
+    Publisher,
+}
+
+impl FaultKind {
+    pub(super) const ALL: [FaultKind; 4] = [
+        FaultKind::Kill,
+        FaultKind::Pause,
+        FaultKind::Nats,
+        FaultKind::Publisher,
+    ];
+
+    pub(super) fn name(self) -> &'static str {
+        match self {
+            FaultKind::Kill => "kill",
+            FaultKind::Pause => "pause",
+            FaultKind::Nats => "nats",
+            FaultKind::Publisher => "publisher",
+        }
+    }
+}
 
 /// A checker that sees no new frame for longer than this saw its room's frames stop (a gap).
 pub(super) const STOPPED_S: f64 = 0.5;

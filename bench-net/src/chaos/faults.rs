@@ -30,37 +30,8 @@ const TAIL_S: f64 = 25.0;
 /// At least this long between one fault's end and the next one's start.
 const QUIET_S: f64 = 5.0;
 
-/// A kind of fault.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub(super) enum FaultKind {
-    /// A replica killed and restarted.
-    Kill,
-    /// A room's owner paused past its lease.
-    Pause,
-    /// NATS restarted.
-    Nats,
-    /// A publisher moved to another replica.
-    Publisher,
-}
-
-impl FaultKind {
-    pub(super) const ALL: [FaultKind; 4] = [
-        FaultKind::Kill,
-        FaultKind::Pause,
-        FaultKind::Nats,
-        FaultKind::Publisher,
-    ];
-
-    pub(super) fn name(self) -> &'static str {
-        match self {
-            FaultKind::Kill => "kill",
-            FaultKind::Pause => "pause",
-            FaultKind::Nats => "nats",
-            FaultKind::Publisher => "publisher",
-        }
-    }
-}
+// The kinds of fault live with the accounting that sorts recoveries by them.
+pub(super) use super::accounting::FaultKind;
 
 /// A fault injected.
 #[derive(Clone, Debug, serde::Serialize)]
