@@ -124,13 +124,12 @@ async fn session(shared: &Arc<Shared>, r: usize, k: usize, motion: &Arc<Motion>)
                     break;
                 }
                 let seq = ctl.seq.fetch_add(1, Ordering::Relaxed) + 1;
-                let frame = v1::ControlFrame {
-                    room: room.clone(),
+                let frame = crease_proto::control::control_frame_flat(
+                    &room,
                     seq,
-                    capture_time_us: unix_us(),
-                    positions: motion.at(r, seq),
-                    ..Default::default()
-                };
+                    unix_us(),
+                    motion.at(r, seq),
+                );
                 if sink.send(frame).await.is_err() {
                     break;
                 }
@@ -450,13 +449,7 @@ pub(super) async fn owner_of(shared: &Shared, room: &str) -> Option<usize> {
         let k = shared.pick_live(None)?;
         let ask = async {
             let mut client = connect(&shared.replicas[k].url, None).await.ok()?;
-            let info = client
-                .get_room(v1::GetRoomRequest {
-                    room: room.to_owned(),
-                })
-                .await
-                .ok()?
-                .into_inner();
+            let info = crease_remote::get_room(&mut client, room).await.ok()?;
             shared.replica_of(&info.owner)
         };
         if let Ok(Some(owner)) = tokio::time::timeout(CONNECT, ask).await {

@@ -254,10 +254,7 @@ async fn open_rooms(
     for replica in &procs.replicas {
         let mut client = connect(&replica.url, None).await?;
         for room in &rooms {
-            while client
-                .get_room(v1::GetRoomRequest {
-                    room: room.id.clone(),
-                })
+            while crease_remote::get_room(&mut client, &room.id)
                 .await
                 .is_err()
             {
