@@ -23,9 +23,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use cluster_kit::{ADMIN, Nats, Replica, free_port, nats_binary, until};
+use cluster_kit::{
+    ADMIN, Nats, Replica, free_port, nats_binary, refused_by_nats, signal, three_replicas, until,
+};
 use common::{authed, control_frame, model_with_detail};
 use crease_core::codec::FrameDecoder;
 use crease_core::model::TrainedModel;
@@ -347,28 +349,7 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
     tls(&mut bad);
     for (id, args) in [("nopass", none), ("wrongpass", bad)] {
         let mut r = Replica::start_with(id, &models, &nats.url(), dir.path(), &args);
-        let deadline = Instant::now() + Duration::from_secs(30);
-        let status = loop {
-            if let Some(status) = r.child.try_wait().unwrap() {
-                break status;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "replica {id} still running:\n{}",
-                r.log()
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        };
-        assert!(!status.success(), "replica {id} exited 0:\n{}", r.log());
-        let log = r.log().to_lowercase();
-        assert!(
-            log.contains("authorization violation"),
-            "replica {id}'s log does not say NATS refused it:\n{log}"
-        );
-        eprintln!(
-            "replica {id} refused: {}",
-            r.log().lines().last().unwrap_or_default()
-        );
+        eprintln!("replica {id} refused: {}", refused_by_nats(&mut r).await);
     }
 
     // Two trusted replicas serve a room across them.
@@ -532,13 +513,7 @@ async fn a_paused_owner_gets_no_frame_to_a_viewer_after_the_adopters_first() {
     let models = models_dir(dir.path(), &model);
     const LEASE_MS: u64 = 1000;
     let args = vec!["--lease-ms".to_owned(), LEASE_MS.to_string()];
-    let mut replicas: Vec<Replica> = ["A", "B", "C"]
-        .iter()
-        .map(|id| Replica::start_with(id, &models, &nats.url(), dir.path(), &args))
-        .collect();
-    for r in &mut replicas {
-        r.ready().await;
-    }
+    let replicas = three_replicas(&models, &nats.url(), dir.path(), &args).await;
     let token = open_room(&replicas[0], "paused").await;
     for r in &replicas {
         until(Duration::from_secs(10), "room listed", || async {
@@ -582,24 +557,11 @@ async fn a_paused_owner_gets_no_frame_to_a_viewer_after_the_adopters_first() {
             },
         )
         .await;
-        let pid = replicas[p].child.id().to_string();
-        assert!(
-            std::process::Command::new("kill")
-                .args(["-STOP", &pid])
-                .status()
-                .unwrap()
-                .success()
-        );
+        signal(&replicas[p], "-STOP");
         tokio::time::sleep(Duration::from_millis(2 * LEASE_MS)).await;
         // Adopted by another replica meanwhile.
         let adopter = replicas[other].owner_of("paused").await.unwrap_or_default();
-        assert!(
-            std::process::Command::new("kill")
-                .args(["-CONT", &pid])
-                .status()
-                .unwrap()
-                .success()
-        );
+        signal(&replicas[p], "-CONT");
         assert_ne!(
             adopter, owner,
             "run {run}: nobody adopted the room of paused {owner}"
@@ -803,24 +765,7 @@ async fn nats_credentials_files_of_an_operators_account_admit_replicas() {
     let args = |creds: &Path| vec!["--nats-creds".to_owned(), creds.display().to_string()];
 
     let mut refused = Replica::start_with("S", &models, &nats.url(), dir.path(), &args(&stranger));
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while refused.child.try_wait().unwrap().is_none() {
-        assert!(
-            Instant::now() < deadline,
-            "replica S still running:\n{}",
-            refused.log()
-        );
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-    let log = refused.log();
-    assert!(
-        log.to_lowercase().contains("authorization violation"),
-        "replica S's log does not say NATS refused it:\n{log}"
-    );
-    eprintln!(
-        "replica S refused: {}",
-        log.lines().last().unwrap_or_default()
-    );
+    eprintln!("replica S refused: {}", refused_by_nats(&mut refused).await);
 
     let mut a = Replica::start_with("A", &models, &nats.url(), dir.path(), &args(&good));
     let mut b = Replica::start_with("B", &models, &nats.url(), dir.path(), &args(&good));
@@ -856,13 +801,7 @@ async fn a_resumed_relay_forwards_nothing_from_before_its_pause() {
     let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
     let model = Arc::new(model_with_detail());
     let models = models_dir(dir.path(), &model);
-    let mut replicas: Vec<Replica> = ["A", "B", "C"]
-        .iter()
-        .map(|id| Replica::start_with(id, &models, &nats.url(), dir.path(), &[]))
-        .collect();
-    for r in &mut replicas {
-        r.ready().await;
-    }
+    let replicas = three_replicas(&models, &nats.url(), dir.path(), &[]).await;
     let token = open_room(&replicas[0], "resumed").await;
     for r in &replicas {
         until(Duration::from_secs(10), "room listed", || async {
@@ -889,26 +828,13 @@ async fn a_resumed_relay_forwards_nothing_from_before_its_pause() {
             counts().iter().zip(&before).all(|(n, b)| *n >= b + 20)
         })
         .await;
-        let pid = replicas[1].child.id().to_string();
-        assert!(
-            std::process::Command::new("kill")
-                .args(["-STOP", &pid])
-                .status()
-                .unwrap()
-                .success()
-        );
+        signal(&replicas[1], "-STOP");
         // Frames keep going into B's socket for a while, then the publisher moves to C.
         tokio::time::sleep(Duration::from_millis(1500)).await;
         through_b.abort();
         let through_c = publisher(&replicas[2], &model, "resumed", &token, Arc::clone(&next));
         tokio::time::sleep(Duration::from_millis(1500)).await;
-        assert!(
-            std::process::Command::new("kill")
-                .args(["-CONT", &pid])
-                .status()
-                .unwrap()
-                .success()
-        );
+        signal(&replicas[1], "-CONT");
         let resumed = counts();
         until(
             Duration::from_secs(10),

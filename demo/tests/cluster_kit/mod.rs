@@ -235,3 +235,53 @@ pub(crate) async fn until<F: std::future::Future<Output = bool>>(
     }
     start.elapsed()
 }
+
+/// Sends `signal` (`-STOP`, `-CONT`) to `replica`'s process.
+pub(crate) fn signal(replica: &Replica, signal: &str) {
+    let pid = replica.child.id().to_string();
+    let status = Command::new("kill").args([signal, &pid]).status().unwrap();
+    assert!(status.success(), "kill {signal} {pid}");
+}
+
+/// Replicas A, B, C on `models` and `nats` with `args`, each ready.
+pub(crate) async fn three_replicas(
+    models: &Path,
+    nats: &str,
+    dir: &Path,
+    args: &[String],
+) -> Vec<Replica> {
+    let mut replicas: Vec<Replica> = ["A", "B", "C"]
+        .iter()
+        .map(|id| Replica::start_with(id, models, nats, dir, args))
+        .collect();
+    for r in &mut replicas {
+        r.ready().await;
+    }
+    replicas
+}
+
+/// Waits (30 s at most) for `replica` to exit, which it must do unsuccessfully, saying in its
+/// log that NATS refused it; returns its log's last line.
+pub(crate) async fn refused_by_nats(replica: &mut Replica) -> String {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = replica.child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "replica {} still running:\n{}",
+            replica.id,
+            replica.log()
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let log = replica.log();
+    assert!(!status.success(), "replica {} exited 0:\n{log}", replica.id);
+    assert!(
+        log.to_lowercase().contains("authorization violation"),
+        "replica {}'s log does not say NATS refused it:\n{log}",
+        replica.id
+    );
+    log.lines().last().unwrap_or_default().to_owned()
+}

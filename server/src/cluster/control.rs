@@ -128,7 +128,9 @@ pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: Stri
             continue;
         }
         let forwarded = v1::ForwardedControl::decode(msg.payload.as_ref());
-        let lapsed = cluster.link(&room).is_some_and(|l| l.lease_lapsed());
+        // The room's link, once per message: its lease (fencing) and its epoch (the ack).
+        let link = cluster.link(&room);
+        let lapsed = link.as_ref().is_some_and(|l| l.lease_lapsed());
         let ack = match forwarded.map(read_forwarded_control) {
             // Fencing: an owner whose lease lapsed (it was paused or cut off) predicts nothing
             // for the cluster until it renews, or learns that another replica adopted the room.
@@ -153,7 +155,7 @@ pub(crate) async fn serve(host: Arc<dyn Host>, cluster: Arc<Cluster>, room: Stri
             ),
         };
         let payload = ack.encode_to_vec();
-        let epoch = cluster.link(&room).map_or(0, |l| l.entry().0.epoch);
+        let epoch = link.map_or(0, |l| l.entry().0.epoch);
         let headers = trust::ack_headers(
             cluster.key.as_ref(),
             &subject,

@@ -601,8 +601,7 @@ impl Fanout for RoomLink {
             self.cluster.metrics.fenced_frames.inc();
             return;
         }
-        if self.is_owner()
-            && self.is_confirmed()
+        if self.is_confirmed()
             && self.cluster.is_connected()
             && self.remote_interest(channel)
             && self.out.try_send((channel, Arc::clone(&frame))).is_err()
