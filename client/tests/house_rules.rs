@@ -6,7 +6,8 @@
 //! - no dev-dependency of ours depends, transitively, on the crate under test;
 //! - `crease-core` does not depend, even transitively, on tokio, tonic, axum or prost;
 //! - no library source file (`*/src/**/*.rs`) is over 1,000 lines unless ARCHITECTURE.md's
-//!   "Files kept whole" section names it.
+//!   "Files kept whole" section names it;
+//! - the fuzz workspace's own `Cargo.lock` is up to date with the crates it uses.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 mod source_scan;
@@ -317,5 +318,26 @@ fn no_library_file_over_a_thousand_lines_without_a_reason() {
         "library files over {MAX_LINES} lines (split them, or say why in ARCHITECTURE.md's \
          \"Files kept whole\"):\n{}",
         long.join("\n")
+    );
+}
+
+/// The fuzz crate is its own workspace with its own `Cargo.lock`; CI checks it with `--locked`, so
+/// a dependency added to a crate the fuzz targets use must be locked there too (`cargo update
+/// --offline --manifest-path fuzz/Cargo.toml --workspace`). `cargo metadata --locked` finds a
+/// stale lock in a third of a second, without nightly and without compiling anything.
+#[test]
+fn the_fuzz_workspace_lock_is_up_to_date() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = std::process::Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--locked", "--offline"])
+        .args(["--manifest-path", "fuzz/Cargo.toml"])
+        .current_dir(repo())
+        .output()
+        .expect("cargo metadata runs");
+    assert!(
+        out.status.success(),
+        "fuzz/Cargo.lock is stale; run `cargo update --offline --manifest-path fuzz/Cargo.toml \
+         --workspace` and commit it:\n{}",
+        String::from_utf8_lossy(&out.stderr)
     );
 }
