@@ -61,6 +61,7 @@ pub enum ScenarioChoice {
 /// Options of `crease bench-net`.
 #[derive(Clone, Debug, clap::Args)]
 #[command(after_long_help = AFTER_HELP)]
+#[command(group(clap::ArgGroup::new("spawns_nats").args(["replicas", "chaos"]).multiple(true)))]
 pub struct BenchNetArgs {
     /// The trained model (the horse for issue 6's figures: see --help). With --chaos, default:
     /// the demo hand in the demo's cache folder (`crease demo` leaves it there).
@@ -139,9 +140,9 @@ pub struct BenchNetArgs {
     /// bytes per published frame.
     #[arg(long, value_name = "N", conflicts_with = "server")]
     pub replicas: Option<usize>,
-    /// The `nats-server` binary for --replicas. Default: /usr/sbin/nats-server (Debian's) or
-    /// one on the PATH.
-    #[arg(long, value_name = "PATH", requires = "replicas")]
+    /// The `nats-server` binary for --replicas and --chaos. Default: /usr/sbin/nats-server
+    /// (Debian's) or one on the PATH.
+    #[arg(long, value_name = "PATH", requires = "spawns_nats")]
     pub nats_bin: Option<PathBuf>,
     /// Soak instead of bench: MINUTES of churn and faults against a spawned server (rooms,
     /// reconnecting publishers with malformed frames, viewers over gRPC and WebSocket that
@@ -174,8 +175,11 @@ pub struct BenchNetArgs {
     /// Chaos: viewers spread over the replicas (besides three checkers per room).
     #[arg(long, default_value_t = 200, requires = "chaos")]
     pub chaos_viewers: usize,
-    /// Chaos: the replicas' lease (`crease-server --lease-ms`); a pause lasts 2.5 leases.
-    #[arg(long, value_name = "MS", default_value_t = 2000, requires = "chaos")]
+    /// Chaos: the replicas' lease (`crease-server --lease-ms`); a pause lasts 2.5 leases. A
+    /// room whose owner dies comes back after about a lease and an eighth (the adopter's
+    /// check) plus the hand-over, so the issue's 3 s bar wants less than the server's default
+    /// 2 s on a loaded machine (RELIABILITY.md, "The chaos soak").
+    #[arg(long, value_name = "MS", default_value_t = 1500, requires = "chaos")]
     pub chaos_lease_ms: u64,
     /// Chaos: the longest a room may go without a frame once a fault has ended, seconds.
     #[arg(

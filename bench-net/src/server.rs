@@ -99,13 +99,22 @@ pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> 
     spawn_server_with(args, &extra, &random_token()).await
 }
 
-/// [`spawn_server`] with `extra` arguments (a cluster's `--nats`, a soak's limits) and admin
-/// token `admin`.
-pub(super) async fn spawn_server_with(
-    args: &BenchNetArgs,
-    extra: &[String],
-    admin_token: &str,
-) -> anyhow::Result<Target> {
+/// The limits a soak raises: every one of its clients comes from one address.
+pub(super) const SOAK_LIMITS: [&str; 10] = [
+    "--max-connections-per-address",
+    "100000",
+    "--max-connections",
+    "100000",
+    "--max-streams-per-address",
+    "100000",
+    "--max-streams",
+    "100000",
+    "--max-publish-hz",
+    "1000",
+];
+
+/// The `crease-server` binary: `--server-bin`, else the one beside this executable.
+pub(super) fn server_binary(args: &BenchNetArgs) -> anyhow::Result<PathBuf> {
     let bin = match &args.server_bin {
         Some(bin) => bin.clone(),
         None => std::env::current_exe()
@@ -114,10 +123,21 @@ pub(super) async fn spawn_server_with(
     };
     if !bin.is_file() {
         bail!(
-            "{}: no crease-server binary (build it with `cargo build --release -p crease-server`, or pass --server-bin PATH or --server URL)",
+            "{}: no crease-server binary (build it with `cargo build --release -p crease-demo`, or pass --server-bin PATH)",
             bin.display()
         );
     }
+    Ok(bin)
+}
+
+/// [`spawn_server`] with `extra` arguments (a cluster's `--nats`, a soak's limits) and admin
+/// token `admin`.
+pub(super) async fn spawn_server_with(
+    args: &BenchNetArgs,
+    extra: &[String],
+    admin_token: &str,
+) -> anyhow::Result<Target> {
+    let bin = server_binary(args)?;
     let model = args
         .model
         .file_stem()
@@ -211,7 +231,7 @@ impl Drop for SpawnedNats {
 }
 
 /// The `nats-server` binary: `--nats-bin`, else Debian's or one on the PATH.
-fn nats_binary(args: &BenchNetArgs) -> anyhow::Result<PathBuf> {
+pub(super) fn nats_binary(args: &BenchNetArgs) -> anyhow::Result<PathBuf> {
     if let Some(bin) = &args.nats_bin {
         return Ok(bin.clone());
     }
@@ -225,6 +245,7 @@ fn nats_binary(args: &BenchNetArgs) -> anyhow::Result<PathBuf> {
     [
         PathBuf::from("/usr/sbin/nats-server"),
         PathBuf::from("/usr/bin/nats-server"),
+        PathBuf::from("/usr/local/bin/nats-server"),
     ]
     .into_iter()
     .chain(on_path)

@@ -234,11 +234,20 @@ fn bench_net_says_how_to_build_a_missing_server_and_needs_an_admin_token() {
     let err = run(&["--server-bin", missing.to_str().unwrap()]);
     assert!(
         err.contains("no crease-server binary")
-            && err.contains("cargo build --release -p crease-server"),
+            && err.contains("cargo build --release -p crease-demo"),
         "{err}"
     );
     let err = run(&["--server", "http://127.0.0.1:9"]);
     assert!(err.contains("--admin-token"), "{err}");
+    // The chaos soak's options are checked before anything starts.
+    let err = run(&["--chaos", "1", "--chaos-lease-ms", "50"]);
+    assert!(
+        err.contains("--chaos-lease-ms must be 100 to 60000, got 50"),
+        "{err}"
+    );
+    // --nats-bin means nothing without a run that starts NATS.
+    let err = run(&["--nats-bin", "/usr/sbin/nats-server"]);
+    assert!(err.contains("--replicas") && err.contains("--chaos"), "{err}");
     // The control file must fit the model's five control points.
     let bad = tmp.path().join("bad.csv");
     std::fs::write(&bad, "1,2,3\n").unwrap();

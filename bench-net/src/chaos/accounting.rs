@@ -320,18 +320,37 @@ pub(super) struct SplitBrain {
     pub newest_owner: String,
 }
 
-/// What the NATS observer saw: per room, the newest epoch and the owner of every epoch.
+/// What the NATS observer saw: per room, the owner of every epoch and the lowest seq seen in
+/// it.
+///
+/// A frame of an older epoch than one already seen is one of two things. Split brain: the old
+/// owner predicted it from a control the new owner handles too (its seq is at or above the
+/// first seq of some newer epoch). Or a *late* frame: published before the hand-over and held
+/// in the paused owner's NATS client (its outgoing queue) until it resumed, below every newer
+/// epoch's first seq; the relays drop it by its epoch (`crease_cluster_refused_stale_frames_total`)
+/// and the checkers would see it out of order if one got through. Late frames are counted, not
+/// violations.
 #[derive(Debug, Default)]
 pub(super) struct EpochCheck {
-    rooms: HashMap<String, BTreeMap<u64, String>>,
+    rooms: HashMap<String, BTreeMap<u64, Epoch>>,
     /// Frames seen.
     pub frames: u64,
     /// Frames without a readable owner or epoch header.
     pub unlabelled: u64,
     /// Split-brain frames.
     pub split: Vec<SplitBrain>,
+    /// Late frames (see the type's docs).
+    pub late: u64,
     /// Ownership changes seen on NATS (a room's frames moving to a newer epoch).
     pub handovers: u64,
+}
+
+/// One ownership epoch of a room as the observer saw it.
+#[derive(Debug)]
+struct Epoch {
+    owner: String,
+    /// The lowest seq seen in it (`u64::MAX` while none was readable).
+    first_seq: u64,
 }
 
 impl EpochCheck {
@@ -340,49 +359,91 @@ impl EpochCheck {
         self.rooms.iter().filter_map(|(room, epochs)| {
             epochs
                 .last_key_value()
-                .map(|(_, owner)| (room.as_str(), owner.as_str()))
+                .map(|(_, e)| (room.as_str(), e.owner.as_str()))
         })
     }
 
-    /// A frame of `room` from `owner` in `epoch` (`None`: headers missing) seen at `t`;
-    /// returns the violation, if it is one.
+    /// A frame of `room` from `owner` in `epoch` (`label` `None`: headers missing) with `seq`
+    /// (`None`: the payload did not decode) seen at `t`; returns the violation, if it is one.
     pub(super) fn frame(
         &mut self,
         t: f64,
         room: &str,
         label: Option<(&str, u64)>,
+        seq: Option<u64>,
     ) -> Option<SplitBrain> {
         self.frames += 1;
         let Some((owner, epoch)) = label else {
             self.unlabelled += 1;
             return None;
         };
+        let seq_or_top = seq.unwrap_or(u64::MAX);
         let epochs = self.rooms.entry(room.to_owned()).or_default();
-        let (newest, newest_owner) = match epochs.last_key_value() {
-            Some((e, o)) => (*e, o.clone()),
-            None => {
-                epochs.insert(epoch, owner.to_owned());
+        let Some((&newest, newest_e)) = epochs.last_key_value() else {
+            epochs.insert(
+                epoch,
+                Epoch {
+                    owner: owner.to_owned(),
+                    first_seq: seq_or_top,
+                },
+            );
+            return None;
+        };
+        let newest_owner = newest_e.owner.clone();
+        if let Some(e) = epochs.get_mut(&epoch) {
+            if e.owner != owner {
+                return Some(self.split_brain(t, room, owner, epoch, newest, newest_owner));
+            }
+            e.first_seq = e.first_seq.min(seq_or_top);
+            if epoch == newest {
                 return None;
             }
-        };
-        let claimed = epochs.get(&epoch).is_some_and(|o| o != owner);
-        if epoch < newest || claimed {
-            let v = SplitBrain {
-                t,
-                room: room.to_owned(),
-                owner: owner.to_owned(),
-                epoch,
-                newest,
-                newest_owner,
+        }
+        if epoch < newest {
+            // Late if below the first seq of every newer epoch (an unreadable seq is not).
+            let newer_first = epochs
+                .range(epoch + 1..)
+                .map(|(_, e)| e.first_seq)
+                .min()
+                .unwrap_or(u64::MAX);
+            return match seq {
+                Some(seq) if seq < newer_first => {
+                    self.late += 1;
+                    None
+                }
+                _ => Some(self.split_brain(t, room, owner, epoch, newest, newest_owner)),
             };
-            self.split.push(v.clone());
-            return Some(v);
         }
-        if epoch > newest {
-            self.handovers += 1;
-            epochs.insert(epoch, owner.to_owned());
-        }
+        self.handovers += 1;
+        epochs.insert(
+            epoch,
+            Epoch {
+                owner: owner.to_owned(),
+                first_seq: seq_or_top,
+            },
+        );
         None
+    }
+
+    fn split_brain(
+        &mut self,
+        t: f64,
+        room: &str,
+        owner: &str,
+        epoch: u64,
+        newest: u64,
+        newest_owner: String,
+    ) -> SplitBrain {
+        let v = SplitBrain {
+            t,
+            room: room.to_owned(),
+            owner: owner.to_owned(),
+            epoch,
+            newest,
+            newest_owner,
+        };
+        self.split.push(v.clone());
+        v
     }
 }
 
@@ -584,25 +645,41 @@ mod tests {
     }
 
     #[test]
-    fn an_older_epoch_after_a_newer_ones_frame_is_split_brain() {
+    fn an_older_epoch_after_a_newer_ones_frame_is_split_brain_unless_it_is_late() {
         let mut e = EpochCheck::default();
-        assert!(e.frame(1.0, "a", Some(("r0", 1))).is_none());
-        assert!(e.frame(1.1, "b", Some(("r1", 1))).is_none());
-        assert!(e.frame(1.2, "a", Some(("r0", 1))).is_none());
-        // Adopted: a newer epoch, then the paused owner's old one.
-        assert!(e.frame(5.0, "a", Some(("r2", 2))).is_none());
-        let v = e.frame(6.0, "a", Some(("r0", 1))).unwrap();
+        assert!(e.frame(1.0, "a", Some(("r0", 1)), Some(10)).is_none());
+        assert!(e.frame(1.1, "b", Some(("r1", 1)), Some(10)).is_none());
+        assert!(e.frame(1.2, "a", Some(("r0", 1)), Some(11)).is_none());
+        // Adopted: a newer epoch from seq 200, then the paused owner's old one.
+        assert!(e.frame(5.0, "a", Some(("r2", 2)), Some(200)).is_none());
+        assert!(e.frame(5.1, "a", Some(("r2", 2)), Some(201)).is_none());
+        // Seq 12 was published before the hand-over and held in r0's queue: late.
+        assert!(e.frame(5.5, "a", Some(("r0", 1)), Some(12)).is_none());
+        assert_eq!((e.late, e.split.len()), (1, 0));
+        // Seq 202 is one the new owner handles too: split brain; so is a seq unread.
+        let v = e.frame(6.0, "a", Some(("r0", 1)), Some(202)).unwrap();
         assert_eq!((v.epoch, v.newest, v.newest_owner.as_str()), (1, 2, "r2"));
+        assert!(e.frame(6.0, "a", Some(("r0", 1)), None).is_some());
+        // Seq 150 (below epoch 2's first) is late even though it is above epoch 1's.
+        assert!(e.frame(6.05, "a", Some(("r0", 1)), Some(150)).is_none());
         // Room b is another room: its epoch 1 is fine.
-        assert!(e.frame(6.1, "b", Some(("r1", 1))).is_none());
-        // Two owners claiming one epoch.
-        assert!(e.frame(7.0, "a", Some(("r1", 2))).is_some());
-        assert!(e.frame(8.0, "a", None).is_none());
-        assert_eq!((e.frames, e.unlabelled, e.split.len()), (8, 1, 2));
+        assert!(e.frame(6.1, "b", Some(("r1", 1)), Some(300)).is_none());
+        // Two owners claiming one epoch, whatever the seq.
+        assert!(e.frame(7.0, "a", Some(("r1", 2)), Some(5)).is_some());
+        assert!(e.frame(8.0, "a", None, Some(400)).is_none());
+        assert_eq!(
+            (e.frames, e.unlabelled, e.split.len(), e.late),
+            (12, 1, 3, 2)
+        );
         assert_eq!(e.handovers, 1);
+        // A third epoch whose first seq is lower than the second's (its frames came late):
+        // the old epoch's frame is late only below both.
+        assert!(e.frame(9.0, "a", Some(("r1", 3)), Some(190)).is_none());
+        assert!(e.frame(9.1, "a", Some(("r0", 1)), Some(195)).is_some());
+        assert!(e.frame(9.2, "a", Some(("r0", 1)), Some(189)).is_none());
         let mut owners: Vec<_> = e.owners().collect();
         owners.sort_unstable();
-        assert_eq!(owners, vec![("a", "r2"), ("b", "r1")]);
+        assert_eq!(owners, vec![("a", "r1"), ("b", "r1")]);
     }
 
     #[test]

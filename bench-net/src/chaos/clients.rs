@@ -23,16 +23,19 @@ use prost::Message as _;
 use rand::Rng as _;
 use tokio::time::{Instant, MissedTickBehavior};
 
-use super::probe;
+use super::memory::Point;
 use super::state::{Life, Shared, lock};
+use crate::soak::probe;
 use crease_remote::mesh_stream::{StreamReader, subscribe_encoded};
 use crease_remote::publish::{PublishOptions, Sink, publish};
 use crease_remote::{connect, unix_us};
 
 /// Connecting and subscribing may take this long (a paused replica never answers).
 const CONNECT: Duration = Duration::from_secs(5);
-/// A publisher that gets no ack for this long drops its stream and goes elsewhere.
-const PUBLISH_STALL: Duration = Duration::from_secs(3);
+/// A publisher that gets no ack for this long drops its stream and goes elsewhere: a live
+/// capture sends 60 frames a second and each is acked, so a second without one is a replica
+/// that stopped (a paused process keeps its socket open; only the silence tells).
+const PUBLISH_STALL: Duration = Duration::from_secs(1);
 /// A plain viewer that gets no frame for this long goes elsewhere.
 const VIEWER_IDLE: Duration = Duration::from_secs(5);
 
@@ -187,8 +190,10 @@ async fn session(shared: &Arc<Shared>, r: usize, k: usize, motion: &Arc<Motion>)
     moved
 }
 
-/// A plain viewer of room `room`: watches through one replica until its connection fails or
-/// goes quiet, then through a random live one.
+/// A plain viewer of room `room`: watches through its home replica (`v` modulo the replicas)
+/// until its connection fails or goes quiet, then through a random live one, and back home
+/// once home is up again (so each replica serves the same viewers whenever it is up, and its
+/// memory is judged at a steady load: `memory`).
 pub(super) async fn viewer(shared: Arc<Shared>, v: usize, room: usize) {
     let (ws, palette) = {
         let mut rng = rand::rng();
@@ -201,15 +206,18 @@ pub(super) async fn viewer(shared: Arc<Shared>, v: usize, room: usize) {
     };
     // Spread the first connections over two seconds.
     pause(&shared, Duration::from_millis((v as u64 * 37) % 2000)).await;
-    let mut replica = Some(v % shared.replicas.len());
+    let home = v % shared.replicas.len();
+    let mut replica = Some(home);
     while !shared.stopping() {
         match replica {
             Some(k) if shared.replicas[k].life() == Life::Up => {
                 let room = &shared.rooms[room].id;
+                // Away from home: back as soon as home is up.
+                let leave = || k != home && shared.replicas[home].life() == Life::Up;
                 let _ = if ws {
-                    watch_ws(&shared, k, room, encoding).await
+                    watch_ws(&shared, k, room, encoding, leave).await
                 } else {
-                    watch_grpc(&shared, k, room, encoding).await
+                    watch_grpc(&shared, k, room, encoding, leave).await
                 };
                 if shared.stopping() {
                     break;
@@ -223,7 +231,11 @@ pub(super) async fn viewer(shared: Arc<Shared>, v: usize, room: usize) {
             }
             _ => pause(&shared, Duration::from_millis(500)).await,
         }
-        replica = shared.pick_live(None);
+        replica = if shared.replicas[home].life() == Life::Up {
+            Some(home)
+        } else {
+            shared.pick_live(None)
+        };
     }
 }
 
@@ -232,6 +244,7 @@ async fn watch_grpc(
     k: usize,
     room: &str,
     encoding: Encoding,
+    leave: impl Fn() -> bool,
 ) -> anyhow::Result<()> {
     let url = &shared.replicas[k].url;
     let subscribed = async {
@@ -242,7 +255,7 @@ async fn watch_grpc(
         .await
         .context("subscribing: timed out")??;
     let mut last = Instant::now();
-    while !shared.stopping() && last.elapsed() < VIEWER_IDLE {
+    while !shared.stopping() && !leave() && last.elapsed() < VIEWER_IDLE {
         match tokio::time::timeout(Duration::from_secs(1), sub.next_frame()).await {
             Ok(Ok(Some(_))) => {
                 last = Instant::now();
@@ -258,7 +271,13 @@ async fn watch_grpc(
     Ok(())
 }
 
-async fn watch_ws(shared: &Shared, k: usize, room: &str, encoding: Encoding) -> anyhow::Result<()> {
+async fn watch_ws(
+    shared: &Shared,
+    k: usize,
+    room: &str,
+    encoding: Encoding,
+    leave: impl Fn() -> bool,
+) -> anyhow::Result<()> {
     let url = format!(
         "ws://{}/ws/rooms/{room}?level=base&encoding={}",
         shared.replicas[k].http,
@@ -268,7 +287,7 @@ async fn watch_ws(shared: &Shared, k: usize, room: &str, encoding: Encoding) -> 
         .await
         .context("connecting: timed out")??;
     let mut last = Instant::now();
-    while !shared.stopping() && last.elapsed() < VIEWER_IDLE {
+    while !shared.stopping() && !leave() && last.elapsed() < VIEWER_IDLE {
         match tokio::time::timeout(Duration::from_secs(1), socket.next()).await {
             Ok(Some(Ok(tokio_tungstenite::tungstenite::Message::Binary(b)))) => {
                 if let Ok(v1::MeshFrame {
@@ -372,8 +391,15 @@ pub(super) async fn observer(shared: Arc<Shared>, url: String) -> anyhow::Result
             let epoch = h.get("Crease-Epoch")?.as_str().parse().ok()?;
             Some((owner, epoch))
         });
+        // The frame's seq tells a late frame (from before a hand-over) from split brain.
+        let seq = match v1::MeshFrame::decode(msg.payload.as_ref()) {
+            Ok(v1::MeshFrame {
+                body: Some(v1::mesh_frame::Body::Frame(f)),
+            }) => Some(f.seq),
+            _ => None,
+        };
         let t = shared.now();
-        let split = lock(&shared.epochs).frame(t, room, label);
+        let split = lock(&shared.epochs).frame(t, room, label, seq);
         if let Some(v) = split {
             eprintln!(
                 "chaos {t:7.1} s: SPLIT BRAIN room {}: a frame of {} in epoch {} after epoch {} of {}",
@@ -422,12 +448,15 @@ pub(super) async fn sampler(shared: Arc<Shared>, every: Duration) {
             (e.frames, e.split.len(), owned)
         };
         {
-            let mut all = lock(&shared.samples);
-            let mut all_owned = lock(&shared.owned);
+            let mut all = lock(&shared.memory);
             for (k, s) in samples.into_iter().enumerate() {
-                if let (Some(s), Some(list), Some(o)) = (s, all.get_mut(k), all_owned.get_mut(k)) {
-                    list.push(s);
-                    o.push(owned[k]);
+                if let (Some(s), Some(list)) = (s, all.get_mut(k)) {
+                    list.push(Point {
+                        t: s.t,
+                        rss_mib: s.rss_mib,
+                        owned: owned[k],
+                        life: shared.replicas[k].deaths.load(Ordering::Relaxed),
+                    });
                 }
             }
         }

@@ -34,26 +34,6 @@ pub(super) fn free_addresses(n: usize) -> anyhow::Result<Vec<SocketAddr>> {
         .collect()
 }
 
-/// The `nats-server` binary: Debian's, or one on the PATH.
-pub(super) fn nats_binary() -> anyhow::Result<PathBuf> {
-    let on_path = std::env::var_os("PATH")
-        .map(|p| {
-            std::env::split_paths(&p)
-                .map(|d| d.join("nats-server"))
-                .collect::<Vec<_>>()
-        })
-        .unwrap_or_default();
-    [
-        PathBuf::from("/usr/sbin/nats-server"),
-        PathBuf::from("/usr/bin/nats-server"),
-        PathBuf::from("/usr/local/bin/nats-server"),
-    ]
-    .into_iter()
-    .chain(on_path)
-    .find(|p| p.is_file())
-    .context("no nats-server binary (apt-get install -y nats-server)")
-}
-
 /// A log file opened for appending, with a line saying what starts now.
 fn append_log(path: &Path, what: &str) -> anyhow::Result<File> {
     let mut file = OpenOptions::new()

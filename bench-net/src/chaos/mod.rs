@@ -9,8 +9,9 @@
 //! - **rooms and clients** (`clients`): `--chaos-rooms` rooms (20), opened on the replicas
 //!   in turn, each with one publisher at `--rate` (60 Hz) through a random live replica;
 //!   `--chaos-viewers` (200) viewers spread over the replicas, gRPC and WebSocket, vertex and
-//!   palette frames, reading bytes only. Publishers and viewers move to a random live replica
-//!   when their connection fails or goes quiet.
+//!   palette frames, reading bytes only. Publishers move to a random live replica when their
+//!   connection fails or no ack comes for a second; viewers when theirs fails or goes quiet,
+//!   and back to their home replica once it is up again.
 //! - **faults** (`faults`): every 20-40 s one of `kill` (SIGKILL a replica, restart it 5-15 s
 //!   later), `pause` (SIGSTOP a room's owner for 2.5 leases), `nats` (restart NATS) or
 //!   `publisher` (move a publisher); one at a time, MINUTES x 2 of them.
@@ -20,14 +21,16 @@
 //!   subscription), decode failures (healed by a keyframe or not). A NATS observer reads every
 //!   frame's `Crease-Epoch` on `crease.frames.>`: an older epoch after a newer one's frame is
 //!   split brain. Takes (`takes`) started in two rooms are stopped and read back at the end.
-//!   Every 5 s each replica's RSS (`soak`'s probe).
+//!   Every 5 s each replica's RSS (`soak`'s probe) with the rooms it owns, judged over the
+//!   stretches of steady load (`memory`).
 //!
 //! The report (`report`) fails the run (exit status 1) on an ordering violation, a
 //! split-brain frame, a room without a frame for longer than `--chaos-max-gap` (10 s) after a
 //! fault ended (or with no fault), a decode failure no keyframe healed, a bad take, RSS growth
-//! over 5% of a replica never killed (the peak of the minute that ends one sixth of the run
-//! to the last minute's), a replica that exited on its own or panicked, and fewer than
-//! MINUTES x 2 faults.
+//! over 5% across a steady stretch of a replica's life (one high-water of rooms owned: the
+//! peak of its first settled minute to its last minute's), a run of 10 minutes or more that
+//! judged RSS over less than half its length, a replica that exited on its own or panicked,
+//! and fewer than MINUTES x 2 faults.
 //!
 //! This file: the options' checks, the set-up, the run and the report's figures.
 
@@ -35,11 +38,7 @@ mod accounting;
 mod clients;
 mod cluster;
 mod faults;
-// The soak's probe, compiled here too: `soak` keeps it private, and this crate's other
-// modules are not this one's to change. The chaos soak samples; it does not wait to settle.
-#[allow(dead_code, clippy::duplicate_mod)]
-#[path = "../soak/probe.rs"]
-mod probe;
+mod memory;
 mod report;
 mod state;
 mod takes;
@@ -58,10 +57,10 @@ use tokio::task::JoinSet;
 use tokio::time::Instant;
 
 use super::args::{BenchNetArgs, demo_model};
-use super::server::random_token;
+use super::server::{SOAK_LIMITS, nats_binary, random_token, server_binary};
 use accounting::{Recovery, STOPPED_S, Span, Watch, attribute, recoveries, uncovered};
 use clients::Motion;
-use cluster::{Nats, Replica, free_addresses, nats_binary};
+use cluster::{Nats, Replica, free_addresses};
 use crease_remote::{authorized, connect};
 use faults::{FaultKind, Processes};
 use report::{ChaosReport, LISTED, ReplicaRss, RoomGap};
@@ -71,8 +70,11 @@ use state::{Counters, PublisherCtl, REPLICAS, ReplicaView, Room, Shared, lock};
 const SAMPLE_EVERY: Duration = Duration::from_secs(5);
 /// Rooms recording a take.
 const TAKE_ROOMS: usize = 2;
-/// RSS growth that fails the run, percent.
+/// RSS growth over a steady stretch that fails the run, percent.
 const RSS_GROWTH: f64 = 5.0;
+/// A run this long (seconds) must judge RSS over at least half its length, summed over the
+/// replicas' steady stretches.
+const MEMORY_JUDGED_AFTER_S: f64 = 600.0;
 
 /// Runs the chaos soak (from `bench_net::run`).
 pub(super) fn run(args: &BenchNetArgs, minutes: f64) -> anyhow::Result<()> {
@@ -156,39 +158,15 @@ async fn start_cluster(
     models: &Path,
     admin: &str,
 ) -> anyhow::Result<Processes> {
-    let bin = match &args.server_bin {
-        Some(bin) => bin.clone(),
-        None => std::env::current_exe()
-            .context("locating the crease executable")?
-            .with_file_name(format!("crease-server{}", std::env::consts::EXE_SUFFIX)),
-    };
-    if !bin.is_file() {
-        bail!(
-            "{}: no crease-server binary (build it with `cargo build --release -p crease-demo`, or pass --server-bin PATH)",
-            bin.display()
-        );
-    }
+    let bin = server_binary(args)?;
     let addresses = free_addresses(1 + 2 * REPLICAS)?;
     let nats = Nats::start(
-        nats_binary()?,
+        nats_binary(args)?,
         addresses[0].port(),
         dir.join("js"),
         dir.join("nats.log"),
     )
     .await?;
-    // The soak's limits: every client comes from one address.
-    let limits = [
-        "--max-connections-per-address",
-        "100000",
-        "--max-connections",
-        "100000",
-        "--max-streams-per-address",
-        "100000",
-        "--max-streams",
-        "100000",
-        "--max-publish-hz",
-        "1000",
-    ];
     let mut replicas = Vec::with_capacity(REPLICAS);
     for k in 0..REPLICAS {
         let (grpc, http) = (addresses[1 + 2 * k], addresses[2 + 2 * k]);
@@ -210,7 +188,7 @@ async fn start_cluster(
             "--takes".into(),
             takes.display().to_string(),
         ];
-        argv.extend(limits.iter().map(|s| (*s).to_owned()));
+        argv.extend(SOAK_LIMITS.iter().map(|s| (*s).to_owned()));
         let log = dir.join(format!("{id}.log"));
         let mut replica = Replica::new(id, bin.clone(), argv, admin.to_owned(), grpc, http, log);
         replica.spawn()?;
@@ -329,8 +307,7 @@ async fn chaos(
         rooms,
         admin_token: admin,
         epochs: Default::default(),
-        samples: Mutex::new(vec![Vec::new(); REPLICAS]),
-        owned: Mutex::new(vec![Vec::new(); REPLICAS]),
+        memory: Mutex::new(vec![Vec::new(); REPLICAS]),
         counters: Counters::default(),
     });
     let mut tasks: JoinSet<anyhow::Result<()>> = JoinSet::new();
@@ -565,50 +542,49 @@ fn summarise(args: &BenchNetArgs, shared: &Shared, s: Summary) -> ChaosReport {
             violations.push(format!("take {} on {}: {why}", t.take, t.replica));
         }
     }
-    // RSS.
-    let samples = lock(&shared.samples);
-    let owned = lock(&shared.owned);
-    let warm_s = s.duration_s / 6.0;
+    // RSS, over each replica's steady stretches (`memory`).
+    let memory = lock(&shared.memory);
     let rss: Vec<ReplicaRss> = shared
         .replicas
         .iter()
-        .zip(samples.iter().zip(owned.iter()))
-        .map(|(view, (list, owned))| {
-            let deaths = view.deaths.load(Ordering::Relaxed);
-            let warm = probe::rss_peak(list, warm_s);
-            let end = probe::rss_peak(list, list.last().map_or(0.0, |x| x.t));
-            let growth = (deaths == 0 && warm > 0.0).then(|| 100.0 * (end - warm) / warm);
-            // The rooms it owned at the last sample of the warm-up, and at the end.
-            let warm_at = list.iter().rposition(|x| x.t <= warm_s);
-            ReplicaRss {
-                replica: view.id.clone(),
-                deaths,
-                start_mib: list.first().map_or(0.0, |x| x.rss_mib),
-                end_mib: list.last().map_or(0.0, |x| x.rss_mib),
-                warm_peak_mib: warm,
-                end_peak_mib: end,
-                growth_percent: growth,
-                rooms_owned: (
-                    warm_at.and_then(|i| owned.get(i).copied()),
-                    owned.last().copied(),
-                ),
-            }
+        .zip(memory.iter())
+        .map(|(view, points)| ReplicaRss {
+            replica: view.id.clone(),
+            deaths: view.deaths.load(Ordering::Relaxed),
+            start_mib: points.first().map_or(0.0, |x| x.rss_mib),
+            end_mib: points.last().map_or(0.0, |x| x.rss_mib),
+            stretches: memory::steady(points),
         })
         .collect();
     for m in &rss {
-        if let Some(g) = m.growth_percent
-            && g > RSS_GROWTH
-        {
-            let rooms = |n: Option<usize>| n.map_or("?".to_owned(), |n| n.to_string());
-            violations.push(format!(
-                "replica {} RSS grew {g:.1}% ({:.1} -> {:.1} MiB, peaks; it owned {} rooms then, {} at the end)",
-                m.replica,
-                m.warm_peak_mib,
-                m.end_peak_mib,
-                rooms(m.rooms_owned.0),
-                rooms(m.rooms_owned.1)
-            ));
+        for x in &m.stretches {
+            if let Some(g) = x.growth_percent
+                && g > RSS_GROWTH
+            {
+                violations.push(format!(
+                    "replica {} RSS grew {g:.1}% at a steady load ({:.1} -> {:.1} MiB, peaks of the first and last minute of {:.0}-{:.0} s in its life {} with at most {} rooms owned)",
+                    m.replica,
+                    x.first_peak_mib.unwrap_or(0.0),
+                    x.last_peak_mib.unwrap_or(0.0),
+                    x.from + memory::SETTLE_S,
+                    x.to,
+                    x.life + 1,
+                    x.rooms
+                ));
+            }
         }
+    }
+    // A run long enough to judge must judge some memory (else the check is blind).
+    let judged_s: f64 = rss
+        .iter()
+        .flat_map(|m| &m.stretches)
+        .map(memory::Stretch::judged_s)
+        .sum();
+    if s.duration_s >= MEMORY_JUDGED_AFTER_S && judged_s < s.duration_s / 2.0 {
+        violations.push(format!(
+            "RSS judged over {judged_s:.0} s of steady load in all (summed over the replicas), under half the run's {:.0} s: too few steady stretches to tell a leak",
+            s.duration_s
+        ));
     }
     if s.panics > 0 {
         violations.push(format!("{} panic(s) in the replicas' logs", s.panics));
@@ -653,6 +629,7 @@ fn summarise(args: &BenchNetArgs, shared: &Shared, s: Summary) -> ChaosReport {
         nats_frames: epochs.frames,
         nats_unlabelled: epochs.unlabelled,
         handovers: epochs.handovers,
+        nats_late: epochs.late,
         ordering_violations: ordering.len(),
         ordering_listed: ordering.into_iter().take(LISTED).collect(),
         split_brain_frames: epochs.split.len(),

@@ -7,6 +7,7 @@ use std::io::Write;
 
 use super::accounting::{Recovery, SplitBrain};
 use super::faults::Fault;
+use super::memory::Stretch;
 use super::takes::TakeCheck;
 
 /// Ordering violations, split-brain frames and gap violations listed in full at most.
@@ -17,21 +18,14 @@ pub(super) const LISTED: usize = 20;
 pub(super) struct ReplicaRss {
     /// Its id.
     pub replica: String,
-    /// Times it died (killed, or on its own): its RSS starts again then, so no growth figure.
+    /// Times it died (killed, or on its own): its RSS starts again then.
     pub deaths: u32,
     /// The first and last samples, MiB.
     pub start_mib: f64,
     /// See `start_mib`.
     pub end_mib: f64,
-    /// The peak of the minute that ends one sixth of the run, and of the last minute, MiB.
-    pub warm_peak_mib: f64,
-    /// See `warm_peak_mib`.
-    pub end_peak_mib: f64,
-    /// From the warm peak to the end peak, percent (replicas never killed).
-    pub growth_percent: Option<f64>,
-    /// The rooms it owned at the end of the warm-up and at the end (each owned room holds a
-    /// pipeline: RSS follows them).
-    pub rooms_owned: (Option<usize>, Option<usize>),
+    /// Its steady stretches, each judged on its own (`memory::steady`).
+    pub stretches: Vec<Stretch>,
 }
 
 /// A room's longest stretch without a new frame, on any of its checkers.
@@ -97,6 +91,9 @@ pub(super) struct ChaosReport {
     pub nats_unlabelled: u64,
     /// See `nats_frames`.
     pub handovers: u64,
+    /// Frames of an older epoch published before the hand-over and delivered after it (held
+    /// in a paused owner's NATS client): the relays drop them; not split brain.
+    pub nats_late: u64,
     /// Frames at or below the previous seq on a subscription, and the first of them.
     pub ordering_violations: usize,
     /// See `ordering_violations`.
@@ -135,10 +132,6 @@ pub(super) struct ChaosReport {
     pub panics: usize,
     /// Why it failed; empty when it passed.
     pub violations: Vec<String>,
-}
-
-fn or_dash(v: Option<f64>, precision: usize) -> String {
-    v.map_or("-".to_owned(), |v| format!("{v:.precision$}"))
 }
 
 /// The table, on `out`.
@@ -189,8 +182,8 @@ pub(super) fn print_table(r: &ChaosReport, out: &mut impl Write) -> std::io::Res
     )?;
     writeln!(
         out,
-        "  NATS                   {} frames observed ({} without owner/epoch), {} ownership changes",
-        r.nats_frames, r.nats_unlabelled, r.handovers
+        "  NATS                   {} frames observed ({} without owner/epoch), {} ownership changes, {} late frames of an older epoch from before a hand-over (relays drop them)",
+        r.nats_frames, r.nats_unlabelled, r.handovers, r.nats_late
     )?;
     writeln!(out, "  ordering violations    {}", r.ordering_violations)?;
     for o in &r.ordering_listed {
@@ -245,22 +238,37 @@ pub(super) fn print_table(r: &ChaosReport, out: &mut impl Write) -> std::io::Res
     }
     writeln!(
         out,
-        "  RSS (MiB)              replica deaths  start    end   warm peak  end peak  growth  rooms owned"
+        "  RSS (MiB)              replica deaths  start    end   steady stretches judged: life, rooms owned (most), seconds, first -> last minute's peak, growth"
     )?;
-    let rooms = |n: Option<usize>| n.map_or("?".to_owned(), |n| n.to_string());
     for m in &r.rss {
+        let judged: Vec<String> = m
+            .stretches
+            .iter()
+            .filter_map(|x| {
+                let g = x.growth_percent?;
+                Some(format!(
+                    "{}:{} rooms {:.0}-{:.0} s {:.1}->{:.1} {g:+.1}%",
+                    x.life + 1,
+                    x.rooms,
+                    x.from,
+                    x.to,
+                    x.first_peak_mib.unwrap_or(0.0),
+                    x.last_peak_mib.unwrap_or(0.0)
+                ))
+            })
+            .collect();
         writeln!(
             out,
-            "                         {:<7} {:>6} {:>6.1} {:>6.1}  {:>9.1} {:>9.1}  {:>6}  {} -> {}",
+            "                         {:<7} {:>6} {:>6.1} {:>6.1}   {}",
             m.replica,
             m.deaths,
             m.start_mib,
             m.end_mib,
-            m.warm_peak_mib,
-            m.end_peak_mib,
-            or_dash(m.growth_percent, 1) + if m.growth_percent.is_some() { "%" } else { "" },
-            rooms(m.rooms_owned.0),
-            rooms(m.rooms_owned.1)
+            if judged.is_empty() {
+                "none long enough".to_owned()
+            } else {
+                judged.join("; ")
+            }
         )?;
     }
     writeln!(

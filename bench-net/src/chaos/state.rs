@@ -12,7 +12,7 @@ use rand::Rng as _;
 use tokio::time::Instant;
 
 use super::accounting::{EpochCheck, Watch};
-use super::probe::Sample;
+use super::memory::Point;
 
 /// The replicas of the soak's cluster.
 pub(super) const REPLICAS: usize = 3;
@@ -135,11 +135,9 @@ pub(super) struct Shared {
     pub epochs: Mutex<EpochCheck>,
     /// Per room, its publisher's controls.
     pub publishers: Vec<PublisherCtl>,
-    /// Per replica, its samples, and the rooms it owned at each (as NATS frames' owner
-    /// headers say).
-    pub samples: Mutex<Vec<Vec<Sample>>>,
-    /// See `samples`.
-    pub owned: Mutex<Vec<Vec<usize>>>,
+    /// Per replica, its RSS samples with the rooms it owned at each (as NATS frames' owner
+    /// headers say) and its life then.
+    pub memory: Mutex<Vec<Vec<Point>>>,
     /// The counters.
     pub counters: Counters,
 }

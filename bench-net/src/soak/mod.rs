@@ -39,12 +39,13 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 
 use super::args::BenchNetArgs;
-use super::server::{Target, random_token, spawn_server_with};
+use super::server::{SOAK_LIMITS, Target, random_token, spawn_server_with};
 use crease_remote::mesh_stream::{StreamReader, subscribe_encoded};
 use crease_remote::publish::{PublishError, PublishOptions, Sink, publish};
 use crease_remote::{authorized, connect, unix_us};
 
-mod probe;
+// The chaos soak samples its replicas with the same probe.
+pub(crate) mod probe;
 
 pub(super) use probe::Sample;
 use probe::{SETTLE, rss_peak, sample, settle};
@@ -188,21 +189,7 @@ async fn soak(
     model: &TrainedModel,
     minutes: f64,
 ) -> anyhow::Result<SoakReport> {
-    let extra: Vec<String> = [
-        "--max-connections-per-address",
-        "100000",
-        "--max-connections",
-        "100000",
-        "--max-streams-per-address",
-        "100000",
-        "--max-streams",
-        "100000",
-        "--max-publish-hz",
-        "1000",
-    ]
-    .iter()
-    .map(|s| (*s).to_owned())
-    .collect();
+    let extra: Vec<String> = SOAK_LIMITS.iter().map(|s| (*s).to_owned()).collect();
     let target = Arc::new(spawn_server_with(args, &extra, &random_token()).await?);
     let pid = target.pid.context("the spawned server's pid")?;
     let http = target.http.context("the spawned server's HTTP address")?;

@@ -19,7 +19,7 @@ const RSS_WINDOW_S: f64 = 60.0;
 
 /// One sample of the server.
 #[derive(Clone, Debug, serde::Serialize)]
-pub(in super::super) struct Sample {
+pub(crate) struct Sample {
     /// Seconds since the soak started.
     pub t: f64,
     /// Resident set, MiB.
@@ -77,7 +77,7 @@ pub(super) async fn settle(
 }
 
 /// The server's RSS, fds and threads (`/proc`) and tasks (`/metrics`); `None` once it is gone.
-pub(super) async fn sample(
+pub(crate) async fn sample(
     pid: u32,
     http: std::net::SocketAddr,
     started: Instant,
