@@ -201,6 +201,17 @@ def object_name(s: CreaseSettings) -> str:
     return f"crease {s.room}"
 
 
+def client_of(s: CreaseSettings):
+    """The crease client for the panel's server, HTTP address and token."""
+    return crease_module().Client(s.server, token=s.token or None, http=s.http)
+
+
+def cancelled(op: bpy.types.Operator, e: Exception) -> set:
+    """Says what went wrong in Blender's status bar, and cancels the operator."""
+    op.report({"ERROR"}, str(e))
+    return {"CANCELLED"}
+
+
 class CREASE_OT_pick_room(bpy.types.Operator):
     """Pick one of the server's rooms"""
 
@@ -217,11 +228,9 @@ class CREASE_OT_pick_room(bpy.types.Operator):
     def invoke(self, context, event):
         s = settings(context)
         try:
-            crease = crease_module()
-            CREASE_OT_pick_room.cache = crease.Client(s.server, http=s.http).rooms()
+            CREASE_OT_pick_room.cache = client_of(s).rooms()
         except Exception as e:  # noqa: BLE001
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
+            return cancelled(self, e)
         context.window_manager.invoke_search_popup(self)
         return {"RUNNING_MODAL"}
 
@@ -245,8 +254,7 @@ class CREASE_OT_watch(bpy.types.Operator):
         try:
             _watchers[name] = Watcher(s.server, s.token, s.room, s.level, s.encoding, name)
         except Exception as e:  # noqa: BLE001
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
+            return cancelled(self, e)
         if not bpy.app.timers.is_registered(tick):
             bpy.app.timers.register(tick, first_interval=TICK, persistent=True)
         s.status = f"watching {s.room} ({s.level}, {s.encoding})"
@@ -302,8 +310,7 @@ class CREASE_OT_import_take(bpy.types.Operator):
         s = settings(context)
         take = s.take.strip()
         try:
-            crease = crease_module()
-            client = crease.Client(s.server, token=s.token or None, http=s.http)
+            client = client_of(s)
             if not take:
                 takes = client.takes(s.room)
                 if not takes:
@@ -311,8 +318,7 @@ class CREASE_OT_import_take(bpy.types.Operator):
                 take = takes[0].take
             glb = client.take_glb(take)
         except Exception as e:  # noqa: BLE001
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
+            return cancelled(self, e)
         path = Path(tempfile.mkdtemp(prefix="crease-take-")) / f"{take}.glb"
         path.write_bytes(glb)
         result = bpy.ops.import_scene.gltf(filepath=str(path))
