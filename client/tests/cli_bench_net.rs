@@ -247,7 +247,10 @@ fn bench_net_says_how_to_build_a_missing_server_and_needs_an_admin_token() {
     );
     // --nats-bin means nothing without a run that starts NATS.
     let err = run(&["--nats-bin", "/usr/sbin/nats-server"]);
-    assert!(err.contains("--replicas") && err.contains("--chaos"), "{err}");
+    assert!(
+        err.contains("--replicas") && err.contains("--chaos"),
+        "{err}"
+    );
     // The control file must fit the model's five control points.
     let bad = tmp.path().join("bad.csv");
     std::fs::write(&bad, "1,2,3\n").unwrap();

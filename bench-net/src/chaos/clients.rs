@@ -432,7 +432,10 @@ pub(super) async fn sampler(shared: Arc<Shared>, every: Duration) {
             .iter()
             .zip(&shared.replicas)
             .map(|(s, r)| match s {
-                Some(s) => format!("{} {:.0}", r.id, s.rss_mib),
+                Some(s) => format!(
+                    "{} {:.0} ({} threads, {} fds)",
+                    r.id, s.rss_mib, s.threads, s.fds
+                ),
                 None => format!("{} -", r.id),
             })
             .collect();
@@ -465,7 +468,7 @@ pub(super) async fn sampler(shared: Arc<Shared>, every: Duration) {
             (f + w.frames, o + w.out_of_order.len())
         });
         eprintln!(
-            "chaos {:7.1} s: rss {} MiB; frames {frames} (checkers), {nats} (NATS); out of order {order}, split brain {split}",
+            "chaos {:7.1} s: rss MiB {}; frames {frames} (checkers), {nats} (NATS); out of order {order}, split brain {split}",
             shared.now(),
             rss.join(", ")
         );
