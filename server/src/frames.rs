@@ -21,6 +21,15 @@ use prost::bytes::{Bytes, BytesMut};
 /// a pool needs about two slots plus one per stalled subscriber; past this many, frames are
 /// allocated and dropped as before (counted in [`FramePool::fresh`]).
 const POOL_SLOTS: usize = 32;
+/// Every this many frames (30 s at 60 Hz) a pool gives back the free slots above what that
+/// stretch needed at most ([`TRIM_SLACK`] more): a burst of lagging subscribers (a fault's CPU
+/// spike, viewers arriving from a dead replica) grows a pool, and without this its memory
+/// stayed at the burst's high-water for the room's life (the chaos soak's RSS steps,
+/// RELIABILITY.md). At a steady load the need does not change, so nothing is given back and
+/// nothing allocated.
+const TRIM_EVERY: u32 = 1800;
+/// See [`TRIM_EVERY`].
+const TRIM_SLACK: usize = 2;
 
 /// One predicted mesh, encoded once and shared by every subscriber of its level.
 #[derive(Debug)]
@@ -158,6 +167,11 @@ pub(crate) struct FramePool {
     next: usize,
     /// Frames, byte buffers and lane buffers allocated (or grown) so far.
     fresh: u64,
+    /// Frames filled since the last trim, and the most slots held at once meanwhile (counting
+    /// the one being filled).
+    fills: u32,
+    /// See `fills`.
+    peak_held: usize,
 }
 
 impl FramePool {
@@ -165,6 +179,34 @@ impl FramePool {
     #[cfg(test)]
     pub(crate) fn fresh(&self) -> u64 {
         self.fresh
+    }
+
+    /// Notes how many slots are held now (plus the one about to be filled) and, every
+    /// [`TRIM_EVERY`] frames, drops the free slots above the stretch's need. Only a slot no one
+    /// else holds is dropped (its count is 1: nobody can clone it meanwhile).
+    fn trim(&mut self) {
+        let held = self
+            .slots
+            .iter()
+            .filter(|s| Arc::strong_count(s) > 1)
+            .count();
+        self.peak_held = self.peak_held.max(held + 1);
+        self.fills += 1;
+        if self.fills < TRIM_EVERY {
+            return;
+        }
+        let keep = self.peak_held + TRIM_SLACK;
+        let mut extra = self.slots.len().saturating_sub(keep);
+        if extra > 0 {
+            self.slots.retain(|s| {
+                let drop = extra > 0 && Arc::strong_count(s) == 1 && Arc::weak_count(s) == 0;
+                extra -= usize::from(drop);
+                !drop
+            });
+            self.next = 0;
+        }
+        self.fills = 0;
+        self.peak_held = 0;
     }
 
     /// Fills a frame nobody holds with `encoded` (the encoder's output) and `lanes` (its
@@ -176,6 +218,7 @@ impl FramePool {
         lanes: &[[u16; 4]],
         fill: impl FnOnce(&mut MeshUpdate),
     ) -> Arc<MeshUpdate> {
+        self.trim();
         let n = self.slots.len();
         let free = (0..n)
             .map(|k| (self.next + k) % n.max(1))
@@ -273,5 +316,60 @@ mod tests {
         assert_eq!(old_bytes, encoded(3));
         assert_eq!(old.lanes, lanes(3));
         assert!(pool.slots.len() <= 4, "{} slots", pool.slots.len());
+    }
+
+    #[test]
+    fn a_pool_gives_back_what_a_burst_took_and_never_a_held_frame() {
+        let qbox = QuantBox::from_min_step(
+            crease_core::glam::Vec3::ZERO,
+            crease_core::glam::Vec3::ONE,
+            16,
+        )
+        .unwrap();
+        let mut pool = FramePool::default();
+        let fill = |pool: &mut FramePool, i: u64| {
+            pool.fill(qbox, &[i as u8; 100], &[[i as u16, 0, 0, 0]; 16], |u| {
+                u.seq = i
+            })
+        };
+        let mut seq = 0;
+        // A burst: 12 frames held at once (subscribers lagging), then let go, except one that
+        // a stalled subscriber keeps.
+        let mut burst: Vec<Arc<MeshUpdate>> = (0..12)
+            .map(|_| {
+                seq += 1;
+                fill(&mut pool, seq)
+            })
+            .collect();
+        assert_eq!(pool.slots.len(), 12);
+        let stalled = burst.remove(5);
+        let stalled_seq = stalled.seq;
+        drop(burst);
+        // Steady again: one frame held at a time (the fan-out's newest). The period the burst
+        // fell in keeps what it needed; the next one gives it back.
+        let mut newest = None;
+        for _ in 0..2 * TRIM_EVERY {
+            seq += 1;
+            newest = Some(fill(&mut pool, seq));
+        }
+        // Kept: the stretch's most held at once (the stalled frame, the newest and the one
+        // being filled, 3) plus the slack; the burst's other slots are gone.
+        assert!(
+            pool.slots.len() <= 3 + TRIM_SLACK,
+            "{} slots after the trim",
+            pool.slots.len()
+        );
+        assert!(pool.slots.len() >= 3);
+        // The stalled subscriber's frame is still its own, and still in the pool.
+        assert_eq!(stalled.seq, stalled_seq);
+        assert!(pool.slots.iter().any(|s| Arc::ptr_eq(s, &stalled)));
+        // At this steady load the next trim period allocates nothing.
+        let before = pool.fresh();
+        for _ in 0..TRIM_EVERY + 10 {
+            seq += 1;
+            newest = Some(fill(&mut pool, seq));
+        }
+        assert_eq!(pool.fresh(), before, "allocations at a steady load");
+        assert_eq!(newest.map(|n| n.seq), Some(seq));
     }
 }
