@@ -298,6 +298,44 @@ fn models_dir(dir: &Path, model: &TrainedModel) -> PathBuf {
     models
 }
 
+/// A plain cluster (no credentials, no key) of replicas A, B, C with `args`, and room `room`
+/// opened on A and listed on all three; what the tests hold while they run.
+struct RoomOnThree {
+    _dir: tempfile::TempDir,
+    nats: Nats,
+    model: Arc<TrainedModel>,
+    replicas: Vec<Replica>,
+    /// The room's publish token.
+    token: String,
+}
+
+/// [`RoomOnThree`]; `None` (the test skips, saying why) without a nats-server binary.
+async fn room_on_three(room: &'static str, args: &[String]) -> Option<RoomOnThree> {
+    let Some(nats_bin) = nats_binary() else {
+        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+        return None;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
+    let model = Arc::new(model_with_detail());
+    let models = models_dir(dir.path(), &model);
+    let replicas = three_replicas(&models, &nats.url(), dir.path(), args).await;
+    let token = open_room(&replicas[0], room).await;
+    for r in &replicas {
+        until(Duration::from_secs(10), "room listed", || async {
+            r.owner_of(room).await.is_some()
+        })
+        .await;
+    }
+    Some(RoomOnThree {
+        _dir: dir,
+        nats,
+        model,
+        replicas,
+        token,
+    })
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else() {
     let Some(nats_bin) = nats_binary() else {
@@ -503,24 +541,18 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_paused_owner_gets_no_frame_to_a_viewer_after_the_adopters_first() {
-    let Some(nats_bin) = nats_binary() else {
-        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
-    let model = Arc::new(model_with_detail());
-    let models = models_dir(dir.path(), &model);
     const LEASE_MS: u64 = 1000;
     let args = vec!["--lease-ms".to_owned(), LEASE_MS.to_string()];
-    let replicas = three_replicas(&models, &nats.url(), dir.path(), &args).await;
-    let token = open_room(&replicas[0], "paused").await;
-    for r in &replicas {
-        until(Duration::from_secs(10), "room listed", || async {
-            r.owner_of("paused").await.is_some()
-        })
-        .await;
-    }
+    let Some(RoomOnThree {
+        _dir,
+        nats,
+        model,
+        replicas,
+        token,
+    }) = room_on_three("paused", &args).await
+    else {
+        return;
+    };
     let viewers: Vec<_> = replicas.iter().map(|r| viewer(r, "paused")).collect();
     let next = Arc::new(Mutex::new(0u64));
     let mut publishing: Option<tokio::task::JoinHandle<()>> = None;
@@ -793,22 +825,16 @@ async fn nats_credentials_files_of_an_operators_account_admit_replicas() {
 /// would see the room jump back). Found by the chaos soak (`crease bench-net --chaos`).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_resumed_relay_forwards_nothing_from_before_its_pause() {
-    let Some(nats_bin) = nats_binary() else {
-        eprintln!("skipping: no nats-server binary (apt-get install -y nats-server)");
+    let Some(RoomOnThree {
+        _dir,
+        nats: _nats,
+        model,
+        replicas,
+        token,
+    }) = room_on_three("resumed", &[]).await
+    else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let nats = Nats::start(&nats_bin, free_port(), &dir.path().join("js"));
-    let model = Arc::new(model_with_detail());
-    let models = models_dir(dir.path(), &model);
-    let replicas = three_replicas(&models, &nats.url(), dir.path(), &[]).await;
-    let token = open_room(&replicas[0], "resumed").await;
-    for r in &replicas {
-        until(Duration::from_secs(10), "room listed", || async {
-            r.owner_of("resumed").await.is_some()
-        })
-        .await;
-    }
     let viewers: Vec<_> = [&replicas[0], &replicas[2]]
         .iter()
         .map(|r| viewer(r, "resumed"))

@@ -392,7 +392,8 @@ pub(super) async fn observer(shared: Arc<Shared>, url: String) -> anyhow::Result
             Some((owner, epoch))
         });
         // The frame's seq tells a late frame (from before a hand-over) from split brain.
-        let seq = match v1::MeshFrame::decode(msg.payload.as_ref()) {
+        // Decoded from the payload's own `Bytes`: the frame's data is a slice of it, not a copy.
+        let seq = match v1::MeshFrame::decode(msg.payload.clone()) {
             Ok(v1::MeshFrame {
                 body: Some(v1::mesh_frame::Body::Frame(f)),
             }) => Some(f.seq),
