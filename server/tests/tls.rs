@@ -10,17 +10,26 @@ use crease_server::registry::ModelRegistry;
 use crease_server::{AppState, Config, TlsFiles};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn grpc_and_https_over_tls() {
-    let dir = tempfile::tempdir().unwrap();
+/// A self-signed certificate for `localhost`, written with its key as PEM files in `dir`.
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
+fn self_signed(
+    dir: &std::path::Path,
+) -> (rcgen::Certificate, std::path::PathBuf, std::path::PathBuf) {
     let key = rcgen::KeyPair::generate().unwrap();
     let cert = rcgen::CertificateParams::new(vec!["localhost".to_owned()])
         .unwrap()
         .self_signed(&key)
         .unwrap();
-    let (cert_path, key_path) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
+    let (cert_path, key_path) = (dir.join("cert.pem"), dir.join("key.pem"));
     std::fs::write(&cert_path, cert.pem()).unwrap();
     std::fs::write(&key_path, key.serialize_pem()).unwrap();
+    (cert, cert_path, key_path)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn grpc_and_https_over_tls() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cert, cert_path, key_path) = self_signed(dir.path());
 
     // A missing key file is an error naming it.
     let bad = Config {
@@ -180,14 +189,7 @@ async fn https_connections_are_capped_per_address_before_the_handshake() {
     use crease_server::Limits;
     use crease_server::admission::Caps;
     let dir = tempfile::tempdir().unwrap();
-    let key = rcgen::KeyPair::generate().unwrap();
-    let cert = rcgen::CertificateParams::new(vec!["localhost".to_owned()])
-        .unwrap()
-        .self_signed(&key)
-        .unwrap();
-    let (cert_path, key_path) = (dir.path().join("cert.pem"), dir.path().join("key.pem"));
-    std::fs::write(&cert_path, cert.pem()).unwrap();
-    std::fs::write(&key_path, key.serialize_pem()).unwrap();
+    let (cert, cert_path, key_path) = self_signed(dir.path());
     let state = AppState::new(
         ModelRegistry::default(),
         Config {
