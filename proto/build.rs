@@ -22,9 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // each message shares them instead of copying.
         .bytes(".crease.v1.Frame.data")
         .bytes(".crease.v1.ActorFrame.data")
-        // A palette header (several MB at the detail level) is made once per room and level.
+        // A palette header (~1 MB at the detail level) is made once per model and level.
         .bytes(".crease.v1.PaletteTopology")
-        .bytes(".crease.v1.SubdivisionStep")
         .build_client(true)
         .build_server(true)
         .compile_fds(fds)?;

@@ -1,7 +1,8 @@
-// Palette streams (issue 18, issue 37's module): a PaletteTopology (rest mesh, skin, the
-// detail level's Loop steps and regressor) loaded into palette.js's PaletteSynth, then per
-// frame the bones and the detail kernel vector (a codec frame of ~100 B, decoded here at once:
-// nothing per vertex), synthesised on the GPU at the next redraw (latest wins). Also the
+// Palette streams (issue 18, issue 37's module): a PaletteTopology (rest mesh, skin, base
+// triangles, the detail level's Loop level count and regressor) loaded into palette.js's
+// PaletteSynth (which rebuilds the Loop steps, issue 41), then per frame the bones and the
+// detail kernel vector (a codec frame of ~100 B, decoded here at once: nothing per vertex),
+// synthesised on the GPU at the next redraw (latest wins). Also the
 // choice of encoding (`?encoding=`, float render targets) and window.crease.palette. A room of
 // several actors (issue 38) has a palette stream per actor (its slot: state.js createActor),
 // each with its own PaletteSynth; window.crease.palette is the first actor's.
@@ -37,6 +38,7 @@ export function createPaletteStream(state, { view, overlay }) {
   /** An actor's palette stream's header: everything but the bones. A second one (a new
    * socket) rebuilds. True when it began a stream. */
   function header(slot, t, bytes) {
+    const received = performance.now();
     const p = slot.palette;
     if (!p.synth) p.synth = new PaletteSynth(view.renderer);
     const synth = p.synth;
@@ -51,8 +53,12 @@ export function createPaletteStream(state, { view, overlay }) {
     }
     state.stream = "palette";
     c.headers += 1;
-    c.headerMs = Math.round(performance.now() - state.socket.openedAt);
+    // Issue 41's figures: the header read (from opening the socket), its decoding and GPU
+    // set-up (the Loop rebuild included), and below the first frame shown.
+    c.headerMs = Math.round(received - state.socket.openedAt);
     c.headerBytes = bytes.length;
+    c.headerLoadMs = Math.round(performance.now() - received);
+    c.firstFrameMs = null;
     c.encoding = "palette";
     slot.model = h.model;
     slot.vertexCount = h.vertexCount;
@@ -100,6 +106,9 @@ export function createPaletteStream(state, { view, overlay }) {
       if (!p.synth || !p.synth.update()) continue;
       const pending = p.pending;
       if (slot.index === 0) {
+        // The redraw that first shows a frame of this stream (its passes ran; the draw follows
+        // in this redraw), from opening the socket.
+        if (c.firstFrameMs === null) c.firstFrameMs = Math.round(performance.now() - state.socket.openedAt);
         c.palette.frame = pending.bytes;
         c.palette.frames = pending.chain && pending.chain.slice(0, pending.length);
         c.palette.seq = pending.seq;

@@ -1,9 +1,10 @@
 // Palette streams on the GPU (issue 18): the server sends once a PaletteTopology (rest mesh,
-// skin, and at the detail level the Loop subdivision steps and the detail regressor D, b), then
-// per frame only the bones (and the detail kernel vector xi) as the lanes of a codec frame,
-// keyframe or delta (PaletteDecoder in codec.js; core/src/codec/palette is the reference). This
-// module turns them into the drawn mesh with WebGL2 float render targets, one full-screen pass
-// per step:
+// skin, base triangles, and at the detail level the number of Loop levels and the detail
+// regressor D, b; the Loop steps and the drawn triangles are rebuilt here by loop.js, issue
+// 41), then per frame only the bones (and the detail kernel vector xi) as the lanes of a codec
+// frame, keyframe or delta (PaletteDecoder in codec.js; core/src/codec/palette is the
+// reference). This module turns them into the drawn mesh with WebGL2 float render targets, one
+// full-screen pass per step:
 //
 //   skin      base_v = sum_k w_vk (R_k rest_v + t_k)             (linear blend skinning, K <= 8)
 //   subdivide level_s = S_s level_(s-1), s = 1..L                (CSR gather, detail level only)
@@ -27,7 +28,11 @@
 //   synth.material(params), synth.geometry()   // what draws them (gl_VertexID fetches)
 
 import * as THREE from "three";
+// The same relative path as codec.js's (the decode worker's reasons apply to this module's
+// importers too): meshopt's decoder for the header's detail blocks.
+import { MeshoptDecoder } from "./node_modules/meshoptimizer/meshopt_decoder.mjs";
 import { PaletteDecoder, decodeIndices } from "./codec.js";
+import { MAX_LEVELS, loopSteps } from "./loop.js";
 import { littleEndian } from "./wire.js";
 
 /** Whether this renderer can render into float targets (WebGL2 + EXT_color_buffer_float). */
@@ -45,14 +50,72 @@ function expectLength(what, got, expected) {
   if (got !== expected) throw headerError(`${what} has ${got} entries, expected ${expected}`);
 }
 
+/** Stored detail values per meshopt block (`PaletteTopology.detail_blocks`). */
+const BLOCK_VALUES = 2;
+/** The first byte of meshopt's vertex codec, version 1 (core::codec's MESHOPT_VERTEX_V1). */
+const MESHOPT_VERTEX_V1 = 0xa1;
+
+/** Turns each base triangle left by its 2 bits of `turns` (core::codec::apply_corner_turns):
+ * the index codec may start a triangle at another corner, Loop's numbering may not. */
+function applyTurns(triangles, turns) {
+  const count = triangles.length / 3;
+  const expected = Math.ceil(count / 4);
+  if (turns.length !== expected) {
+    throw headerError(`triangle_turns is ${turns.length} bytes, expected ${expected} (2 bits for each of ${count} triangles)`);
+  }
+  for (let t = 0; t < count; t++) {
+    const k = (turns[t >> 2] >> (2 * (t & 3))) & 3;
+    if (k === 0) continue;
+    if (k === 3) throw headerError(`triangle_turns: triangle ${t} has turn 3, expected 0, 1 or 2`);
+    const a = triangles[3 * t], b = triangles[3 * t + 1], c = triangles[3 * t + 2];
+    // Left k times: [b, c, a] for k = 1, [c, a, b] for k = 2.
+    triangles[3 * t] = k === 1 ? b : c;
+    triangles[3 * t + 1] = k === 1 ? c : a;
+    triangles[3 * t + 2] = k === 1 ? a : b;
+  }
+}
+
+/** The detail values: `nv` rows of `width` i16 q in meshopt blocks of BLOCK_VALUES per row
+ * (`detail_blocks`), as f32(q * step). */
+function decodeDetail(blocks, nv, width, step) {
+  const detail = new Float32Array(nv * width);
+  const bytes = new Uint8Array(4 * nv);
+  const q = new Int16Array(bytes.buffer);
+  blocks.forEach((data, j) => {
+    const what = `detail_blocks[${j}]`;
+    if (data.length === 0) throw headerError(`${what} is empty`);
+    if (data[0] !== MESHOPT_VERTEX_V1) {
+      throw headerError(`${what}: meshopt vertex codec byte 0x${data[0].toString(16)}, expected 0x${MESHOPT_VERTEX_V1.toString(16)} (version 1)`);
+    }
+    try {
+      MeshoptDecoder.decodeVertexBuffer(bytes, nv, 4, data);
+    } catch (e) {
+      throw headerError(`${what}: ${e.message} (${data.length} bytes for ${nv} rows)`);
+    }
+    const first = BLOCK_VALUES * j;
+    const second = first + 1 < width;
+    // Typed arrays are little-endian on every platform a browser runs on (codec.js reads its
+    // lanes the same way).
+    for (let v = 0; v < nv; v++) {
+      detail[v * width + first] = f32(q[2 * v] * step);
+      if (second) detail[v * width + first + 1] = f32(q[2 * v + 1] * step);
+    }
+  });
+  return detail;
+}
+
 /**
- * Checks a PaletteTopology (readPaletteTopology in wire.js) the way PaletteHeader::validate
- * does (core/src/codec/palette/header.rs) and decodes its arrays: {model, level ("base" |
- * "detail"), vertexCount, triangles (Uint32Array, 3 per triangle), bounds, bones, baseVertices,
- * rest (Float32Array, xyz), influences, skinBones (Uint32Array), skinWeights (Float32Array,
- * q / 65535), steps [{rows, columns, rowPtr, cols (Uint32Array), weights (Float32Array, one
- * per entry)}], examples, detail (Float32Array, N + 1 values per drawn vertex: q * scale) or
- * null}. Throws an Error naming the first thing that is wrong.
+ * Checks a PaletteTopology (readPaletteTopology in wire.js) the way read_palette_topology and
+ * PaletteHeader::validate do (proto/src/palette.rs, core/src/codec/palette/header.rs), decodes
+ * its arrays and, at the detail level, rebuilds the Loop steps and the drawn triangles from the
+ * base triangles (loop.js, issue 41): {model, level ("base" | "detail"), vertexCount (drawn),
+ * triangleCount (drawn), triangles (Uint32Array, 3 per drawn triangle), baseTriangles (the
+ * base mesh's, in the model's corner order), levels (0 at the base level), bounds, bones,
+ * baseVertices, rest (Float32Array, xyz), influences, skinBones (Uint32Array), skinWeights
+ * (Float32Array, q / 65535), steps [{rows, columns, rowPtr, cols (Uint32Array), weights
+ * (Float32Array, one per entry)}], examples, detailStep, detail (Float32Array, N + 1 values
+ * per drawn vertex: f32(q * detailStep)) or null}. Throws an Error naming the first thing that
+ * is wrong.
  */
 export function decodePaletteTopology(t) {
   if (t.version !== 1) throw headerError(`palette lane layout version ${t.version}, this viewer reads version 1`);
@@ -81,69 +144,63 @@ export function decodePaletteTopology(t) {
     }
     if (sum !== 65535) throw headerError(`skin weights of vertex ${v}: sum to ${sum}, expected 65535`);
   }
-  const steps = [];
-  let columns = nb;
-  if (detailLevel) {
-    if (t.subdivision.length === 0) throw headerError("subdivision: no steps at the detail level");
-    t.subdivision.forEach((s, l) => {
-      const what = `subdivision[${l}]`;
-      expectLength(`${what} columns`, s.columns, columns);
-      const rowPtr = littleEndian(s.rowPtr, Uint32Array, `${what} row_ptr`);
-      expectLength(`${what} row_ptr`, rowPtr.length, s.rows + 1);
-      if (rowPtr[0] !== 0) throw headerError(`${what} row_ptr[0] is ${rowPtr[0]}, expected 0`);
-      for (let r = 0; r < s.rows; r++) {
-        if (rowPtr[r + 1] < rowPtr[r]) throw headerError(`${what} row_ptr decreases at row ${r}`);
-      }
-      const nnz = rowPtr[s.rows];
-      const cols = littleEndian(s.cols, Uint32Array, `${what} cols`);
-      expectLength(`${what} cols`, cols.length, nnz);
-      const badCol = cols.findIndex((c) => c >= columns);
-      if (badCol >= 0) throw headerError(`${what} cols ${badCol} is ${cols[badCol]}, expected < ${columns}`);
-      const index = littleEndian(s.weightIndex, s.weights.length <= 256 ? Uint8Array : Uint16Array, `${what} weight_index`);
-      expectLength(`${what} weight_index`, index.length, nnz);
-      const weights = new Float32Array(nnz);
-      for (let e = 0; e < nnz; e++) {
-        if (index[e] >= s.weights.length) {
-          throw headerError(`${what} weight_index ${e} is ${index[e]}, expected < ${s.weights.length}`);
-        }
-        weights[e] = s.weights[index[e]];
-      }
-      if (!weights.every(Number.isFinite)) throw headerError(`${what}: a weight is not finite`);
-      steps.push({ rows: s.rows, columns: s.columns, rowPtr, cols, weights });
-      columns = s.rows;
-    });
-  } else if (t.subdivision.length) {
-    throw headerError(`${t.subdivision.length} subdivision steps at the base level`);
+  // The base triangles (meshopt's index codec spends at least a byte per triangle: a count
+  // past the bytes is refused before anything is allocated for it).
+  if (t.triangleCount > t.indices.length) {
+    throw headerError(`triangle_count ${t.triangleCount}, but indices has only ${t.indices.length} bytes`);
   }
-  expectLength("vertex_count", t.vertexCount, columns);
+  let baseTriangles;
+  try {
+    baseTriangles = decodeIndices(t.indices, t.triangleCount, nb);
+  } catch (e) {
+    throw headerError(e.message.startsWith("indices") ? e.message : `indices: ${e.message}`);
+  }
+  let steps = [];
+  let triangles = baseTriangles;
   let detail = null;
+  let levels = 0;
+  let step = 0;
   const N = detailLevel ? t.examples : 0;
   if (detailLevel) {
-    const scales = littleEndian(t.detailScales, Float32Array, "detail_scales");
-    expectLength("detail scales", scales.length, columns);
-    const badScale = scales.findIndex((s) => !Number.isFinite(s));
-    if (badScale >= 0) throw headerError(`detail scale ${badScale}: not finite`);
-    const rows = littleEndian(t.detailRows, Int16Array, "detail_rows");
-    expectLength("detail rows", rows.length, columns * (N + 1));
-    detail = new Float32Array(rows.length);
-    for (let v = 0; v < columns; v++) {
-      const s = scales[v];
-      for (let j = 0; j <= N; j++) detail[v * (N + 1) + j] = f32(rows[v * (N + 1) + j] * s);
+    levels = t.subdivisionLevels;
+    if (!(levels >= 1 && levels <= MAX_LEVELS)) {
+      throw headerError(`subdivision_levels ${levels}, expected 1..=${MAX_LEVELS} at the detail level`);
     }
-  }
-  let triangles;
-  try {
-    triangles = decodeIndices(t.indices, t.triangleCount, t.vertexCount);
-  } catch (e) {
-    throw headerError(e.message);
+    applyTurns(baseTriangles, t.triangleTurns);
+    step = t.detailStep;
+    if (!(Number.isFinite(step) && step > 0)) throw headerError(`detail_step ${step}, expected a finite value > 0`);
+    const width = N + 1;
+    const blocks = Math.ceil(width / BLOCK_VALUES);
+    if (t.detailBlocks.length !== blocks) {
+      throw headerError(
+        `detail_blocks has ${t.detailBlocks.length} blocks, expected ${blocks} (${width} values per row, ${BLOCK_VALUES} per block)`,
+      );
+    }
+    let rebuilt;
+    try {
+      rebuilt = loopSteps(nb, baseTriangles, levels);
+    } catch (e) {
+      throw headerError(`the base triangles (indices, triangle_turns) do not subdivide: ${e.message}`);
+    }
+    steps = rebuilt.steps;
+    triangles = rebuilt.triangles;
+    const drawn = steps[steps.length - 1].rows;
+    if (t.vertexCount !== drawn) {
+      throw headerError(`vertex_count ${t.vertexCount}, but ${levels} Loop levels of the base mesh give ${drawn}`);
+    }
+    detail = decodeDetail(t.detailBlocks, drawn, width, step);
+  } else if (t.vertexCount !== nb) {
+    throw headerError(`vertex_count ${t.vertexCount}, expected base_vertices ${nb} at the base level`);
   }
   const b = t.bounds || { min: [0, 0, 0], max: [0, 0, 0] };
   return {
     model: t.model,
     level: detailLevel ? "detail" : "base",
     vertexCount: t.vertexCount,
-    triangleCount: t.triangleCount,
+    triangleCount: triangles.length / 3,
     triangles,
+    baseTriangles,
+    levels,
     bounds: b,
     bones: t.bones,
     baseVertices: nb,
@@ -153,6 +210,7 @@ export function decodePaletteTopology(t) {
     skinWeights,
     steps,
     examples: N,
+    detailStep: step,
     detail,
   };
 }

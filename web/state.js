@@ -72,6 +72,8 @@ export function createState(params) {
     paletteReason: null, // why
     headers: 0, // stream headers received (one per socket)
     headerMs: null, // the last palette header: ms from opening its socket to the header read
+    headerLoadMs: null, // ... and from the header read to its arrays decoded and set up on the GPU
+    firstFrameMs: null, // ... and from opening its socket to the first redraw that showed a frame
     headerBytes: null, // ... and its size
     sockets: 0, // sockets opened
     rendered: 0, // requestAnimationFrame redraws that showed a new frame

@@ -182,37 +182,12 @@ function littleEndian(bytes, Type, what) {
   return out;
 }
 
-/** Packed (wire type 2) or unpacked (wire 5) `repeated float`, appended to `into`. */
-function readFloats(r, wire, into) {
-  if (wire === 5) {
-    if (r.pos + 4 > r.b.length) throw new Error("protobuf: truncated float");
-    into.push(readFloat(r.b.subarray(r.pos, r.pos + 4)));
-    r.pos += 4;
-  } else {
-    for (const v of littleEndian(r.bytes(), Float32Array, "weights")) into.push(v);
-  }
-}
-
-function readSubdivisionStep(bytes) {
-  const r = new Reader(bytes);
-  const s = { rows: 0, columns: 0, rowPtr: new Uint8Array(0), cols: new Uint8Array(0), weightIndex: new Uint8Array(0), weights: [] };
-  for (const [field, wire] of r.fields()) {
-    if (field === 1 && wire === 0) s.rows = r.varint();
-    else if (field === 2 && wire === 0) s.columns = r.varint();
-    else if (field === 3 && wire === 2) s.rowPtr = r.bytes();
-    else if (field === 4 && wire === 2) s.cols = r.bytes();
-    else if (field === 5 && wire === 2) s.weightIndex = r.bytes();
-    else if (field === 6 && (wire === 2 || wire === 5)) readFloats(r, wire, s.weights);
-    else r.skip(wire);
-  }
-  return s;
-}
-
 /**
- * Reads a `PaletteTopology` (issue 18): the counts as numbers, the byte arrays as they are
- * (subarrays of the message: `decodePaletteTopology` in palette.js checks and converts them),
- * `bounds` as {min, max}, `subdivision` as steps {rows, columns, rowPtr, cols, weightIndex,
- * weights: number[]}.
+ * Reads a `PaletteTopology` (issue 18; its detail part as issue 41 has it): the counts as
+ * numbers, `detailStep` as the f32 sent, the byte arrays as they are (subarrays of the
+ * message: `decodePaletteTopology` in palette.js checks and converts them), `detailBlocks` as
+ * an array of them, `bounds` as {min, max}. The Loop steps and the drawn triangles are not on
+ * the wire: palette.js rebuilds them from the base triangles (`indices`) with loop.js.
  */
 export function readPaletteTopology(bytes) {
   const r = new Reader(bytes);
@@ -220,23 +195,31 @@ export function readPaletteTopology(bytes) {
   const t = {
     model: "", level: 0, version: 0, vertexCount: 0, triangleCount: 0, indices: empty, bounds: null,
     bones: 0, baseVertices: 0, restPositions: empty, influences: 0, skinBones: empty, skinWeights: empty,
-    subdivision: [], examples: 0, detailRows: empty, detailScales: empty, actor: "", actorIndex: 0, actorCount: 0,
+    examples: 0, actor: "", actorIndex: 0, actorCount: 0,
+    subdivisionLevels: 0, detailStep: 0, detailBlocks: [], triangleTurns: empty,
   };
   for (const [field, wire] of r.fields()) {
     if (wire === 0) {
       const v = r.varint();
-      const name = { 2: "level", 3: "version", 4: "vertexCount", 5: "triangleCount", 8: "bones", 9: "baseVertices", 11: "influences", 15: "examples", 19: "actorIndex", 20: "actorCount" }[field];
+      const name = {
+        2: "level", 3: "version", 4: "vertexCount", 5: "triangleCount", 8: "bones", 9: "baseVertices", 11: "influences",
+        15: "examples", 19: "actorIndex", 20: "actorCount", 21: "subdivisionLevels",
+      }[field];
       if (name) t[name] = v;
     } else if (wire === 2) {
       const b = r.bytes();
       if (field === 1) t.model = text.decode(b);
       else if (field === 18) t.actor = text.decode(b);
       else if (field === 7) t.bounds = readBox(b);
-      else if (field === 14) t.subdivision.push(readSubdivisionStep(b));
+      else if (field === 23) t.detailBlocks.push(b);
       else {
-        const name = { 6: "indices", 10: "restPositions", 12: "skinBones", 13: "skinWeights", 16: "detailRows", 17: "detailScales" }[field];
+        const name = { 6: "indices", 10: "restPositions", 12: "skinBones", 13: "skinWeights", 24: "triangleTurns" }[field];
         if (name) t[name] = b;
       }
+    } else if (wire === 5 && field === 22) {
+      if (r.pos + 4 > r.b.length) throw new Error("protobuf: truncated float");
+      t.detailStep = readFloat(r.b.subarray(r.pos, r.pos + 4));
+      r.pos += 4;
     } else r.skip(wire);
   }
   return t;

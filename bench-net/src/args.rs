@@ -63,12 +63,13 @@ pub enum ScenarioChoice {
 #[command(after_long_help = AFTER_HELP)]
 #[command(group(clap::ArgGroup::new("spawns_nats").args(["replicas", "chaos"]).multiple(true)))]
 pub struct BenchNetArgs {
-    /// The trained model (the horse for issue 6's figures: see --help). With --chaos, default:
-    /// the demo hand in the demo's cache folder (`crease demo` leaves it there).
+    /// The trained model (the horse for issue 6's figures: see --help). Default: the demo hand
+    /// in the demo's cache folder (`crease-server` leaves it there on its first start), the
+    /// model of --chaos and --idle.
     #[arg(
         long,
         value_name = "FILE",
-        required_unless_present = "chaos",
+        required_unless_present_any = ["chaos", "idle"],
         default_value_os_t = demo_model(),
         hide_default_value = true
     )]
@@ -189,6 +190,12 @@ pub struct BenchNetArgs {
         requires = "chaos"
     )]
     pub chaos_max_gap: f64,
+    /// Idle measurement instead of bench (issue 41): the embedded demo server (the cache
+    /// folder of --model, the demo hand by default) spawned with nobody connected, its CPU
+    /// over SECONDS from `/proc/PID/stat` (goal: at most 0.5% of a core), then the time from
+    /// subscribing to the first frame for a new viewer of each encoding.
+    #[arg(long, value_name = "SECONDS", conflicts_with_all = ["server", "replicas", "soak", "chaos"])]
+    pub idle: Option<f64>,
 }
 
 /// One load shape: rooms, each with its publisher and subscribers.

@@ -25,12 +25,15 @@
 //! - `report`: the figures and the table (its types re-exported here);
 //! - `soak`: `--soak MINUTES`, the server held under churn and faults (and its `/proc` probe);
 //! - `chaos`: `--chaos MINUTES`, a spawned cluster (NATS and three replicas) under load while
-//!   replicas are killed and paused, NATS restarted and publishers moved (issue 40).
+//!   replicas are killed and paused, NATS restarted and publishers moved (issue 40);
+//! - `idle`: `--idle SECONDS`, the embedded demo server's CPU with nobody connected, and the
+//!   time to a new viewer's first frame (issue 41).
 //!
 //! This module has the control frames and the run over the scenarios.
 
 mod args;
 mod chaos;
+mod idle;
 mod load;
 mod report;
 mod server;
@@ -59,6 +62,9 @@ pub fn run(args: &BenchNetArgs) -> anyhow::Result<()> {
     }
     if let Some(minutes) = args.chaos {
         return chaos::run(args, minutes);
+    }
+    if let Some(seconds) = args.idle {
+        return idle::run(args, seconds);
     }
     if !(args.rate.is_finite() && args.rate > 0.0 && args.rate <= 1000.0) {
         bail!(

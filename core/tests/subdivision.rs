@@ -506,3 +506,119 @@ fn vertex_fans_list_every_incident_triangle_once() {
         assert_eq!(changed, expect, "vertex {i}");
     }
 }
+
+/// `tests/vectors/loop-v1.json` (issue 41): small topologies with the Loop steps and the
+/// subdivided triangles a palette decoder must rebuild from them bit for bit (the viewer's
+/// `web/loop.js`, the Python package's), covering valence 3 (Warren's 3/16), valences 4 to 7,
+/// boundaries (Hoppe's rules) and an edge whose two opposite vertices coincide (a merged
+/// column).
+const LOOP_VECTORS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/vectors/loop-v1.json");
+
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
+fn loop_vectors() -> serde_json::Value {
+    use crease_core::mesh::subdivision::loop_steps;
+    use serde_json::{Value, json};
+    let pillow = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        triangles: vec![[0, 1, 2], [0, 2, 1]],
+    };
+    let fan = Mesh {
+        positions: (0..7)
+            .map(|i| {
+                if i == 0 {
+                    Vec3::ZERO
+                } else {
+                    let a = i as f32;
+                    Vec3::new(a.cos(), a.sin(), 0.0)
+                }
+            })
+            .collect(),
+        triangles: (1..=6u32).map(|i| [0, i, i % 6 + 1]).collect(),
+    };
+    let cases = [
+        ("tetrahedron", tetrahedron(), 2),
+        ("octahedron", octahedron(), 1),
+        ("open grid 2x2", rough_grid(2, 3), 2),
+        ("hexagon fan", fan, 1),
+        ("sphere with valence-7 poles", uv_sphere(1.0, 3, 7), 1),
+        ("pillow (two triangles back to back)", pillow, 1),
+    ];
+    let meshes: Vec<Value> = cases
+        .into_iter()
+        .map(|(name, mesh, levels)| {
+            let (steps, triangles) =
+                loop_steps(mesh.vertex_count(), &mesh.triangles, levels).unwrap();
+            let steps: Vec<Value> = steps
+                .iter()
+                .map(|s| {
+                    json!({
+                        "rows": s.rows(),
+                        "columns": s.columns(),
+                        "row_ptr": s.row_ptr(),
+                        "cols": s.cols(),
+                        "weights": s.vals().iter().map(|w| format!("{w:?}")).collect::<Vec<_>>(),
+                    })
+                })
+                .collect();
+            json!({
+                "name": name,
+                "vertex_count": mesh.vertex_count(),
+                "triangles": mesh.triangles,
+                "levels": levels,
+                "steps": steps,
+                "subdivided_triangles": triangles,
+            })
+        })
+        .collect();
+    json!({
+        "about": "crease Loop subdivision test vectors (core::mesh::subdivision::loop_steps; issue 41): per topology, its vertex count, triangles and level count, then each one-level step as CSR (row_ptr, cols, weights: shortest decimals of exact f32s, built in f64 and rounded once) and the subdivided triangles. A palette decoder rebuilds these from the base triangles and must match them exactly. Rules and numbering: core/src/mesh/subdivision.rs and ARCHITECTURE.md (Palette streams). Regenerate with `cargo test -p crease-core --test subdivision -- --ignored regenerate_loop_vectors`.",
+        "version": 1,
+        "meshes": meshes,
+    })
+}
+
+#[test]
+#[ignore = "writes tests/vectors/loop-v1.json: run only after a deliberate change of the rules"]
+fn regenerate_loop_vectors() {
+    let text = serde_json::to_string_pretty(&loop_vectors()).unwrap();
+    std::fs::write(LOOP_VECTORS, text + "\n").unwrap();
+    println!("wrote {LOOP_VECTORS}");
+}
+
+/// The file is what `loop_steps` builds today, and each step's weights are the rules' own
+/// (checked here from the counts of the topology: rows sum to one, boundary rows 3/4 and
+/// 1/8, edge rows 3/8 and 1/8 or 1/2).
+#[test]
+fn loop_vectors_match() {
+    let text = std::fs::read_to_string(LOOP_VECTORS).expect("tests/vectors/loop-v1.json");
+    let file: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        file,
+        loop_vectors(),
+        "regenerate only after a deliberate change of the rules"
+    );
+    for m in file["meshes"].as_array().unwrap() {
+        for s in m["steps"].as_array().unwrap() {
+            let ptr: Vec<usize> = serde_json::from_value(s["row_ptr"].clone()).unwrap();
+            let w: Vec<f64> = s["weights"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_str().unwrap().parse().unwrap())
+                .collect();
+            for r in 0..ptr.len() - 1 {
+                let sum: f64 = w[ptr[r]..ptr[r + 1]].iter().sum();
+                assert!(
+                    (sum - 1.0).abs() < 1e-6,
+                    "{}: row {r} sums to {sum}",
+                    m["name"]
+                );
+            }
+        }
+    }
+    // The pillow's edge rows merge their two opposite vertices into one weight of 1/4.
+    let pillow = &file["meshes"][5]["steps"][0];
+    let ptr: Vec<usize> = serde_json::from_value(pillow["row_ptr"].clone()).unwrap();
+    let w: Vec<String> = serde_json::from_value(pillow["weights"].clone()).unwrap();
+    assert_eq!(w[ptr[3]..ptr[4]], ["0.375", "0.375", "0.25"]);
+}

@@ -134,11 +134,19 @@ impl ActorAnimation {
 /// dragging a control point in the viewer), so the two do not fight over the hand.
 const YIELD_S: f64 = 3.0;
 
+/// How often a paused animation looks whether the room is watched again, besides waking on
+/// every local subscription ([`Room::joins`]): another replica's viewers reach the room as
+/// interest announcements only.
+const IDLE_CHECK: Duration = Duration::from_millis(250);
+
 /// Publishes `animation` into `room` at `rate_hz` until the server shuts down: the frames go
 /// through [`crease_server::ingest::publish`] with the room's token, as a remote publisher's would
 /// (metrics, acks, latency), one at a time; a tick missed while a frame was still being
 /// predicted is skipped, not queued. When another publisher's frames arrive, the animation
-/// pauses until none came for `YIELD_S` seconds, and resumes where it left off.
+/// pauses until none came for `YIELD_S` seconds, and resumes where it left off. While nobody
+/// watches the room ([`Room::watched`]) it pauses too, ticking no timer, and resumes where
+/// it left off the moment a viewer subscribes (issue 41): its first frame goes out at once,
+/// and the viewer's first frame is a keyframe (the codec's on-demand keyframes).
 pub async fn drive(
     state: Arc<AppState>,
     room: Arc<Room>,
@@ -156,6 +164,7 @@ pub async fn drive(
     // after our last frame.
     let (mut t, mut last_tick) = (0.0f64, Instant::now());
     let (mut ours, mut others_at) = (room.published(), None::<Instant>);
+    let mut joins = room.joins();
     for seq in 0u64.. {
         tokio::select! {
             _ = tick.tick() => {}
@@ -164,6 +173,23 @@ pub async fn drive(
         if state.room(&room.id).is_none() {
             tracing::info!(room = %room.id, "demo room closed: the animation stops");
             return;
+        }
+        if !room.watched() {
+            tracing::debug!(room = %room.id, "nobody watches: the animation pauses");
+            joins.mark_unchanged();
+            while !room.watched() {
+                tokio::select! {
+                    _ = joins.changed() => {}
+                    () = tokio::time::sleep(IDLE_CHECK) => {}
+                    () = &mut closing => return,
+                }
+                if state.room(&room.id).is_none() {
+                    return;
+                }
+            }
+            tracing::debug!(room = %room.id, "watched: the animation resumes");
+            last_tick = Instant::now();
+            tick.reset();
         }
         let now = Instant::now();
         if room.published() > ours {

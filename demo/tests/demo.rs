@@ -95,6 +95,17 @@ fn run_the_printed_watch_command(line: &str) {
     assert!(stderr.contains("watching room \"demo\""), "{stderr}");
 }
 
+/// The frames `room` has published so far (`RoomInfo.published`).
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
+async fn room_published(client: &mut CreaseClient<tonic::transport::Channel>, room: &str) -> u64 {
+    client
+        .get_room(v1::GetRoomRequest { room: room.into() })
+        .await
+        .unwrap()
+        .into_inner()
+        .published
+}
+
 #[test]
 fn demo_trains_animates_and_serves() {
     let cache = tempfile::tempdir().unwrap();
@@ -265,6 +276,45 @@ fn demo_trains_animates_and_serves() {
         assert!(positions.iter().all(|p| {
             p.cmpge(lo - Vec3::splat(margin)).all() && p.cmple(hi + Vec3::splat(margin)).all()
         }));
+
+        // Nothing computed for nobody (issue 41): with its last viewer gone the demo room's
+        // animation pauses (its count of published frames stands still), and the next viewer
+        // gets frames at once, the count moving again.
+        drop(sub);
+        let mut still = None;
+        for _ in 0..25 {
+            let a = room_published(&mut client, DEMO_ROOM).await;
+            tokio::time::sleep(Duration::from_millis(400)).await;
+            let b = room_published(&mut client, DEMO_ROOM).await;
+            if a == b {
+                still = Some(b);
+                break;
+            }
+        }
+        let before = still.expect("the demo room kept publishing with nobody watching");
+        let mut sub = client
+            .subscribe(v1::SubscribeRequest {
+                room: DEMO_ROOM.into(),
+                level: v1::Level::Base as i32,
+                ..Default::default()
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut frames = 0;
+        while frames < 3 {
+            let msg = tokio::time::timeout(Duration::from_secs(5), sub.message())
+                .await
+                .expect("the paused demo room resumes for a viewer")
+                .unwrap()
+                .unwrap();
+            if let Some(v1::mesh_frame::Body::Frame(_)) = msg.body {
+                frames += 1;
+            }
+        }
+        let after = room_published(&mut client, DEMO_ROOM).await;
+        assert!(after >= before + 2, "published {before} -> {after}");
+        drop(sub);
 
         // Beside it, the WebXR room: the joint map bound to the demo model, the 25 joints'
         // centres and dorsal points declared as its markers.

@@ -1,7 +1,7 @@
 //! A recorded mesh stream as a client reads it (`crease decode-stream`): length-prefixed
 //! `MeshFrame` messages, the first a `Topology` (indices, vertex order, box) or a
-//! `PaletteTopology` (skin, subdivision steps, detail regressor), then frames decoded in order
-//! (codec frames of vertices, or palette lanes synthesised into a mesh).
+//! `PaletteTopology` (skin, base triangles rebuilt into Loop steps, detail regressor), then
+//! frames decoded in order (codec frames of vertices, or palette lanes synthesised into a mesh).
 #![no_main]
 use crease_cli::commands::decode_stream::read_capture;
 use crease_remote::mesh_stream::StreamReader;

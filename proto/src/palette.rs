@@ -3,11 +3,13 @@
 //! back by [`read_palette_topology`]; its frames are `Frame`s whose data is a palette frame
 //! (`crease_core::codec::palette`). The byte layouts are those `crease.proto` documents.
 
-use crease_core::codec::palette::{
-    PALETTE_VERSION, PaletteDetail, PaletteHeader, PaletteSkin, PaletteStep,
+use crease_core::codec::palette::{PALETTE_VERSION, PaletteDetail, PaletteHeader, PaletteSkin};
+use crease_core::codec::{
+    CodecError, apply_corner_turns, corner_turns, decode_indices, decode_vertex_block,
+    encode_indices, encode_vertex_block,
 };
-use crease_core::codec::{CodecError, decode_indices, encode_indices};
 use crease_core::glam::Vec3;
+use crease_core::mesh::subdivision::{MAX_LEVELS, subdivided_count};
 use prost::bytes::Bytes;
 
 use crate::convert::{Level, box3};
@@ -48,14 +50,18 @@ fn le_bytes<T: Copy, const N: usize>(values: &[T], to: impl Fn(T) -> [u8; N]) ->
     Bytes::from(out)
 }
 
+/// Stored detail values per meshopt block (`PaletteTopology.detail_blocks`).
+const BLOCK_VALUES: usize = 2;
+
 /// The first message of a palette stream.
 ///
 /// # Errors
-/// The index codec's, if a triangle indexes past the drawn mesh.
+/// The index codec's, if a triangle indexes past the base mesh; meshopt's, if it refuses the
+/// detail values.
 pub fn palette_topology_message(p: PaletteParts<'_>) -> Result<v1::MeshFrame, CodecError> {
     let h = p.header;
     let mut indices = Vec::new();
-    encode_indices(&h.triangles, h.vertex_count(), &mut indices)?;
+    encode_indices(&h.triangles, h.rest.len(), &mut indices)?;
     let narrow = h.bones <= 256;
     let skin_bones = if narrow {
         Bytes::from(h.skin.bones.iter().map(|&b| b as u8).collect::<Vec<u8>>())
@@ -63,14 +69,22 @@ pub fn palette_topology_message(p: PaletteParts<'_>) -> Result<v1::MeshFrame, Co
         le_bytes(&h.skin.bones, u16::to_le_bytes)
     };
     let rest: Vec<f32> = h.rest.iter().flat_map(|p| p.to_array()).collect();
-    let (subdivision, examples, detail_rows, detail_scales) = match &h.detail {
-        Some(d) => (
-            d.steps.iter().map(step_message).collect(),
-            d.examples as u32,
-            le_bytes(&d.rows, i16::to_le_bytes),
-            le_bytes(&d.scales, f32::to_le_bytes),
-        ),
-        None => (Vec::new(), 0, Bytes::new(), Bytes::new()),
+    let (levels, examples, detail_step, detail_blocks, triangle_turns) = match &h.detail {
+        Some(d) => {
+            let mut decoded = Vec::new();
+            decode_indices(&indices, h.triangles.len(), h.rest.len(), &mut decoded)?;
+            let turns = corner_turns(&h.triangles, &decoded).ok_or(CodecError::EncoderFailed(
+                "index buffer (a triangle came back changed)",
+            ))?;
+            (
+                d.levels,
+                d.examples as u32,
+                d.quantum,
+                detail_blocks(&d.rows, d.examples + 1)?,
+                Bytes::from(turns),
+            )
+        }
+        None => (0, 0, 0.0, Vec::new(), Bytes::new()),
     };
     Ok(v1::MeshFrame {
         body: Some(v1::mesh_frame::Body::PaletteTopology(v1::PaletteTopology {
@@ -87,31 +101,35 @@ pub fn palette_topology_message(p: PaletteParts<'_>) -> Result<v1::MeshFrame, Co
             influences: h.skin.influences as u32,
             skin_bones,
             skin_weights: le_bytes(&h.skin.weights, u16::to_le_bytes),
-            subdivision,
             examples,
-            detail_rows,
-            detail_scales,
             actor: String::new(),
             actor_index: 0,
             actor_count: 0,
+            subdivision_levels: levels,
+            detail_step,
+            detail_blocks,
+            triangle_turns,
         })),
     })
 }
 
-fn step_message(s: &PaletteStep) -> v1::SubdivisionStep {
-    let weight_index = if s.weights.len() <= 256 {
-        Bytes::from(s.weight_index.iter().map(|&i| i as u8).collect::<Vec<u8>>())
-    } else {
-        le_bytes(&s.weight_index, u16::to_le_bytes)
-    };
-    v1::SubdivisionStep {
-        rows: s.rows() as u32,
-        columns: s.columns as u32,
-        row_ptr: le_bytes(&s.row_ptr, u32::to_le_bytes),
-        cols: le_bytes(&s.cols, u32::to_le_bytes),
-        weight_index,
-        weights: s.weights.clone(),
+/// The detail values (`width` per row) as meshopt blocks of [`BLOCK_VALUES`] values per row
+/// (the proto's `detail_blocks`): neighbouring vertices have similar values, and meshopt's
+/// byte deltas pack small ones into a few bits.
+fn detail_blocks(rows: &[i16], width: usize) -> Result<Vec<Bytes>, CodecError> {
+    let count = rows.len() / width.max(1);
+    let mut block = vec![[0u8; 4]; count];
+    let mut out = Vec::with_capacity(width.div_ceil(BLOCK_VALUES));
+    for first in (0..width).step_by(BLOCK_VALUES) {
+        for (v, slot) in block.iter_mut().enumerate() {
+            let row = &rows[v * width..(v + 1) * width];
+            let [a0, a1] = row[first].to_le_bytes();
+            let [b0, b1] = row.get(first + 1).copied().unwrap_or(0).to_le_bytes();
+            *slot = [a0, a1, b0, b1];
+        }
+        out.push(Bytes::from(encode_vertex_block(&block)?));
     }
+    Ok(out)
 }
 
 /// Reads `count` little-endian values of `N` bytes from field `field`.
@@ -188,54 +206,61 @@ pub fn read_palette_topology(t: &v1::PaletteTopology) -> Result<StreamPalette, W
         bones: read_narrow("skin_bones", &t.skin_bones, slots, t.bones <= 256)?,
         weights: read_le("skin_weights", &t.skin_weights, slots, u16::from_le_bytes)?,
     };
+    let nv = t.vertex_count as usize;
+    let mut triangles = Vec::new();
+    decode_indices(&t.indices, t.triangle_count as usize, nb, &mut triangles)
+        .map_err(|e| err("indices", e.to_string()))?;
     let detail = match level {
         Level::Base => None,
         Level::Detail => {
-            let mut steps = Vec::with_capacity(t.subdivision.len());
-            for (l, s) in t.subdivision.iter().enumerate() {
-                let field = |f: &str| format!("subdivision[{l}].{f}");
-                let rows = s.rows as usize;
-                let row_ptr = read_le(
-                    &field("row_ptr"),
-                    &s.row_ptr,
-                    rows.saturating_add(1),
-                    u32::from_le_bytes,
-                )?;
-                let entries = row_ptr.last().copied().unwrap_or(0) as usize;
-                let cols = read_le(&field("cols"), &s.cols, entries, u32::from_le_bytes)?;
-                let weight_index = read_narrow(
-                    &field("weight_index"),
-                    &s.weight_index,
-                    entries,
-                    s.weights.len() <= 256,
-                )?;
-                steps.push(PaletteStep {
-                    columns: s.columns as usize,
-                    row_ptr,
-                    cols,
-                    weight_index,
-                    weights: s.weights.clone(),
-                });
-            }
-            let nv = t.vertex_count as usize;
+            apply_corner_turns(&mut triangles, &t.triangle_turns)
+                .map_err(|e| err("triangle_turns", e.to_string()))?;
             let n = t.examples as usize;
-            Some(PaletteDetail {
-                steps,
-                examples: n,
-                rows: read_le(
-                    "detail_rows",
-                    &t.detail_rows,
-                    nv.saturating_mul(n.saturating_add(1)),
-                    i16::from_le_bytes,
-                )?,
-                scales: read_le("detail_scales", &t.detail_scales, nv, f32::from_le_bytes)?,
-            })
+            let width = n.saturating_add(1);
+            let blocks = width.div_ceil(BLOCK_VALUES);
+            if t.detail_blocks.len() != blocks {
+                return Err(err(
+                    "detail_blocks",
+                    format!(
+                        "{} blocks, expected {blocks} ({width} values per row, {BLOCK_VALUES} per block)",
+                        t.detail_blocks.len()
+                    ),
+                ));
+            }
+            let levels = t.subdivision_levels;
+            if !(1..=MAX_LEVELS).contains(&levels) {
+                return Err(err(
+                    "subdivision_levels",
+                    format!("{levels}, expected 1..={MAX_LEVELS} at the detail level"),
+                ));
+            }
+            let expected = subdivided_count(nb, &triangles, levels);
+            if expected != Some(nv) {
+                return Err(err(
+                    "vertex_count",
+                    format!(
+                        "{nv}, but {levels} Loop levels of the base mesh give {}",
+                        expected.map_or_else(|| "no mesh".to_owned(), |v| v.to_string())
+                    ),
+                ));
+            }
+            let mut rows = vec![0i16; nv * width];
+            for (j, data) in t.detail_blocks.iter().enumerate() {
+                let block = decode_vertex_block(data, nv)
+                    .map_err(|e| err(&format!("detail_blocks[{j}]"), e.to_string()))?;
+                for (row, [a0, a1, b0, b1]) in rows.chunks_exact_mut(width).zip(block) {
+                    row[j * BLOCK_VALUES] = i16::from_le_bytes([a0, a1]);
+                    if let Some(second) = row.get_mut(j * BLOCK_VALUES + 1) {
+                        *second = i16::from_le_bytes([b0, b1]);
+                    }
+                }
+            }
+            Some(
+                PaletteDetail::rebuild(nb, &triangles, levels, n, rows, t.detail_step)
+                    .map_err(|e| err("indices", e.to_string()))?,
+            )
         }
     };
-    let nv = t.vertex_count as usize;
-    let mut triangles = Vec::new();
-    decode_indices(&t.indices, t.triangle_count as usize, nv, &mut triangles)
-        .map_err(|e| err("indices", e.to_string()))?;
     let header = PaletteHeader {
         bones: t.bones as usize,
         rest: rest.chunks_exact(3).map(Vec3::from_slice).collect(),

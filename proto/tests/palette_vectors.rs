@@ -10,7 +10,7 @@ use crease_core::codec::palette::{
     PaletteFrame, PaletteHeader, PaletteSynth, ROTATION_ERROR, palette_lanes, palette_vertex_count,
     read_palette_lanes, translation_box,
 };
-use crease_core::codec::{FrameDecoder, FrameEncoder};
+use crease_core::codec::{FrameDecoder, FrameEncoder, decode_indices};
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::mesh::subdivision::LoopSubdivision;
@@ -156,27 +156,34 @@ fn build_vectors() -> Value {
     })
     .unwrap();
     let d = h.detail.as_ref().unwrap();
-    // What the index codec gives back (it may rotate a triangle's corners, winding kept).
     let Some(v1::mesh_frame::Body::PaletteTopology(t)) = &msg.body else {
         unreachable!("a palette topology message");
     };
-    let decoded_triangles = read_palette_topology(t).unwrap().header.triangles;
+    // What the index codec gives back (it may rotate a triangle's corners, winding kept),
+    // before the header's corner turns put them back.
+    let mut decoded_triangles = Vec::new();
+    decode_indices(
+        &t.indices,
+        h.triangles.len(),
+        h.rest.len(),
+        &mut decoded_triangles,
+    )
+    .unwrap();
     let steps: Vec<Value> = d
         .steps
         .iter()
         .map(|s| {
             json!({
-                "columns": s.columns,
-                "row_ptr": s.row_ptr,
-                "cols": s.cols,
-                "weight_index": s.weight_index,
-                "weights": jfs(&s.weights),
+                "columns": s.columns(),
+                "row_ptr": s.row_ptr(),
+                "cols": s.cols(),
+                "weights": jfs(s.vals()),
             })
         })
         .collect();
     let rest: Vec<Value> = h.rest.iter().map(|p| jfs(&p.to_array())).collect();
     json!({
-        "about": "crease palette v1 test vectors (core::codec::palette, crease-proto::palette): a PaletteTopology of a tetrahedron (2 bones, K = 2, one Loop level, N = 2) as an encoded MeshFrame (header_hex) with its decoded arrays, then two palette frames (a keyframe, a delta) as core::codec frames of lanes (frame_hex) with their inputs, lanes, decoded bones and xi, and the mesh core's reference decoder synthesises from them (synthesized, drawn vertices in order). Floats are strings: shortest decimals of exact f32s. Regenerate with `cargo test -p crease-proto --test palette_vectors -- --ignored regenerate`.",
+        "about": "crease palette v1 test vectors (core::codec::palette, crease-proto::palette): a PaletteTopology of a tetrahedron (2 bones, K = 2, one Loop level, N = 2) as an encoded MeshFrame (header_hex) with its decoded arrays (the base triangles as the index codec gives them back and after the header's corner turns, the Loop steps and drawn triangles a decoder rebuilds from them, the detail values q with their step), then two palette frames (a keyframe, a delta) as core::codec frames of lanes (frame_hex) with their inputs, lanes, decoded bones and xi, and the mesh core's reference decoder synthesises from them (synthesized, drawn vertices in order). Floats are strings: shortest decimals of exact f32s. Regenerate with `cargo test -p crease-proto --test palette_vectors -- --ignored regenerate`.",
         "version": 1,
         "header_hex": hex(&msg.encode_to_vec()),
         "header": {
@@ -187,10 +194,13 @@ fn build_vectors() -> Value {
             "skin_weights": h.skin.weights,
             "triangles": h.triangles,
             "decoded_triangles": decoded_triangles,
+            "triangle_turns": t.triangle_turns.to_vec(),
+            "levels": d.levels,
             "steps": steps,
+            "drawn_triangles": d.triangles,
             "examples": d.examples,
+            "detail_step": jf(d.quantum),
             "detail_rows": d.rows,
-            "detail_scales": jfs(&d.scales),
         },
         "frames": frames,
     })
@@ -227,14 +237,28 @@ fn test_vectors_match() {
     assert_eq!(json!(read.header.skin.weights), want["skin_weights"]);
     assert_eq!(json!(read.header.skin.bones), want["skin_bones"]);
     assert_eq!(json!(d.rows), want["detail_rows"]);
-    assert_eq!(jfs(&d.scales), want["detail_scales"]);
-    assert_eq!(json!(d.steps[0].cols), want["steps"][0]["cols"]);
-    assert_eq!(json!(read.header.triangles), want["decoded_triangles"]);
+    assert_eq!(jf(d.quantum), want["detail_step"]);
+    // The base triangles come back exactly as sent (corner turns applied), and the steps and
+    // drawn triangles rebuilt from them are the subdivision's own.
+    assert_eq!(json!(read.header.triangles), want["triangles"]);
+    let subdivision = LoopSubdivision::new(
+        &Mesh {
+            positions: read.header.rest.clone(),
+            triangles: read.header.triangles.clone(),
+        },
+        1,
+    )
+    .unwrap();
+    assert_eq!(d.steps, subdivision.steps());
+    assert_eq!(d.triangles, subdivision.triangles());
+    assert_eq!(json!(d.triangles), want["drawn_triangles"]);
+    assert_eq!(json!(d.steps[0].cols()), want["steps"][0]["cols"]);
+    assert_eq!(d.triangles.len(), 16);
     // The index codec may rotate a triangle's corners but keeps each one and its winding.
     let rotations = |t: [u32; 3]| [t, [t[1], t[2], t[0]], [t[2], t[0], t[1]]];
     let input: Vec<[u32; 3]> = serde_json::from_value(want["triangles"].clone()).unwrap();
-    assert_eq!(input.len(), 16);
-    for (got, t) in read.header.triangles.iter().zip(&input) {
+    let raw: Vec<[u32; 3]> = serde_json::from_value(want["decoded_triangles"].clone()).unwrap();
+    for (got, t) in raw.iter().zip(&input) {
         assert!(
             rotations(*t).contains(got),
             "{got:?} is not a rotation of {t:?}"

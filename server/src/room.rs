@@ -182,6 +182,9 @@ pub struct Room {
     /// Frames the pipeline ran through (counted here, after the pipeline: the session is
     /// entered once per frame, before it).
     published: AtomicU64,
+    /// Bumped by every subscription here ([`Room::joins`]): what a room's own source (the
+    /// demo's animation) waits on while nobody watches ([`Room::watched`]).
+    joined: tokio::sync::watch::Sender<u64>,
 }
 
 impl std::fmt::Debug for Room {
@@ -288,6 +291,7 @@ impl Room {
                 closed: AtomicBool::new(false),
                 closed_signal: tokio::sync::watch::Sender::new(false),
                 published: AtomicU64::new(0),
+                joined: tokio::sync::watch::Sender::new(0),
             })
         })
         .await
@@ -424,6 +428,22 @@ impl Room {
     /// Live subscriptions (both levels).
     pub fn subscriber_count(&self) -> usize {
         self.session.subscriber_count()
+    }
+
+    /// Whether anyone wants this room's frames: a subscriber of any channel here or, for a
+    /// room this replica owns in a cluster, on another replica (the fan-out's interest), or a
+    /// take being recorded. A room's own source (the demo's animation) publishes nothing
+    /// while nobody does (issue 41: nothing computed for nobody).
+    pub fn watched(&self) -> bool {
+        Channel::ALL.iter().any(|&c| self.fanout.interest(c)) || self.take_id().is_some()
+    }
+
+    /// Changes whenever a subscription starts here ([`Room::subscribe`]): a paused source
+    /// wakes on it within the frame period of its first viewer. Another replica's viewers
+    /// reach the owner as interest announcements, not through this: a paused source also
+    /// looks at [`Room::watched`] now and then.
+    pub fn joins(&self) -> tokio::sync::watch::Receiver<u64> {
+        self.joined.subscribe()
     }
 
     /// The room's control-point filter.
@@ -800,9 +820,11 @@ impl Room {
     /// [`RoomFull`] at `max` live subscriptions.
     pub fn subscribe(&self, channel: Channel, max: usize) -> Result<Subscription, RoomFull> {
         let slot = self.session.take_slot(max)?;
-        Ok(Subscription {
+        let subscription = Subscription {
             frames: self.fanout.subscribe(channel),
             _slot: slot,
-        })
+        };
+        self.joined.send_modify(|n| *n = n.wrapping_add(1));
+        Ok(subscription)
     }
 }

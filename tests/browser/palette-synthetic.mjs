@@ -1,13 +1,18 @@
-// Synthetic palette streams for palette.test.mjs: a small closed mesh (an octahedron, Loop-
-// subdivided), a few bones, a skin, a detail regressor, encoded as the server would (protobuf
-// MeshFrame { palette_topology }, then MeshFrame { frame } whose data are codec frames of
-// palette lanes, a keyframe then deltas: core/src/codec/palette), and a reference of what the
-// viewer must draw, computed here in f64 from the decoded values (web/codec.js's
-// PaletteDecoder, the header's q / 65535 and q * scale). Lets the GPU passes
-// of web/palette.js be checked without a server that streams palettes, on meshes small enough
-// to read, with every branch the real one has (several subdivision steps, K up to 8, bones
-// over 256, rows of D longer than one texel, buffers wider than the texture).
+// Synthetic palette streams for palette.test.mjs: a small mesh (an octahedron, closed or with
+// a hole, Loop-subdivided), a few bones, a skin, a detail regressor, encoded as the server
+// would (protobuf MeshFrame { palette_topology }: the base triangles through meshopt's index
+// codec with their corner turns, the Loop level count, D and b as i16 multiples of one step in
+// meshopt vertex-codec blocks, issue 41; then MeshFrame { frame } whose data are codec frames
+// of palette lanes, a keyframe then deltas: core/src/codec/palette), and a reference of what
+// the viewer must draw, computed here in f64 from the decoded values (web/codec.js's
+// PaletteDecoder, the header's q / 65535 and q * step) and Loop steps of its own (loopStep
+// below: an implementation independent of web/loop.js, on the same numbering, so that the rows
+// of D line up). Lets the GPU passes of web/palette.js be checked without a server that streams
+// palettes, on meshes small enough to read, with every branch the real one has (several
+// subdivision steps, K up to 8, bones over 256, rows of D longer than one texel, buffers wider
+// than the texture).
 
+import { MeshoptDecoder } from "../../web/node_modules/meshoptimizer/meshopt_decoder.mjs";
 import { MeshoptEncoder } from "../../web/node_modules/meshoptimizer/meshopt_encoder.js";
 
 const f = Math.fround;
@@ -82,8 +87,11 @@ function octahedron(size, c) {
   return { positions: v, triangles: t };
 }
 
-/** One Loop subdivision step of a closed manifold triangle mesh (n vertices, triangles): the
- * CSR matrix (rows: the old vertices, then one per edge) and the new triangles. */
+/** One Loop subdivision step of a manifold triangle mesh, closed or with boundary (n vertices,
+ * triangles): the rows (the old vertices, then one per edge in the order edges are first met,
+ * each triangle [a, b, c] along ab, bc, ca), as [column, f32 weight] lists (a column may
+ * repeat: the reference sums rows in f64), and the new triangles. Loop's rules with Warren's
+ * beta; Hoppe's boundary rules (ARCHITECTURE.md, "Palette streams"). */
 function loopStep(n, triangles) {
   const edges = new Map(); // "a,b" (a < b) -> {id, opposite: []}
   const neighbours = Array.from({ length: n }, () => new Set());
@@ -97,16 +105,24 @@ function loopStep(n, triangles) {
       neighbours[y].add(x);
     }
   }
+  for (const e of edges.values()) {
+    if (e.opposite.length > 2) throw new Error("loopStep: a non-manifold edge");
+  }
   const rows = [];
   for (let v = 0; v < n; v++) {
-    const ring = [...neighbours[v]].sort((x, y) => x - y);
+    const ring = [...neighbours[v]];
+    const boundary = ring.filter((u) => edges.get(key(u, v)).opposite.length === 1);
     const k = ring.length;
-    const beta = k === 3 ? 3 / 16 : 3 / (8 * k);
-    rows.push([[v, f(1 - k * beta)], ...ring.map((u) => [u, f(beta)])]);
+    if (k === 0) rows.push([[v, 1]]);
+    else if (boundary.length === 2) rows.push([[v, f(3 / 4)], ...boundary.map((u) => [u, f(1 / 8)])]);
+    else if (boundary.length === 0) {
+      const beta = k > 3 ? 3 / (8 * k) : 3 / 16;
+      rows.push([[v, f(1 - k * beta)], ...ring.map((u) => [u, f(beta)])]);
+    } else throw new Error(`loopStep: vertex ${v} has ${boundary.length} boundary edges`);
   }
   for (const e of edges.values()) {
-    if (e.opposite.length !== 2) throw new Error("loopStep: not a closed manifold");
-    rows.push([[e.a, f(3 / 8)], [e.b, f(3 / 8)], [e.opposite[0], f(1 / 8)], [e.opposite[1], f(1 / 8)]]);
+    if (e.opposite.length === 1) rows.push([[e.a, f(1 / 2)], [e.b, f(1 / 2)]]);
+    else rows.push([[e.a, f(3 / 8)], [e.b, f(3 / 8)], [e.opposite[0], f(1 / 8)], [e.opposite[1], f(1 / 8)]]);
   }
   const mid = (x, y) => edges.get(key(x, y)).id;
   const next = [];
@@ -115,6 +131,47 @@ function loopStep(n, triangles) {
     next.push([a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]);
   }
   return { rows, columns: n, triangles: next };
+}
+
+/** `triangles` ([a, b, c] lists) through meshopt's index codec (the header's `indices`). */
+export function baseIndices(triangles) {
+  const flat = triangles.flat();
+  return MeshoptEncoder.encodeIndexBuffer(Uint32Array.from(flat), flat.length, 4);
+}
+
+/** The corner turns (2 bits a triangle, four to a byte, low bits first) that bring the
+ * triangles meshopt's index codec gives back of `indices` to `triangles` (the model's): k with
+ * the decoded [a, b, c] turned left k times ([b, c, a] for 1) equal to the model's. */
+export function cornerTurns(indices, triangles) {
+  const decoded = new Uint32Array(3 * triangles.length);
+  MeshoptDecoder.decodeIndexBuffer(new Uint8Array(decoded.buffer), decoded.length, 4, indices);
+  const turns = new Uint8Array(Math.ceil(triangles.length / 4));
+  triangles.forEach((t, i) => {
+    const d = decoded.subarray(3 * i, 3 * i + 3);
+    const k = [0, 1, 2].find((k) => [0, 1, 2].every((j) => d[(j + k) % 3] === t[j]));
+    if (k === undefined) throw new Error(`cornerTurns: triangle ${i} decodes as [${d}], not a rotation of [${t}]`);
+    turns[i >> 2] |= k << (2 * (i & 3));
+  });
+  return turns;
+}
+
+/** `rows` (width i16 values per row) as the header's detail_blocks: block j holds values 2j
+ * and 2j + 1 of every row (0 past the row's end), meshopt's vertex codec version 1 of 4-byte
+ * vertices (level 3, as core::codec::block). */
+export function detailBlocks(rows, width) {
+  const count = rows.length / width;
+  const blocks = [];
+  for (let first = 0; first < width; first += 2) {
+    const values = new Int16Array(2 * count);
+    for (let v = 0; v < count; v++) {
+      values[2 * v] = rows[v * width + first];
+      values[2 * v + 1] = first + 1 < width ? rows[v * width + first + 1] : 0;
+    }
+    const data = MeshoptEncoder.encodeVertexBufferLevel(new Uint8Array(values.buffer), count, 4, 3, 1);
+    if (data[0] !== 0xa1) throw new Error(`detailBlocks: meshopt wrote version byte 0x${data[0].toString(16)}, not 0xa1`);
+    blocks.push(data);
+  }
+  return blocks;
 }
 
 /** A deterministic generator (mulberry32). */
@@ -137,9 +194,10 @@ function normalise(q) {
 /**
  * A synthetic palette stream: {header (MeshFrame bytes), frames: [MeshFrame bytes], exact (the
  * transforms and xi encoded), vertexCount, baseVertices, triangles, bounds, model (what the
- * header holds, for the reference)}. `level` "base" or "detail"; `steps` Loop steps; `K`;
+ * header holds, for the reference)}. `level` "base" or "detail"; `steps` Loop levels; `K`;
  * `bones`; `examples` N; `odd` (base level): an open fan, a fan that does not chain and a
- * vertex of no triangle.
+ * vertex of no triangle; `open` (either level): a triangle missing (a boundary of three
+ * edges).
  */
 export async function syntheticStream({
   level,
@@ -150,9 +208,11 @@ export async function syntheticStream({
   seed = 18,
   frames = 2,
   odd = false,
+  open = false,
   keyframeInterval = 0,
 }) {
   await MeshoptEncoder.ready;
+  await MeshoptDecoder.ready;
   const rand = rng(seed);
   const base = octahedron(0.2, [0.01, 0.08, -0.005]);
   if (odd) {
@@ -163,6 +223,7 @@ export async function syntheticStream({
     base.triangles = [...base.triangles.slice(1), [base.triangles[5][0], base.triangles[5][2], base.triangles[5][1]]];
     base.positions.push([0.05, 0.05, 0.05].map(f));
   }
+  if (open) base.triangles = base.triangles.slice(0, -1);
   const nb = base.positions.length;
   // Skin: K slots per vertex, the first few used, weights summing to 65535.
   const skinBones = [];
@@ -190,16 +251,18 @@ export async function syntheticStream({
     }
   }
   const N = level === "detail" ? examples : 0;
+  // D and b: i16 values q, one step for all (core::codec::palette::detail_quantum's form).
   const detailRows = [];
-  const detailScales = [];
+  const detailStep = f(0.004 / 32767);
   if (level === "detail") {
     for (let v = 0; v < n; v++) {
-      detailScales.push(f((0.004 * (0.5 + rand())) / 32767));
-      for (let j = 0; j <= N; j++) detailRows.push(Math.round((rand() * 2 - 1) * 32767));
+      // Some rows small (meshopt's few-bit groups), most over the whole i16 range.
+      const range = v % 5 === 0 ? 40 : 32767;
+      for (let j = 0; j <= N; j++) detailRows.push(Math.round((rand() * 2 - 1) * range));
     }
   }
-  const flat = triangles.flat();
-  const indices = MeshoptEncoder.encodeIndexBuffer(Uint32Array.from(flat), flat.length, 4);
+  // The base triangles, in model vertex ids, at both levels.
+  const indices = baseIndices(base.triangles);
   const lo = [-0.15, -0.05, -0.15];
   const hi = [0.17, 0.25, 0.14];
   const topo = new Writer()
@@ -207,7 +270,7 @@ export async function syntheticStream({
     .uint(2, level === "detail" ? 2 : 1)
     .uint(3, 1)
     .uint(4, n)
-    .uint(5, triangles.length)
+    .uint(5, base.triangles.length)
     .bytes(6, indices)
     .message(
       7,
@@ -221,29 +284,10 @@ export async function syntheticStream({
     .uint(11, K)
     .bytes(12, bones <= 256 ? Uint8Array.from(skinBones) : le(Uint16Array, skinBones))
     .bytes(13, le(Uint16Array, skinWeights));
-  for (const st of stepList) {
-    const table = [...new Set(st.rows.flat().map((e) => e[1]))].sort((a, b) => a - b);
-    const rowPtr = [0];
-    const cols = [];
-    const index = [];
-    for (const row of st.rows) {
-      for (const [c, w] of row) {
-        cols.push(c);
-        index.push(table.indexOf(w));
-      }
-      rowPtr.push(cols.length);
-    }
-    const w = new Writer()
-      .uint(1, st.rows.length)
-      .uint(2, st.columns)
-      .bytes(3, le(Uint32Array, rowPtr))
-      .bytes(4, le(Uint32Array, cols))
-      .bytes(5, table.length <= 256 ? Uint8Array.from(index) : le(Uint16Array, index))
-      .bytes(6, le(Float32Array, table)); // packed repeated float
-    topo.message(14, w);
-  }
   if (level === "detail") {
-    topo.uint(15, N).bytes(16, le(Int16Array, detailRows)).bytes(17, le(Float32Array, detailScales));
+    topo.uint(15, N).uint(21, steps).f32(22, detailStep);
+    for (const b of detailBlocks(detailRows, N + 1)) topo.bytes(23, b);
+    topo.bytes(24, cornerTurns(indices, base.triangles));
   }
   const header = new Writer().message(3, topo).finish();
   // Frames: random rotations (both signs of the quaternion) and translations, a keyframe first
@@ -281,10 +325,11 @@ export async function syntheticStream({
       bones,
       skinBones,
       skinWeights,
+      baseTriangles: base.triangles,
       steps: stepList.map((s) => s.rows),
       N,
       detailRows,
-      detailScales,
+      detailStep,
     },
   };
 }
@@ -426,7 +471,7 @@ export function referenceMesh(stream, decoded) {
     out = level.map((p, v) => {
       let h = 0;
       for (let j = 0; j <= m.N; j++) {
-        const d = f(m.detailRows[v * (m.N + 1) + j] * m.detailScales[v]);
+        const d = f(m.detailRows[v * (m.N + 1) + j] * m.detailStep);
         h += d * (j < m.N ? decoded.xi[j] : 1);
       }
       return p.map((x, k) => x + h * n[v][k]);

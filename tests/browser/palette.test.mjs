@@ -23,6 +23,8 @@ import { chromium } from "playwright-core";
 import { LAUNCH_ARGS, capturePng, changedPixels, decodePng, imageStats, screenshotPng, watchPage, checkList, sleep, waitForCrease } from "./common.mjs";
 import {
   LaneEncoder,
+  baseIndices,
+  cornerTurns,
   paletteLaneCount,
   paletteLanes,
   referenceMesh,
@@ -30,6 +32,7 @@ import {
   translationBox,
 } from "./palette-synthetic.mjs";
 import { PaletteDecoder, ready as codecReady } from "../../web/codec.js";
+import { loopSteps } from "../../web/loop.js";
 import { decodePaletteTopology } from "../../web/palette.js";
 import { readMeshFrame } from "../../web/wire.js";
 
@@ -47,12 +50,14 @@ const creaseBin = path.resolve(root, process.env.CREASE_BIN || path.join(target,
 const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
 const syntheticOnly = process.env.PALETTE_ONLY === "synthetic";
 const paletteVectorsPath = path.join(root, "tests/vectors/palette-v1.json");
+const loopVectorsPath = path.join(root, "tests/vectors/loop-v1.json");
 
 const VIEWPORT = { width: 1024, height: 768 };
 /** GPU vs reference: the largest coordinate error allowed, as a share of the bounds' diagonal
  * (f32 rounding of the passes: ~1e-7 of the coordinates per pass). */
 const RELATIVE_TOLERANCE = 1e-5;
-/** The most a palette header may take to reach the page on loopback (the detail one: 11.5 MB). */
+/** The most a palette header may take to reach the page on loopback: a bound against a hang,
+ * not a speed target (issue 18's detail header was 11.5 MB; issue 41's is a fraction of that). */
 const HEADER_LIMIT_MS = 30_000;
 /** Unit normals, GPU vs f64 reference (f32 cross products of short edges). */
 const NORMAL_TOLERANCE = 1e-4;
@@ -138,6 +143,13 @@ function floats(buf) {
 
 function diagonal([lo, hi]) {
   return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+}
+
+/** The row of CSR entry `e`. */
+function rowOf(rowPtr, e) {
+  let r = 0;
+  while (rowPtr[r + 1] <= e) r++;
+  return r;
 }
 
 /** The largest |a_i - b_i| and where. */
@@ -303,10 +315,26 @@ try {
   });
 
   await check("(b) malformed palette headers are refused naming the field (palette.js)", async () => {
-    const s = await syntheticStream({ level: "detail", K: 3, bones: 4 });
+    // N = 4: three detail blocks (5 values per row, 2 per block).
+    const s = await syntheticStream({ level: "detail", K: 3, bones: 4, steps: 2, examples: 4 });
     const t0 = readMeshFrame(s.header).paletteTopology;
-    decodePaletteTopology(t0);
+    const h0 = decodePaletteTopology(t0);
+    assert.equal(h0.levels, 2, "levels");
+    assert.equal(t0.detailBlocks.length, 3, "detail blocks");
+    const nb = s.baseVertices;
+    const tris = s.model.baseTriangles;
     const fresh = () => readMeshFrame(Uint8Array.from(s.header)).paletteTopology;
+    // The base triangles re-encoded (and their turns): `list` replaces them.
+    const retriangle = (t, list) => {
+      t.indices = baseIndices(list);
+      t.triangleCount = list.length;
+      t.triangleTurns = cornerTurns(t.indices, list);
+    };
+    const block = (j, fn) => (t) => {
+      const b = Uint8Array.from(t.detailBlocks[j]);
+      fn(b);
+      t.detailBlocks[j] = b;
+    };
     const cases = {
       "version 2": [(t) => (t.version = 2), /version 2/],
       "influences 9": [(t) => (t.influences = 9), /influences 9/],
@@ -314,24 +342,104 @@ try {
       "a skin bone past the bones": [(t) => (t.bones = 1), /skin bone|skin bones/],
       "weights not summing to 65535": [(t) => (t.skinWeights = Uint8Array.from(t.skinWeights).fill(1, 0, 2)), /sum to/],
       "rest positions short": [(t) => (t.restPositions = t.restPositions.subarray(12)), /rest_positions/],
-      "a column past the previous level": [(t) => (t.subdivision[1].columns += 1), /columns/],
-      "row_ptr short": [(t) => (t.subdivision[0].rowPtr = t.subdivision[0].rowPtr.subarray(4)), /row_ptr/],
-      "a weight index past the table": [
-        (t) => (t.subdivision[0].weightIndex = Uint8Array.from(t.subdivision[0].weightIndex).fill(200, 0, 1)),
-        /weight_index/,
+      "subdivision_levels 0": [(t) => (t.subdivisionLevels = 0), /palette header: subdivision_levels 0, expected 1..=3/],
+      "subdivision_levels 4": [(t) => (t.subdivisionLevels = 4), /palette header: subdivision_levels 4, expected 1..=3/],
+      "triangle_turns a byte short": [
+        (t) => (t.triangleTurns = t.triangleTurns.subarray(1)),
+        /palette header: triangle_turns is 1 bytes, expected 2 \(2 bits for each of 8 triangles\)/,
       ],
-      "detail rows short": [(t) => (t.detailRows = t.detailRows.subarray(2)), /detail rows/],
-      "detail scales odd length": [(t) => (t.detailScales = t.detailScales.subarray(1)), /detail_scales/],
-      "vertex count off": [(t) => (t.vertexCount += 1), /vertex_count/],
-      "no steps at the detail level": [(t) => (t.subdivision = []), /no steps/],
-      "indices corrupt": [(t) => (t.indices = Uint8Array.from(t.indices).fill(0xff, 1)), /palette header/],
+      "triangle_turns a byte long": [(t) => (t.triangleTurns = Uint8Array.from([...t.triangleTurns, 0])), /triangle_turns is 3 bytes, expected 2/],
+      "a turn of 3": [(t) => (t.triangleTurns = Uint8Array.from(t.triangleTurns).fill(0xc0 | t.triangleTurns[1], 1, 2)), /triangle_turns: triangle 7 has turn 3/],
+      "detail_step 0": [(t) => (t.detailStep = 0), /detail_step 0, expected a finite value > 0/],
+      "detail_step NaN": [(t) => (t.detailStep = NaN), /detail_step NaN/],
+      "a detail block missing": [(t) => t.detailBlocks.pop(), /detail_blocks has 2 blocks, expected 3 \(5 values per row, 2 per block\)/],
+      "a detail block too many": [(t) => t.detailBlocks.push(t.detailBlocks[0]), /detail_blocks has 4 blocks, expected 3/],
+      "a corrupt detail block": [block(1, (b) => b.fill(0xff, 1)), /palette header: detail_blocks\[1\]: /],
+      "a detail block cut short": [(t) => (t.detailBlocks[2] = t.detailBlocks[2].subarray(0, t.detailBlocks[2].length - 3)), /palette header: detail_blocks\[2\]: /],
+      "an empty detail block": [(t) => (t.detailBlocks[0] = new Uint8Array(0)), /detail_blocks\[0\] is empty/],
+      "a detail block of meshopt version 0": [block(0, (b) => (b[0] = 0xa0)), /detail_blocks\[0\]: meshopt vertex codec byte 0xa0, expected 0xa1/],
+      "vertex_count one more than the rebuild": [
+        (t) => (t.vertexCount += 1),
+        new RegExp(`palette header: vertex_count ${s.vertexCount + 1}, but 2 Loop levels of the base mesh give ${s.vertexCount}`),
+      ],
+      "vertex_count of one level fewer": [(t) => (t.subdivisionLevels = 1), /vertex_count \d+, but 1 Loop levels of the base mesh give 18/],
+      "a triangle index past base_vertices": [
+        (t) => retriangle(t, [...tris.slice(0, 7), [tris[7][0], tris[7][1], nb]]),
+        new RegExp(`palette header: indices: triangle 7 has vertex ${nb}, only ${nb}`),
+      ],
+      "triangle_count past the indices' bytes": [(t) => (t.triangleCount = t.indices.length + 1), /triangle_count \d+, but indices has only \d+ bytes/],
+      "indices corrupt": [(t) => (t.indices = Uint8Array.from(t.indices).fill(0xff, 1)), /palette header: indices: /],
+      "a base triangle repeated (an edge in 3 triangles)": [
+        (t) => retriangle(t, [...tris, tris[0]]),
+        /palette header: the base triangles \(indices, triangle_turns\) do not subdivide: Loop subdivision: edge \(\d+, \d+\) is shared by 3 triangles/,
+      ],
+      "a degenerate base triangle": [
+        (t) => retriangle(t, [...tris.slice(0, 7), [tris[7][0], tris[7][1], tris[7][0]]]),
+        /do not subdivide: Loop subdivision: triangle 7 \[\d+, \d+, \d+\] is degenerate/,
+      ],
+      "two base triangles missing at one vertex (a bowtie)": [
+        (t) => retriangle(t, tris.filter((_, i) => i !== 0 && i !== 2)),
+        /do not subdivide: Loop subdivision: vertex 4 has 4 boundary edges/,
+      ],
+      "base level: vertex_count off": [(t) => ((t.level = 1), (t.vertexCount += 1)), /vertex_count 67, expected base_vertices 6 at the base level/],
     };
     for (const [what, [fn, re]] of Object.entries(cases)) {
       const t = fresh();
       fn(t);
       assert.throws(() => decodePaletteTopology(t), (e) => e instanceof Error && re.test(e.message), what);
     }
+    // The base level ignores the detail fields; a base header decodes with the same arrays.
+    const tb = fresh();
+    tb.level = 1;
+    tb.vertexCount = nb;
+    const hb = decodePaletteTopology(tb);
+    assert.equal(hb.steps.length, 0, "steps at the base level");
+    assert.equal(hb.detail, null, "detail at the base level");
     return `${Object.keys(cases).length} malformed headers refused`;
+  });
+
+  await check("(b2) web/loop.js rebuilds every mesh of tests/vectors/loop-v1.json exactly (Node)", async () => {
+    const v = JSON.parse(fs.readFileSync(loopVectorsPath, "utf8"));
+    assert.equal(v.version, 1, "loop-v1.json version");
+    assert.ok(v.meshes.length > 0, "loop-v1.json has no meshes");
+    let entries = 0;
+    let triangles = 0;
+    const lines = [];
+    for (const m of v.meshes) {
+      const got = loopSteps(m.vertex_count, m.triangles.flat(), m.levels);
+      assert.equal(got.steps.length, m.steps.length, `${m.name}: steps`);
+      m.steps.forEach((w, l) => {
+        const s = got.steps[l];
+        const what = `${m.name}, step ${l}`;
+        assert.equal(s.rows, w.rows, `${what}: rows`);
+        assert.equal(s.columns, w.columns, `${what}: columns`);
+        assert.deepEqual(Array.from(s.rowPtr), w.row_ptr, `${what}: row_ptr`);
+        assert.deepEqual(Array.from(s.cols), w.cols, `${what}: cols`);
+        assert.equal(s.weights.length, w.weights.length, `${what}: weights`);
+        w.weights.forEach((x, e) => {
+          const want = Math.fround(Number(x));
+          assert.ok(Object.is(s.weights[e], want), `${what}: weight ${e} (row ${rowOf(w.row_ptr, e)}) is ${s.weights[e]}, expected ${x}`);
+        });
+        entries += w.weights.length;
+      });
+      assert.deepEqual(Array.from(got.triangles), m.subdivided_triangles.flat(), `${m.name}: subdivided triangles`);
+      triangles += m.subdivided_triangles.length;
+      lines.push(`${m.name} (L=${m.levels}, ${m.steps.at(-1).rows} vertices)`);
+    }
+    // And what it refuses, named as core names it.
+    const refused = [
+      [4, [0, 1, 2, 0, 2, 3], 0, /^Loop subdivision: 0 levels requested, expected 1..=3$/],
+      [3, [0, 1, 2, 0, 2, 3], 1, /^Loop subdivision: triangle 1 refers to vertex 3, but there are only 3 vertices$/],
+      [4, [0, 1, 2, 1, 1, 2], 1, /^Loop subdivision: triangle 1 \[1, 1, 2\] is degenerate \(repeats a vertex\)$/],
+      [5, [0, 1, 2, 0, 1, 3, 1, 0, 4], 1, /^Loop subdivision: edge \(0, 1\) is shared by 3 triangles/],
+      [5, [0, 1, 2, 0, 3, 4], 1, /^Loop subdivision: vertex 0 has 4 boundary edges/],
+      // Two closed cones (tetrahedra) sharing their apex 0: two fans at vertex 0.
+      [7, [0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2, 0, 4, 5, 0, 5, 6, 0, 6, 4, 4, 6, 5], 1, /^Loop subdivision: the triangles around vertex 0 form 2 separate fans/],
+    ];
+    for (const [n, t, levels, re] of refused) {
+      assert.throws(() => loopSteps(n, t, levels), (e) => e instanceof Error && re.test(e.message), String(re));
+    }
+    return `${v.meshes.length} meshes (${lines.join(", ")}): ${entries} weights bit-exact, ${triangles} triangles; ${refused.length} bad meshes refused`;
   });
 
   assert.ok(importMap, "the viewer's index.html has no import map");
@@ -352,6 +460,8 @@ try {
       { level: "detail", K: 4, bones: 3, steps: 2, examples: 5, width: 7 },
       // One step, N + 1 = 4 (one texel), one influence, the default width.
       { level: "detail", K: 1, bones: 2, steps: 1, examples: 3, width: 0 },
+      // A triangle missing: Loop's boundary rules, two levels, N + 1 = 3 (an odd last block).
+      { level: "detail", K: 2, bones: 3, steps: 2, examples: 2, width: 5, open: true },
       // N = 300: xi in a texture rather than a uniform array.
       { level: "detail", K: 2, bones: 3, steps: 1, examples: 300, width: 64 },
     ];
@@ -408,7 +518,7 @@ try {
         assert.ok(n.worst <= NORMAL_TOLERANCE, `${cfg.level} frame ${i}: normal error ${n.worst} at vertex ${n.vertex}`);
         if (i === got.frames.length - 1) {
           lines.push(
-            `${cfg.level}${cfg.odd ? " (odd fans)" : ""} K=${cfg.K} B=${cfg.bones}${cfg.steps ? ` L=${cfg.steps} N=${cfg.examples}` : ""} ` +
+            `${cfg.level}${cfg.odd ? " (odd fans)" : ""}${cfg.open ? " (open)" : ""} K=${cfg.K} B=${cfg.bones}${cfg.steps ? ` L=${cfg.steps} N=${cfg.examples}` : ""} ` +
               `W=${cfg.width || "default"}: ${s.vertexCount} vertices, position error ${p.worst.toExponential(2)} ` +
               `(${(p.worst / diagonal(s.bounds)).toExponential(1)} of the diagonal), normal ${n.worst.toExponential(1)}`,
           );
@@ -422,23 +532,70 @@ try {
   await check("(c2) palette test vectors (tests/vectors/palette-v1.json) decode and synthesise as core's in the page", async () => {
     const v = JSON.parse(fs.readFileSync(paletteVectorsPath, "utf8"));
     const headerBytes = Buffer.from(v.header_hex, "hex");
-    // The rewriter is exact: the message re-encoded unchanged is its own bytes.
-    assert.ok(withPaletteField(headerBytes, 16, (b) => b).equals(headerBytes), "re-encoding header_hex changes it");
-    const rows = Buffer.from(protoFields(protoFields(headerBytes).find((f) => f.field === 3).body).find((f) => f.field === 16).body);
+    // The rewriters are exact: the message re-encoded unchanged is its own bytes.
+    assert.ok(withPaletteField(headerBytes, 23, (b) => b).equals(headerBytes), "re-encoding header_hex changes it");
+    assert.ok(withPaletteVarint(headerBytes, 21, v.header.levels).equals(headerBytes), "re-encoding header_hex's levels changes it");
+    const N = v.header.examples;
+    const drawn = v.header.detail_rows.length / (N + 1);
+    const levels = v.header.levels;
+    const blocks = protoFields(protoFields(headerBytes).find((f) => f.field === 3).body).filter((f) => f.field === 23 && f.wire === 2);
+    assert.equal(blocks.length, Math.ceil((N + 1) / 2), "detail_blocks in header_hex");
+    blocks.forEach((b, j) => assert.equal(b.body[0], 0xa1, `detail_blocks[${j}]: meshopt's version byte`));
     const keyHex = v.frames[0].frame_hex;
     const deltaHex = v.frames[1].frame_hex;
+    const variant = (bytes) => bytes.toString("hex");
     // Malformed variants: [what, header hex (null: the vector's), frames fed after it, the Error expected].
     const malformed = [
       ["the delta without its keyframe", null, [deltaHex], /palette frame 1: a delta on frame 0, and no frame is held/],
       ["the delta twice", null, [keyHex, deltaHex, deltaHex], /palette frame 1: a delta on frame 0, the frame held is 1/],
       ["the keyframe a byte short", null, [keyHex.slice(0, -2)], /frame: payload length \d+, but \d+ bytes follow the header/],
       ["the delta a byte short", null, [keyHex, deltaHex.slice(0, -2)], /frame: payload length/],
-      ["detail_rows one value short", withPaletteField(headerBytes, 16, (b) => b.subarray(0, b.length - 2)).toString("hex"), [], /palette header: detail rows has 29 entries, expected 30/],
-      ["detail_rows an odd byte short", withPaletteField(headerBytes, 16, (b) => b.subarray(0, b.length - 1)).toString("hex"), [], /palette header: detail_rows is 59 bytes, not a multiple of 2/],
-      ["detail_rows one value long", withPaletteField(headerBytes, 16, (b) => Buffer.concat([b, b.subarray(0, 2)])).toString("hex"), [], /palette header: detail rows has 31 entries, expected 30/],
+      [
+        "detail_blocks[0] a byte short",
+        variant(withPaletteField(headerBytes, 23, (b, k) => (k === 0 ? b.subarray(0, b.length - 1) : b))),
+        [],
+        /palette header: detail_blocks\[0\]: /,
+      ],
+      [
+        "detail_blocks[1] corrupt",
+        variant(withPaletteField(headerBytes, 23, (b, k) => (k === 1 ? Buffer.from(b).fill(0xff, 1) : b))),
+        [],
+        /palette header: detail_blocks\[1\]: /,
+      ],
+      [
+        "a detail block missing",
+        variant(withPaletteField(headerBytes, 23, (b, k) => (k === 0 ? null : b))),
+        [],
+        new RegExp(`palette header: detail_blocks has ${blocks.length - 1} blocks, expected ${blocks.length} \\(${N + 1} values per row, 2 per block\\)`),
+      ],
+      [
+        "a detail block too many",
+        variant(withPaletteField(headerBytes, 23, (b, k) => (k === 0 ? [b, b] : b))),
+        [],
+        new RegExp(`palette header: detail_blocks has ${blocks.length + 1} blocks, expected ${blocks.length}`),
+      ],
+      [
+        "triangle_turns a byte short",
+        variant(withPaletteField(headerBytes, 24, (b) => b.subarray(0, b.length - 1))),
+        [],
+        /palette header: triangle_turns is \d+ bytes, expected \d+/,
+      ],
+      [
+        "a turn of 3 (triangle 0)",
+        variant(withPaletteField(headerBytes, 24, (b) => Buffer.from([b[0] | 3, ...b.subarray(1)]))),
+        [],
+        /palette header: triangle_turns: triangle 0 has turn 3, expected 0, 1 or 2/,
+      ],
+      [
+        "vertex_count one more than the rebuild",
+        variant(withPaletteVarint(headerBytes, 4, drawn + 1)),
+        [],
+        new RegExp(`palette header: vertex_count ${drawn + 1}, but ${levels} Loop levels of the base mesh give ${drawn}`),
+      ],
+      ["subdivision_levels 0", variant(withPaletteVarint(headerBytes, 21, 0)), [], /palette header: subdivision_levels 0, expected 1..=3/],
+      ["subdivision_levels 4", variant(withPaletteVarint(headerBytes, 21, 4)), [], /palette header: subdivision_levels 4, expected 1..=3/],
       ["header_hex cut 10 bytes short", v.header_hex.slice(0, -20), [], /protobuf: truncated field/],
     ];
-    assert.equal(rows.length, 2 * v.header.detail_rows.length, "detail_rows' bytes in header_hex");
     const r = await synthPage.evaluate(
       async ({ v, malformed }) => {
         const THREE = await import("three");
@@ -446,6 +603,7 @@ try {
         const { readMeshFrame, littleEndian } = await import("/wire.js");
         const codec = await import("/codec.js");
         await codec.ready;
+        const { MeshoptDecoder } = await import("/node_modules/meshoptimizer/meshopt_decoder.mjs");
         const bad = [];
         const counts = {};
         const count = (what, n = 1) => (counts[what] = (counts[what] || 0) + n);
@@ -479,14 +637,24 @@ try {
         cmpValue("model", t.model, "tetra");
         cmpValue("level", t.level, 2);
         cmpValue("version", t.version, v.version);
-        const h = decodePaletteTopology(t);
+        let h;
+        try {
+          h = decodePaletteTopology(t);
+        } catch (e) {
+          return { bad: [`decodePaletteTopology: ${e.message}`] };
+        }
         cmpValue("decoded level", h.level, "detail");
         cmpValue("bones", h.bones, want.bones);
         cmpValue("baseVertices", h.baseVertices, want.rest.length);
         cmpValue("influences", h.influences, want.influences);
         cmpValue("examples", h.examples, want.examples);
-        cmpValue("vertexCount", h.vertexCount, want.detail_scales.length);
-        cmpValue("triangleCount", h.triangleCount, want.triangles.length);
+        const N = want.examples;
+        const nv = want.detail_rows.length / (N + 1);
+        cmpValue("vertexCount (drawn)", h.vertexCount, nv);
+        cmpValue("triangle_count (base)", t.triangleCount, want.triangles.length);
+        cmpValue("triangleCount (drawn)", h.triangleCount, want.drawn_triangles.length);
+        cmpValue("subdivision_levels", t.subdivisionLevels, want.levels);
+        cmpValue("levels", h.levels, want.levels);
         cmpFloats("bounds.min", h.bounds.min, ["-1.0", "-1.0", "-1.0"]);
         cmpFloats("bounds.max", h.bounds.max, ["2.0", "2.0", "2.0"]);
         cmpFloats("rest", h.rest, want.rest);
@@ -494,39 +662,44 @@ try {
         // The 16-bit weights as sent, and as the JS exposes them (q / 65535 in f32).
         cmpInts("skin_weights (u16)", littleEndian(t.skinWeights, Uint16Array, "skin_weights"), want.skin_weights);
         cmpFloats("skinWeights", h.skinWeights, want.skin_weights.map((q) => Math.fround(q / 65535)));
-        // Triangles: the index codec may rotate a triangle's corners (its winding kept).
-        const tri = h.triangles;
+        // The base triangles: as the index codec gives them back (it may rotate a triangle's
+        // corners, winding kept), the turns sent, and turned back: the model's.
+        const raw = codec.decodeIndices(t.indices, t.triangleCount, t.baseVertices);
+        cmpInts("triangles (as decoded)", raw, want.decoded_triangles);
+        cmpInts("triangle_turns", t.triangleTurns, want.triangle_turns);
+        cmpInts("baseTriangles (turned back)", h.baseTriangles, want.triangles);
         let rotated = 0;
-        if (tri.length !== 3 * want.triangles.length) bad.push(`triangles: ${tri.length / 3}, expected ${want.triangles.length}`);
-        else {
-          want.triangles.forEach(([a, b, c], i) => {
-            const g = [tri[3 * i], tri[3 * i + 1], tri[3 * i + 2]];
-            const rot = [0, 1, 2].find((k) => g[k] === a && g[(k + 1) % 3] === b && g[(k + 2) % 3] === c);
-            if (rot === undefined) bad.push(`triangle ${i}: [${g}], expected [${a},${b},${c}] or a rotation of it`);
-            else if (rot !== 0) rotated++;
-          });
-          count("triangles", want.triangles.length);
-          // And exactly what the Rust index decoder gives back.
-          cmpInts("triangles (as decoded)", tri, want.decoded_triangles);
-        }
+        want.triangles.forEach((w, i) => {
+          if (w.some((x, k) => raw[3 * i + k] !== x)) rotated++;
+        });
+        // The Loop steps and the drawn triangles, rebuilt (loop.js) from the base triangles.
         cmpValue("steps", h.steps.length, want.steps.length);
         want.steps.forEach((ws, l) => {
           const s = h.steps[l];
-          const raw = t.subdivision[l];
           if (!s) return;
           cmpValue(`steps[${l}].rows`, s.rows, ws.row_ptr.length - 1);
           cmpValue(`steps[${l}].columns`, s.columns, ws.columns);
           cmpInts(`steps[${l}].rowPtr`, s.rowPtr, ws.row_ptr);
           cmpInts(`steps[${l}].cols`, s.cols, ws.cols);
-          // As sent (the table and its indices), and as the JS expands them (one weight per entry).
-          cmpInts(`steps[${l}] weight_index`, littleEndian(raw.weightIndex, raw.weights.length <= 256 ? Uint8Array : Uint16Array, "weight_index"), ws.weight_index);
-          cmpFloats(`steps[${l}] weights table`, raw.weights, ws.weights);
-          cmpFloats(`steps[${l}].weights`, s.weights, ws.weight_index.map((i) => ws.weights[i]));
+          cmpFloats(`steps[${l}].weights`, s.weights, ws.weights);
         });
-        const N = want.examples;
-        cmpInts("detail_rows (i16)", littleEndian(t.detailRows, Int16Array, "detail_rows"), want.detail_rows);
-        cmpFloats("detail_scales", littleEndian(t.detailScales, Float32Array, "detail_scales"), want.detail_scales);
-        cmpFloats("detail (q * scale)", h.detail, want.detail_rows.map((q, i) => Math.fround(q * f32(want.detail_scales[Math.floor(i / (N + 1))]))));
+        cmpInts("triangles (drawn)", h.triangles, want.drawn_triangles);
+        // D and b: the i16 q of the blocks (meshopt's decoder on its own), and as the JS
+        // exposes them (f32(q * step)).
+        cmpFloats("detail_step", [t.detailStep], [want.detail_step]);
+        cmpFloats("detailStep", [h.detailStep], [want.detail_step]);
+        const q = new Int16Array(nv * (N + 1));
+        t.detailBlocks.forEach((data, j) => {
+          const bytes = new Uint8Array(4 * nv);
+          MeshoptDecoder.decodeVertexBuffer(bytes, nv, 4, data);
+          const pair = new Int16Array(bytes.buffer);
+          for (let v = 0; v < nv; v++) {
+            q[v * (N + 1) + 2 * j] = pair[2 * v];
+            if (2 * j + 1 <= N) q[v * (N + 1) + 2 * j + 1] = pair[2 * v + 1];
+          }
+        });
+        cmpInts("detail_rows (i16, from detail_blocks)", q, want.detail_rows);
+        cmpFloats("detail (q * step)", h.detail, want.detail_rows.map((x) => Math.fround(x * f32(want.detail_step))));
 
         // 2. The frames in order: PaletteDecoder (the viewer's, through PaletteSynth), and
         // decodeFrame + readPaletteLanes on their own.
@@ -645,8 +818,9 @@ try {
       );
     }
     return (
-      `header: ${r.counts.integers} integers and ${r.counts.floats} floats bit-exact, ${r.counts.triangles} triangles ` +
-      `(${r.rotated} rotated); ${r.counts.frames} frames' lanes, bones and xi bit-exact; GPU vs core max ` +
+      `header: ${r.counts.integers} integers and ${r.counts.floats} floats bit-exact (base triangles, ${r.rotated} of ` +
+      `${v.header.triangles.length} rotated by the index codec and turned back; the rebuilt Loop steps and drawn triangles; ` +
+      `D and b); ${r.counts.frames} frames' lanes, bones and xi bit-exact; GPU vs core max ` +
       `${Math.max(...errs).toExponential(2)} (allowed ${tol.toExponential(2)}); ${malformed.length} malformed variants ` +
       `refused by PaletteDecoder and PaletteSynth`
     );
@@ -862,12 +1036,38 @@ function lengthDelimited(field, body) {
   return Buffer.concat([varint(field * 8 + 2), varint(body.length), Buffer.from(body)]);
 }
 
-/** A MeshFrame of a PaletteTopology (field 3) with the topology's length-delimited field
- * `field` replaced by fn(its bytes), re-encoded (the lengths around it follow). */
+/** A MeshFrame of a PaletteTopology (field 3) with each occurrence k of the topology's
+ * length-delimited field `field` replaced by fn(its bytes, k): bytes, an array of them (the
+ * field repeated), or null (dropped); re-encoded (the lengths around it follow). */
 function withPaletteField(meshFrame, field, fn) {
-  const rewrite = (body) =>
-    Buffer.concat(protoFields(body).map((g) => (g.field === field && g.wire === 2 ? lengthDelimited(field, fn(g.body)) : Buffer.from(g.raw))));
-  return Buffer.concat(protoFields(meshFrame).map((f) => (f.field === 3 && f.wire === 2 ? lengthDelimited(3, rewrite(f.body)) : Buffer.from(f.raw))));
+  return withPaletteTopology(meshFrame, (fields) => {
+    let k = 0;
+    return fields.flatMap((g) => {
+      if (!(g.field === field && g.wire === 2)) return [Buffer.from(g.raw)];
+      const out = fn(g.body, k++);
+      return out === null ? [] : (Array.isArray(out) ? out : [out]).map((b) => lengthDelimited(field, b));
+    });
+  });
+}
+
+/** A MeshFrame of a PaletteTopology with its varint field `field` set to `value` (added at the
+ * end when absent). */
+function withPaletteVarint(meshFrame, field, value) {
+  return withPaletteTopology(meshFrame, (fields) => {
+    const encoded = Buffer.concat([varint(field * 8), varint(value)]);
+    const out = fields.map((g) => (g.field === field && g.wire === 0 ? encoded : Buffer.from(g.raw)));
+    if (!fields.some((g) => g.field === field && g.wire === 0)) out.push(encoded);
+    return out;
+  });
+}
+
+/** A MeshFrame whose PaletteTopology (field 3) is rewritten by fn(its fields) -> Buffers. */
+function withPaletteTopology(meshFrame, fn) {
+  return Buffer.concat(
+    protoFields(meshFrame).map((f) =>
+      f.field === 3 && f.wire === 2 ? lengthDelimited(3, Buffer.concat(fn(protoFields(f.body)))) : Buffer.from(f.raw),
+    ),
+  );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -891,6 +1091,32 @@ async function serverChecks() {
       const { page, state } = await viewer(`level=${level}&encoding=palette`, `${level} palette page`);
       assert.equal(state.encoding, "palette", `window.crease.encoding (reason: ${state.paletteReason})`);
       const c = await paletteCapture(page);
+      // Issue 41: the header's decoding in this page, the Loop rebuild on its own (both run
+      // again here, warm: the viewer's own first run is in headerLoadMs).
+      const rebuild =
+        level === "detail" && c
+          ? await page.evaluate(async () => {
+              const { readMeshFrame } = await import("/wire.js");
+              const { decodePaletteTopology } = await import("/palette.js");
+              const { loopSteps } = await import("/loop.js");
+              const t = readMeshFrame(window.crease.palette.header).paletteTopology;
+              const t0 = performance.now();
+              const h = decodePaletteTopology(t);
+              const t1 = performance.now();
+              loopSteps(h.baseVertices, h.baseTriangles, h.levels);
+              const t2 = performance.now();
+              return {
+                decodeMs: t1 - t0,
+                loopMs: t2 - t1,
+                baseVertices: h.baseVertices,
+                baseTriangles: h.baseTriangles.length / 3,
+                levels: h.levels,
+                vertices: h.vertexCount,
+                triangles: h.triangleCount,
+                examples: h.examples,
+              };
+            })
+          : null;
       await page.close();
       assert.ok(c, "no window.crease.palette.frame");
       const header = Buffer.from(c.header, "base64");
@@ -950,10 +1176,24 @@ async function serverChecks() {
           `the ${level} header took ${state.headerMs} ms (limit ${HEADER_LIMIT_MS})`,
         );
         assert.equal(state.headerBytes, header.length, "window.crease.headerBytes");
-        figures.push(`${level}: the palette header, ${header.length} B, read ${state.headerMs} ms after the socket opened`);
+        // Issue 41 asks for the first detail frame drawn within 1 s of subscribing, on
+        // loopback: printed, never asserted (a loaded machine is slower).
+        figures.push(
+          `${level}: the palette header, ${header.length} B, read ${state.headerMs} ms after the socket opened (the ` +
+            `subscribe request), decoded and set up in ${state.headerLoadMs} ms; the first frame drawn ` +
+            `${state.firstFrameMs} ms after the socket opened${level === "detail" ? " (issue 41: <= 1000 ms on loopback)" : ""}`,
+        );
+        if (rebuild) {
+          figures.push(
+            `${level}: the header decoded again in the page in ${rebuild.decodeMs.toFixed(1)} ms; loop.js alone, rebuilding ` +
+              `${rebuild.levels} Loop levels (${rebuild.baseVertices} base vertices, ${rebuild.baseTriangles} triangles -> ` +
+              `${rebuild.vertices} vertices, ${rebuild.triangles} triangles) ${rebuild.loopMs.toFixed(1)} ms; N = ${rebuild.examples}`,
+          );
+        }
         return (
           `${info.vertex_count} vertices, max |gpu - core| ${e.worst.toExponential(3)} (${(e.worst / diag).toExponential(2)} ` +
-          `of the diagonal), header ${header.length} B in ${state.headerMs} ms, ${frames.length} frames (${frame.length} B the last)`
+          `of the diagonal), header ${header.length} B in ${state.headerMs} ms, first frame drawn at ${state.firstFrameMs} ms, ` +
+          `${frames.length} frames (${frame.length} B the last)`
         );
       } finally {
         fs.rmSync(dir, { recursive: true, force: true });

@@ -214,11 +214,14 @@ pub(super) async fn viewer(shared: Arc<Shared>, v: usize, room: usize) {
                 let room = &shared.rooms[room].id;
                 // Away from home: back as soon as home is up.
                 let leave = || k != home && shared.replicas[home].life() == Life::Up;
+                let viewers = &shared.replicas[k].viewers;
+                viewers.fetch_add(1, Ordering::Relaxed);
                 let _ = if ws {
                     watch_ws(&shared, k, room, encoding, leave).await
                 } else {
                     watch_grpc(&shared, k, room, encoding, leave).await
                 };
+                viewers.fetch_sub(1, Ordering::Relaxed);
                 if shared.stopping() {
                     break;
                 }
@@ -459,6 +462,7 @@ pub(super) async fn sampler(shared: Arc<Shared>, every: Duration) {
                         t: s.t,
                         rss_mib: s.rss_mib,
                         owned: owned[k],
+                        viewers: shared.replicas[k].viewers.load(Ordering::Relaxed),
                         life: shared.replicas[k].deaths.load(Ordering::Relaxed),
                     });
                 }

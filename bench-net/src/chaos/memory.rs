@@ -11,7 +11,15 @@
 //! it settled: the peak of its last minute against the peak of its first minute.
 //!
 //! The viewers load a replica too: the soak sends each back to its home replica once that is
-//! up again (`clients::viewer`), so a replica's viewers are the same in every steady stretch.
+//! up again (`clients::viewer`), so a replica's viewers are the same whenever the others are
+//! up; but while another replica is down its viewers visit, and a replica that served all
+//! 200 viewers at once keeps what that took (tokio's I/O slab, connection buffers and frame
+//! pools sized for the peak; the allocator's pages): the 30-minute run of 2026-12-06 after the
+//! frame pools' fix saw r1 step from 310 to 331 MiB while r0 and r2 were killed in turn and
+//! every viewer came to it (392-512 s), then stay flat at 326-331 MiB for 460 s. So a new
+//! high-water of the viewers streaming through a replica cuts a stretch too, as one of rooms
+//! owned does, when it is [`VIEWER_STEP`] above the open stretch's (the reconnections'
+//! overlap moves the count by a few viewers all the time).
 
 /// A life's first seconds are not judged (connections, rooms and the allocator's arenas fill).
 pub(super) const LIFE_WARM_S: f64 = 120.0;
@@ -20,6 +28,11 @@ pub(super) const LIFE_WARM_S: f64 = 120.0;
 pub(super) const SETTLE_S: f64 = 60.0;
 /// RSS is compared as the peak over this many seconds at each end of a stretch.
 pub(super) const WINDOW_S: f64 = 60.0;
+/// A high-water of viewers starts a new stretch when it is this much (a fraction) above the
+/// open stretch's, and at least [`VIEWER_STEP_MIN`] viewers more.
+pub(super) const VIEWER_STEP: f64 = 0.1;
+/// See [`VIEWER_STEP`].
+pub(super) const VIEWER_STEP_MIN: usize = 5;
 
 /// One sample of a replica's memory and load.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,6 +43,8 @@ pub(super) struct Point {
     pub rss_mib: f64,
     /// Rooms it owned at the sample.
     pub owned: usize,
+    /// The soak's viewers streaming through it at the sample.
+    pub viewers: usize,
     /// Which life of the replica (its deaths before the sample).
     pub life: u32,
 }
@@ -41,6 +56,8 @@ pub(super) struct Stretch {
     pub life: u32,
     /// The most rooms it had owned in this life, through the stretch.
     pub rooms: usize,
+    /// The most viewers it had served at once in this life when the stretch began.
+    pub viewers: usize,
     /// Its first and last samples, seconds since the start.
     pub from: f64,
     /// See `from`.
@@ -78,9 +95,10 @@ fn peak(points: &[Point], from: f64, to: f64) -> Option<f64> {
         .reduce(f64::max)
 }
 
-/// A replica's steady stretches: its samples (in time order) cut at each new life and at each
-/// new high-water of the rooms it owned in that life; each life's first [`LIFE_WARM_S`] left
-/// out. A stretch is judged when, after [`SETTLE_S`], it holds two [`WINDOW_S`] windows apart.
+/// A replica's steady stretches: its samples (in time order) cut at each new life, at each
+/// new high-water of the rooms it owned in that life, and at each high-water of its viewers
+/// [`VIEWER_STEP`] above the open stretch's; each life's first [`LIFE_WARM_S`] left out. A
+/// stretch is judged when, after [`SETTLE_S`], it holds two [`WINDOW_S`] windows apart.
 pub(super) fn steady(points: &[Point]) -> Vec<Stretch> {
     let mut out = Vec::new();
     let mut i = 0;
@@ -92,38 +110,43 @@ pub(super) fn steady(points: &[Point]) -> Vec<Stretch> {
             .position(|p| p.life != life)
             .map_or(points.len(), |n| i + n);
         let born = points[i].t;
-        let mut high = 0;
-        // The stretch open now: its first point and its high-water of rooms owned.
-        let mut open: Option<(usize, usize)> = None;
+        let (mut rooms, mut viewers) = (0, 0);
+        // The stretch open now: its first point and its high-waters.
+        let mut open: Option<(usize, usize, usize)> = None;
         for (k, p) in points.iter().enumerate().take(end).skip(i) {
-            let before = high;
-            high = high.max(p.owned);
+            rooms = rooms.max(p.owned);
+            viewers = viewers.max(p.viewers);
             if p.t < born + LIFE_WARM_S {
                 continue;
             }
             match open {
-                None => open = Some((k, high)),
-                Some((s, rooms)) if high > before => {
-                    out.push(stretch(&points[s..k], life, rooms));
-                    open = Some((k, high));
+                None => open = Some((k, rooms, viewers)),
+                Some((s, r, v))
+                    if rooms > r
+                        || (viewers as f64 > v as f64 * (1.0 + VIEWER_STEP)
+                            && viewers >= v + VIEWER_STEP_MIN) =>
+                {
+                    out.push(stretch(&points[s..k], life, r, v));
+                    open = Some((k, rooms, viewers));
                 }
                 Some(_) => {}
             }
         }
-        if let Some((s, rooms)) = open {
-            out.push(stretch(&points[s..end], life, rooms));
+        if let Some((s, r, v)) = open {
+            out.push(stretch(&points[s..end], life, r, v));
         }
         i = end;
     }
     out
 }
 
-fn stretch(points: &[Point], life: u32, rooms: usize) -> Stretch {
+fn stretch(points: &[Point], life: u32, rooms: usize, viewers: usize) -> Stretch {
     let from = points.first().map_or(0.0, |p| p.t);
     let to = points.last().map_or(0.0, |p| p.t);
     let mut s = Stretch {
         life,
         rooms,
+        viewers,
         from,
         to,
         first_peak_mib: None,
@@ -167,6 +190,7 @@ mod tests {
                 t,
                 rss_mib: rss(t),
                 owned: owned(t),
+                viewers: 60,
                 life,
             });
             t += 5.0;
@@ -266,5 +290,40 @@ mod tests {
         let s = steady(&points);
         assert_eq!(s.len(), 1, "{s:?}");
         assert_eq!(s[0].rooms, 9);
+    }
+
+    #[test]
+    fn a_burst_of_visiting_viewers_cuts_a_stretch_and_a_few_do_not() {
+        // 20 rooms throughout; 60 viewers, 62-64 now and then (reconnections overlapping),
+        // and 200 from 400 s to 520 s (the other replicas down): RSS steps from 310 to 330 MiB
+        // during the burst and stays there (what the burst took is kept, not leaked).
+        let mut points = run(
+            0.0,
+            1100.0,
+            0,
+            |_| 20,
+            |t| if t < 420.0 { 310.0 } else { 330.0 },
+        );
+        for p in &mut points {
+            p.viewers = if (400.0..520.0).contains(&p.t) {
+                200
+            } else if (p.t as u64 / 5).is_multiple_of(7) {
+                64
+            } else {
+                60
+            };
+        }
+        let s = steady(&points);
+        let shape: Vec<(usize, f64)> = s.iter().map(|x| (x.viewers, x.from)).collect();
+        assert_eq!(shape, vec![(64, 120.0), (200, 400.0)], "{s:?}");
+        assert_eq!(s[0].growth_percent, Some(0.0));
+        assert_eq!(s[1].growth_percent, Some(0.0));
+        // Without the burst, the same step is a leak at a steady load.
+        for p in &mut points {
+            p.viewers = 60;
+        }
+        let s = steady(&points);
+        assert_eq!(s.len(), 1);
+        assert!(s[0].growth_percent.unwrap() > 5.0, "{s:?}");
     }
 }

@@ -27,8 +27,8 @@
 //! The report (`report`) fails the run (exit status 1) on an ordering violation, a
 //! split-brain frame, a room without a frame for longer than `--chaos-max-gap` (10 s) after a
 //! fault ended (or with no fault), a decode failure no keyframe healed, a bad take, RSS growth
-//! over 5% across a steady stretch of a replica's life (one high-water of rooms owned: the
-//! peak of its first settled minute to its last minute's), a run of 10 minutes or more that
+//! over 5% across a steady stretch of a replica's life (one high-water of rooms owned and of
+//! viewers served: the peak of its first settled minute to its last minute's), a run of 10 minutes or more that
 //! judged RSS over less than half its length, a replica that exited on its own or panicked,
 //! and fewer than MINUTES x 2 faults.
 //!
@@ -105,7 +105,7 @@ pub(super) fn run(args: &BenchNetArgs, minutes: f64) -> anyhow::Result<()> {
     let model_path = args.model.clone();
     if !model_path.is_file() && model_path == demo_model() {
         bail!(
-            "no --model, and no demo hand at {} (run `crease demo` once to build it, or pass --model FILE)",
+            "no --model, and no demo hand at {} (run `crease-server` once, which trains and caches it in about 15 s, or pass --model FILE)",
             model_path.display()
         );
     }
@@ -562,14 +562,15 @@ fn summarise(args: &BenchNetArgs, shared: &Shared, s: Summary) -> ChaosReport {
                 && g > RSS_GROWTH
             {
                 violations.push(format!(
-                    "replica {} RSS grew {g:.1}% at a steady load ({:.1} -> {:.1} MiB, peaks of the first and last minute of {:.0}-{:.0} s in its life {} with at most {} rooms owned)",
+                    "replica {} RSS grew {g:.1}% at a steady load ({:.1} -> {:.1} MiB, peaks of the first and last minute of {:.0}-{:.0} s in its life {} with at most {} rooms owned and {} viewers)",
                     m.replica,
                     x.first_peak_mib.unwrap_or(0.0),
                     x.last_peak_mib.unwrap_or(0.0),
                     x.from + memory::SETTLE_S,
                     x.to,
                     x.life + 1,
-                    x.rooms
+                    x.rooms,
+                    x.viewers
                 ));
             }
         }

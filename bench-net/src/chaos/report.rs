@@ -238,7 +238,7 @@ pub(super) fn print_table(r: &ChaosReport, out: &mut impl Write) -> std::io::Res
     }
     writeln!(
         out,
-        "  RSS (MiB)              replica deaths  start    end   steady stretches judged: life, rooms owned (most), seconds, first -> last minute's peak, growth"
+        "  RSS (MiB)              replica deaths  start    end   steady stretches judged: life, rooms owned and viewers (most), seconds, first -> last minute's peak, growth"
     )?;
     for m in &r.rss {
         let judged: Vec<String> = m
@@ -247,9 +247,10 @@ pub(super) fn print_table(r: &ChaosReport, out: &mut impl Write) -> std::io::Res
             .filter_map(|x| {
                 let g = x.growth_percent?;
                 Some(format!(
-                    "{}:{} rooms {:.0}-{:.0} s {:.1}->{:.1} {g:+.1}%",
+                    "{}:{} rooms {} viewers {:.0}-{:.0} s {:.1}->{:.1} {g:+.1}%",
                     x.life + 1,
                     x.rooms,
+                    x.viewers,
                     x.from,
                     x.to,
                     x.first_peak_mib.unwrap_or(0.0),

@@ -45,6 +45,9 @@ pub(super) struct ReplicaView {
     pub deaths: AtomicU32,
     /// Times it exited on its own.
     pub crashes: AtomicU32,
+    /// The plain viewers streaming through it now (connecting included): its load besides
+    /// the rooms it owns (`memory`).
+    pub viewers: AtomicUsize,
 }
 
 impl ReplicaView {
@@ -57,6 +60,7 @@ impl ReplicaView {
             pid: AtomicU32::new(pid),
             deaths: AtomicU32::new(0),
             crashes: AtomicU32::new(0),
+            viewers: AtomicUsize::new(0),
         }
     }
 

@@ -1,11 +1,10 @@
 """crease.palette against tests/vectors/palette-v1.json: the PaletteTopology the Rust encoder wrote
-must decode to the vectors' header arrays exactly, each palette frame to the vectors' decoded bones
-and xi bit for bit, and the drawn mesh to what the Rust reference decoder (PaletteSynth)
-synthesised: bit for bit with the triangles the reference used, within a stated tolerance with the
-triangles the index codec gives back. Broken headers and frames must be refused, naming what is
-wrong."""
+must decode to the vectors' header arrays exactly (the base triangles turned back to the model's
+corners, the Loop steps and drawn triangles rebuilt from them, the detail values from their meshopt
+blocks), each palette frame to the vectors' decoded bones and xi bit for bit, and the drawn mesh to
+what the Rust reference decoder (PaletteSynth) synthesised, bit for bit. Broken headers and frames
+must be refused, naming what is wrong."""
 
-import dataclasses
 import json
 import math
 import re
@@ -66,7 +65,7 @@ class PaletteVectors(unittest.TestCase):
         self.assertEqual(h.influences, w["influences"])
         self.assertEqual(h.base_vertices, len(w["rest"]))
         self.assertEqual(h.examples, w["examples"])
-        self.assertEqual(h.vertex_count, len(w["detail_scales"]))
+        self.assertEqual(h.levels, w["levels"])
         self.assertEqual((h.actor, h.actor_index, h.actor_count), ("", 0, 0))
         np.testing.assert_array_equal(bits(h.rest), bits(f32(w["rest"])))
         k = w["influences"]
@@ -77,7 +76,9 @@ class PaletteVectors(unittest.TestCase):
         # w = q / 65535 divided in float32, as SkinWeights gets it from PaletteHeader::skin_weights.
         np.testing.assert_array_equal(bits(h.skin_weights), bits(q.astype(np.float32) / np.float32(65535)))
         np.testing.assert_array_equal(h.skin_quantised.sum(axis=1), 65535)
+        # The Loop steps rebuilt from the base triangles are the Rust core's, bit for bit.
         self.assertEqual(len(h.steps), len(w["steps"]))
+        self.assertEqual(len(h.steps), w["levels"])
         columns = h.base_vertices
         for step, ws in zip(h.steps, w["steps"]):
             self.assertEqual(step.columns, ws["columns"])
@@ -85,28 +86,50 @@ class PaletteVectors(unittest.TestCase):
             self.assertEqual(step.rows, len(ws["row_ptr"]) - 1)
             np.testing.assert_array_equal(step.row_ptr, ws["row_ptr"])
             np.testing.assert_array_equal(step.cols, ws["cols"])
-            np.testing.assert_array_equal(step.weight_index, ws["weight_index"])
-            np.testing.assert_array_equal(bits(step.table), bits(f32(ws["weights"])))
-            np.testing.assert_array_equal(bits(step.weights), bits(f32(ws["weights"])[ws["weight_index"]]))
+            np.testing.assert_array_equal(bits(step.weights), bits(f32(ws["weights"])))
             columns = step.rows
         self.assertEqual(h.vertex_count, columns)
+        self.assertEqual(h.vertex_count, self.topology.vertex_count)
         n = w["examples"]
         rows = np.array(w["detail_rows"], dtype=np.int16).reshape(-1, n + 1)
-        scales = f32(w["detail_scales"])
+        step = f32(w["detail_step"])
+        self.assertEqual(rows.shape[0], h.vertex_count)
         np.testing.assert_array_equal(h.detail_rows, rows)
-        np.testing.assert_array_equal(bits(h.detail_scales), bits(scales))
-        # D and b as the decoder uses them: float32(q) * s_v, one float32 product.
-        self.assertEqual(h.detail.shape, (h.vertex_count, n + 1))
-        np.testing.assert_array_equal(bits(h.detail), bits(rows.astype(np.float32) * scales[:, None]))
+        self.assertEqual(np.float32(h.detail_step).view(np.uint32), step.view(np.uint32))
+        # D and b as the decoder uses them: float32(q) * step, one float32 product.
+        self.assertEqual((h.detail.shape, h.detail.dtype), ((h.vertex_count, n + 1), np.float32))
+        np.testing.assert_array_equal(bits(h.detail), bits(rows.astype(np.float32) * step))
         np.testing.assert_array_equal(h.bounds, [[-1, -1, -1], [2, 2, 2]])
 
-    def test_triangles_decode_as_the_index_codec_gives_them(self) -> None:
-        tris = self.decoder().header.triangles
-        self.assertEqual(tris.dtype, np.uint32)
-        np.testing.assert_array_equal(tris, np.array(self.want["decoded_triangles"], dtype=np.uint32))
-        # Each one a rotation of the encoded triangle: corners and winding kept.
-        for got, t in zip(tris.tolist(), self.want["triangles"]):
+    def test_triangles_are_turned_back_and_subdivided_as_the_model_has_them(self) -> None:
+        h = self.decoder().header
+        w = self.want
+        self.assertEqual(self.topology.triangle_count, len(w["triangles"]))
+        self.assertEqual(bytes(self.topology.triangle_turns), bytes(w["triangle_turns"]))
+        self.assertEqual(len(w["triangle_turns"]), -(-len(w["triangles"]) // 4))
+        # What the index codec gives back: each one a rotation of the model's (corners and
+        # winding kept), and the turns make it the model's again.
+        raw = codec.decode_indices(bytes(self.topology.indices), self.topology.triangle_count, h.base_vertices)
+        np.testing.assert_array_equal(raw, np.array(w["decoded_triangles"], dtype=np.uint32))
+        for got, t in zip(raw.tolist(), w["triangles"]):
             self.assertIn(got, [t, t[1:] + t[:1], t[2:] + t[:2]])
+        self.assertEqual(h.base_triangles.dtype, np.uint32)
+        np.testing.assert_array_equal(h.base_triangles, np.array(w["triangles"], dtype=np.uint32))
+        np.testing.assert_array_equal(palette.apply_triangle_turns(raw, bytes(w["triangle_turns"])), w["triangles"])
+        # The drawn triangles: the Loop subdivision of the model's, 4^L each, in place.
+        self.assertEqual(h.triangles.dtype, np.uint32)
+        np.testing.assert_array_equal(h.triangles, np.array(w["drawn_triangles"], dtype=np.uint32))
+        self.assertEqual(len(h.triangles), len(w["triangles"]) * 4 ** w["levels"])
+
+    def test_turns_by_hand(self) -> None:
+        tris = np.array([[1, 2, 3]] * 5, dtype=np.uint32)
+        # Triangles 0..3 in byte 0 (turns 0, 1, 2, 0, low bits first), triangle 4 in byte 1 (2).
+        got = palette.apply_triangle_turns(tris, bytes([0b00_10_01_00, 0b10]))
+        np.testing.assert_array_equal(got, [[1, 2, 3], [2, 3, 1], [3, 1, 2], [1, 2, 3], [3, 1, 2]])
+        with self.assertRaisesRegex(palette.PaletteError, r"triangle_turns: triangle 3: turn 3"):
+            palette.apply_triangle_turns(tris, bytes([0b11_00_00_00, 0]))
+        with self.assertRaisesRegex(palette.PaletteError, r"triangle_turns: 1 bytes, expected 2"):
+            palette.apply_triangle_turns(tris, bytes([0]))
 
     def test_frames_decode_to_the_vectors_bones_and_xi_bit_for_bit(self) -> None:
         decoder = self.decoder()
@@ -136,30 +159,16 @@ class PaletteVectors(unittest.TestCase):
                 self.assertTrue(np.all(np.abs(error) <= fh.step * 0.5 * 1.001 + 1e-7), error)
 
     def test_the_drawn_mesh_is_the_reference_decoders(self) -> None:
-        # The vectors' `synthesized` comes from PaletteSynth built on the encoder's header, whose
-        # triangles are `triangles`; a client has `decoded_triangles`, whose corners the index
-        # codec may have rotated. With the encoder's triangles the result is bit for bit.
-        decoded = self.decoder()
-        h = decoded.header
-        reference = palette.PaletteDecoder.from_header(
-            dataclasses.replace(h, triangles=np.array(self.want["triangles"], dtype=np.uint32))
-        )
+        # The vectors' `synthesized` comes from PaletteSynth built on the encoder's header; the
+        # decoder rebuilds the same drawn triangles (the corner turns undo the index codec's
+        # rotations) and the same steps, so the result is the same bit for bit.
+        decoder = self.decoder()
+        h = decoder.header
         for k, frame in enumerate(self.vectors["frames"]):
             with self.subTest(frame=k, kind=frame["kind"]):
-                data = bytes.fromhex(frame["frame_hex"])
-                want = f32(frame["synthesized"])
-                got = reference.decode(data)
+                got = decoder.decode(bytes.fromhex(frame["frame_hex"]))
                 self.assertEqual((got.shape, got.dtype), ((h.vertex_count, 3), np.float32))
-                np.testing.assert_array_equal(bits(got), bits(want))
-                got = decoded.decode(data)
-                # A rotated triangle's cross product is the same vector with its rounding moved:
-                # the unit normals differ by an ulp or two (<= 2^-23 each here), so a drawn vertex
-                # high_v + h_v n_v by at most |h_v| 2^-20 plus one rounding of the sum.
-                hv = np.abs(h.detail.astype(np.float64) @ np.append(f32(frame["decoded_xi"]), 1.0))
-                tolerance = hv[:, None] * 2.0**-20 + np.spacing(np.abs(want))
-                excess = np.abs(got.astype(np.float64) - want) - tolerance
-                self.assertTrue(np.all(excess <= 0), f"worst excess {excess.max()}")
-                self.assertLessEqual(float(np.abs(got - want).max()), 1e-7)
+                np.testing.assert_array_equal(bits(got), bits(f32(frame["synthesized"])))
 
     def test_synthesize_of_a_decoded_pose_is_decode(self) -> None:
         a, b = self.decoder(), self.decoder()
@@ -207,10 +216,23 @@ class PaletteVectors(unittest.TestCase):
         def truncate(field: str):
             return lambda t: setattr(t, field, getattr(t, field)[:-1])
 
-        def step(edit):
-            return lambda t: edit(t.subdivision[0])
+        def block(j: int, edit):
+            def apply(t):
+                blocks = [edit(bytes(b)) if i == j else bytes(b) for i, b in enumerate(t.detail_blocks)]
+                del t.detail_blocks[:]
+                t.detail_blocks.extend(blocks)
+
+            return apply
 
         nan = struct.pack("<f", float("nan"))
+        # The tetrahedron with a fifth triangle on its edge (0, 1): 5 triangles, 2 turn bytes.
+        five = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3], [0, 1, 2]], dtype=np.uint32)
+
+        def non_manifold(t):
+            t.triangle_count = len(five)
+            t.indices = meshopt.encode_index_buffer(five.reshape(-1))
+            t.triangle_turns = bytes(2)
+
         cases = [
             ("version", lambda t: setattr(t, "version", 2)),
             ("level", lambda t: setattr(t, "level", 7)),
@@ -222,24 +244,26 @@ class PaletteVectors(unittest.TestCase):
             ("skin_bones", set_byte("skin_bones", 3, 2)),  # bone 2 of 2
             ("skin_weights", truncate("skin_weights")),
             ("skin_weights", set_byte("skin_weights", 0, 0)),  # vertex 0's weights no longer sum to 65535
-            ("subdivision", lambda t: t.ClearField("subdivision")),
-            ("subdivision[0].columns", step(lambda s: setattr(s, "columns", 5))),
-            ("subdivision[0].row_ptr", step(truncate("row_ptr"))),
-            ("subdivision[0].row_ptr", step(set_byte("row_ptr", 0, 1))),  # row_ptr[0] = 1
-            ("subdivision[0].row_ptr", step(set_byte("row_ptr", 4, 9))),  # row_ptr[1] = 9 > row_ptr[2] = 8
-            ("subdivision[0].cols", step(truncate("cols"))),
-            ("subdivision[0].cols", step(set_byte("cols", 0, 4))),  # column 4 of 4
-            ("subdivision[0].cols", step(set_byte("cols", 4, 0))),  # row 0 = [0, 0, ...]: not ascending
-            ("subdivision[0].weight_index", step(truncate("weight_index"))),
-            ("subdivision[0].weight_index", step(set_byte("weight_index", 0, 4))),  # of 4 weights
-            ("subdivision[0].weights", step(lambda s: s.weights.__setitem__(3, float("inf")))),
-            ("detail_rows", truncate("detail_rows")),
-            ("detail_scales", truncate("detail_scales")),
-            ("detail_scales", lambda t: setattr(t, "detail_scales", nan + t.detail_scales[4:])),
             ("indices", truncate("indices")),
             ("indices", lambda t: setattr(t, "triangle_count", t.triangle_count + 1)),
             ("indices", set_byte("indices", 0, 0)),
-            ("detail_rows", lambda t: setattr(t, "vertex_count", t.vertex_count + 1)),
+            ("indices", non_manifold),  # edge (0, 1) in three triangles
+            ("triangle_turns", lambda t: setattr(t, "triangle_turns", b"")),
+            ("triangle_turns", lambda t: setattr(t, "triangle_turns", t.triangle_turns + b"\0")),
+            ("triangle_turns", lambda t: setattr(t, "triangle_turns", bytes([t.triangle_turns[0] | 0b11]))),  # turn 3
+            ("detail_blocks", lambda t: t.detail_blocks.pop()),
+            ("detail_blocks", lambda t: t.detail_blocks.append(t.detail_blocks[0])),
+            ("detail_blocks", lambda t: setattr(t, "examples", t.examples + 2)),  # 5 values a row: 3 blocks
+            ("detail_blocks[0]", block(0, lambda b: b[: len(b) // 2])),  # meshopt refuses it
+            ("detail_blocks[1]", block(1, lambda b: b"")),
+            ("detail_blocks[1]", block(1, lambda b: b"\xa0" + b[1:])),  # not the vertex codec's version 1
+            ("subdivision_levels", lambda t: setattr(t, "subdivision_levels", 0)),
+            ("subdivision_levels", lambda t: setattr(t, "subdivision_levels", 4)),
+            # One Loop level of the tetrahedron: 4 + 6 = 10 vertices; two: 10 + 24 = 34.
+            ("vertex_count", lambda t: setattr(t, "vertex_count", t.vertex_count + 1)),
+            ("vertex_count", lambda t: setattr(t, "subdivision_levels", 2)),
+            ("detail_step", lambda t: setattr(t, "detail_step", 0.0)),
+            ("detail_step", lambda t: setattr(t, "detail_step", float("nan"))),
             # At the base level the drawn mesh is the base mesh: 4 vertices, not 10.
             ("vertex_count", lambda t: setattr(t, "level", crease_pb2.LEVEL_BASE)),
             ("bounds", lambda t: t.ClearField("bounds")),
@@ -271,8 +295,11 @@ class PaletteVectors(unittest.TestCase):
         decoder = palette.PaletteDecoder(t)
         h = decoder.header
         self.assertEqual(
-            (h.level, h.vertex_count, h.examples, h.steps, h.detail), (palette.LEVEL_BASE, 4, 0, [], None)
+            (h.level, h.vertex_count, h.examples, h.levels, h.steps, h.detail), (palette.LEVEL_BASE, 4, 0, 0, [], None)
         )
+        # At the base level the drawn triangles are the base ones, as the index codec gives them.
+        np.testing.assert_array_equal(h.triangles, h.base_triangles)
+        np.testing.assert_array_equal(h.triangles, codec.decode_indices(t.indices, 4, 4))
         rest = f32(self.want["rest"]).astype(np.float64)
         k = self.want["influences"]
         bones = np.array(self.want["skin_bones"]).reshape(-1, k)
@@ -310,14 +337,14 @@ class PaletteVectors(unittest.TestCase):
         cols = np.concatenate([np.sort(rng.choice(columns, n, replace=False)) for n in lengths]).astype(np.uint32)
         row_ptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.uint32)
         table = (rng.standard_normal(17) * 10.0 ** rng.integers(-4, 4, 17)).astype(np.float32)
-        weight_index = rng.integers(0, len(table), len(cols)).astype(np.uint16)
-        step = palette.PaletteStep._build(len(lengths), columns, row_ptr, cols, weight_index, table)
+        weights = table[rng.integers(0, len(table), len(cols))]
+        step = palette.PaletteStep._build(len(lengths), columns, row_ptr, cols, weights)
         x = (rng.standard_normal((columns, 3)) * 10.0 ** rng.integers(-3, 3, (columns, 1))).astype(np.float32)
         got = step.apply(x)
         want = np.zeros((len(lengths), 3), dtype=np.float32)
         for r in range(len(lengths)):
             for e in range(row_ptr[r], row_ptr[r + 1]):
-                want[r] = want[r] + x[cols[e]] * table[weight_index[e]]
+                want[r] = want[r] + x[cols[e]] * weights[e]
         np.testing.assert_array_equal(bits(got), bits(want))
 
 

@@ -48,6 +48,52 @@ pub fn encode_indices(
     Ok(())
 }
 
+/// `triangle` turned left `k` times (`[b, c, a]` for `k = 1`): the same triangle, same winding.
+fn turn_left(t: [u32; 3], k: u8) -> [u32; 3] {
+    let k = usize::from(k % 3);
+    [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+}
+
+/// The corner turns that bring `decoded` (what [`decode_indices`] gave back of `sent`) back to
+/// `sent`: per triangle `k` in `0..3` with `decoded` turned left `k` times equal to `sent`,
+/// four per byte, low bits first (the palette header's `triangle_turns`, issue 41: Loop's
+/// vertex numbering depends on each triangle's first corner). `None` when a triangle is not a
+/// rotation of the one sent.
+pub fn corner_turns(sent: &[[u32; 3]], decoded: &[[u32; 3]]) -> Option<Vec<u8>> {
+    if sent.len() != decoded.len() {
+        return None;
+    }
+    let mut out = vec![0u8; sent.len().div_ceil(4)];
+    for (t, (s, d)) in sent.iter().zip(decoded).enumerate() {
+        let k = (0..3u8).find(|&k| turn_left(*d, k) == *s)?;
+        out[t / 4] |= k << (2 * (t % 4));
+    }
+    Some(out)
+}
+
+/// Turns each of `triangles` left by its entry of `turns` ([`corner_turns`]).
+///
+/// # Errors
+/// [`CodecError::Length`] when `turns` is not `ceil(triangles / 4)` bytes, and
+/// [`CodecError::CornerTurn`] for an entry of 3.
+pub fn apply_corner_turns(triangles: &mut [[u32; 3]], turns: &[u8]) -> Result<(), CodecError> {
+    if turns.len() != triangles.len().div_ceil(4) {
+        return Err(CodecError::Length {
+            what: "triangle corner turns (bytes)",
+            expected: triangles.len().div_ceil(4),
+            found: turns.len(),
+        });
+    }
+    for (t, tri) in triangles.iter_mut().enumerate() {
+        let k = (turns[t / 4] >> (2 * (t % 4))) & 3;
+        if k == 3 {
+            return Err(CodecError::CornerTurn { triangle: t });
+        }
+        *tri = turn_left(*tri, k);
+    }
+    Ok(())
+}
+
 /// A spatial streaming order of `positions`: `order[i]` is the vertex to stream `i`-th, so that
 /// vertices near in space are near in the buffer (meshopt's `spatial_sort_remap`, a Morton-order
 /// sort). meshopt's vertex codec predicts each vertex from the one before it, so frames in this
@@ -144,5 +190,48 @@ mod order_tests {
         let mut seen = order.clone();
         seen.sort_unstable();
         assert_eq!(seen, [0, 1, 2]);
+    }
+}
+
+#[cfg(test)]
+mod turn_tests {
+    use super::*;
+
+    #[test]
+    fn corner_turns_bring_the_decoded_triangles_back_to_the_sent_ones() {
+        // A strip of triangles meshopt is free to rotate.
+        let sent: Vec<[u32; 3]> = (0..40u32)
+            .map(|i| {
+                if i % 2 == 0 {
+                    [i, i + 1, i + 2]
+                } else {
+                    [i + 1, i, i + 2]
+                }
+            })
+            .collect();
+        let mut bytes = Vec::new();
+        encode_indices(&sent, 42, &mut bytes).unwrap();
+        let mut decoded = Vec::new();
+        decode_indices(&bytes, sent.len(), 42, &mut decoded).unwrap();
+        let turns = corner_turns(&sent, &decoded).unwrap();
+        assert_eq!(turns.len(), 10);
+        apply_corner_turns(&mut decoded, &turns).unwrap();
+        assert_eq!(decoded, sent);
+        // By hand: [b, c, a] needs two left turns to be [a, b, c].
+        assert_eq!(corner_turns(&[[1, 2, 3]], &[[2, 3, 1]]).unwrap(), vec![2]);
+        assert_eq!(
+            corner_turns(&[[1, 2, 3]], &[[1, 3, 2]]),
+            None,
+            "winding differs"
+        );
+        let mut t = vec![[2, 3, 1]];
+        assert_eq!(
+            apply_corner_turns(&mut t, &[3]),
+            Err(CodecError::CornerTurn { triangle: 0 })
+        );
+        assert!(matches!(
+            apply_corner_turns(&mut t, &[]),
+            Err(CodecError::Length { .. })
+        ));
     }
 }

@@ -113,14 +113,16 @@
 //! bytes, decoded values) pin this format for other decoders; `core/tests/codec.rs` documents how
 //! they are regenerated.
 
+pub mod block;
 pub mod frame;
 pub mod index;
 pub mod palette;
 pub mod quant;
 pub mod stream;
 
+pub use block::{decode_vertex_block, encode_vertex_block};
 pub use frame::{FrameHeader, FrameKind, HEADER_LEN, MAGIC, VERSION, VERTEX_SIZE, parse_frame};
-pub use index::{decode_indices, encode_indices, spatial_order};
+pub use index::{apply_corner_turns, corner_turns, decode_indices, encode_indices, spatial_order};
 pub use quant::{OCT_MAX_ERROR_DEG, QuantBox, oct_decode, oct_encode};
 pub use stream::{
     DEFAULT_KEYFRAME_INTERVAL, FrameDecoder, FrameEncoder, decode_keyframe, encode_keyframe,
@@ -273,6 +275,12 @@ pub enum CodecError {
     /// meshopt refused the index buffer (its error code).
     #[error("index buffer failed to decode (meshopt error {0})")]
     IndexCorrupt(i32),
+    /// A triangle's corner turn of 3 (turns are 0, 1 or 2).
+    #[error("triangle {triangle}: corner turn 3, expected 0, 1 or 2")]
+    CornerTurn {
+        /// The triangle's position in the list.
+        triangle: usize,
+    },
     /// meshopt's encoder returned nothing (its output bound was too small): a bug.
     #[error("meshopt produced no output for a {0}")]
     EncoderFailed(&'static str),

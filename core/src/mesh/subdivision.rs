@@ -139,11 +139,39 @@ pub enum SubdivisionError {
 /// one vertex per edge and turns each edge into two plus three per triangle (`V' = V + E`,
 /// `E' = 2E + 3F`, `F' = 4F`). Saturates instead of overflowing.
 pub fn subdivided_vertex_count(mesh: &Mesh, levels: u32) -> usize {
-    let (mut v, mut e, mut f) = (
+    count_after(
         mesh.vertex_count(),
         mesh.edges().len(),
         mesh.triangles.len(),
-    );
+        levels,
+    )
+}
+
+/// [`subdivided_vertex_count`] of a topology given as a vertex count and triangles, `None`
+/// for a level count outside `1..=MAX_LEVELS`: what a palette decoder checks a header's vertex
+/// count against before it allocates anything for it (the mesh may still be refused by
+/// [`loop_steps`]).
+pub fn subdivided_count(vertex_count: usize, triangles: &[[u32; 3]], levels: u32) -> Option<usize> {
+    if !(1..=MAX_LEVELS).contains(&levels) {
+        return None;
+    }
+    let mut edges: Vec<(u32, u32)> = triangles
+        .iter()
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    Some(count_after(
+        vertex_count,
+        edges.len(),
+        triangles.len(),
+        levels,
+    ))
+}
+
+fn count_after(vertices: usize, edges: usize, triangles: usize, levels: u32) -> usize {
+    let (mut v, mut e, mut f) = (vertices, edges, triangles);
     for _ in 0..levels {
         v = v.saturating_add(e);
         e = e.saturating_mul(2).saturating_add(f.saturating_mul(3));
@@ -440,6 +468,34 @@ impl LoopSubdivision {
             triangles: self.triangles.clone(),
         })
     }
+}
+
+/// The one-level matrices `S_1, ..., S_levels` of `levels` Loop subdivisions of a topology
+/// (`vertex_count` vertices, `triangles`) and the subdivided triangles, without the composed
+/// `S`: what a palette stream's decoder rebuilds from the base triangles (issue 41), applying
+/// the steps in turn. The steps are those of [`LoopSubdivision::steps`], bit for bit (each
+/// built in `f64` and rounded once to `f32`).
+///
+/// # Errors
+/// As [`LoopSubdivision::new`].
+pub fn loop_steps(
+    vertex_count: usize,
+    triangles: &[[u32; 3]],
+    levels: u32,
+) -> Result<(Vec<SparseMatrix>, Vec<[u32; 3]>), SubdivisionError> {
+    if !(1..=MAX_LEVELS).contains(&levels) {
+        return Err(SubdivisionError::BadLevels { levels });
+    }
+    let mut vertex_count = vertex_count;
+    let mut triangles = triangles.to_vec();
+    let mut steps = Vec::with_capacity(levels as usize);
+    for _ in 0..levels {
+        let level = Level::build(vertex_count, &triangles)?;
+        steps.push(level.matrix.into_f32());
+        vertex_count = level.vertex_count;
+        triangles = level.triangles;
+    }
+    Ok((steps, triangles))
 }
 
 /// Marks the missing second opposite vertex of a boundary edge.
@@ -800,6 +856,27 @@ mod tests {
         // Edge [0, 1] is on the boundary.
         assert_eq!(m.row(4), (&[0, 1][..], &[0.5, 0.5][..]));
         assert_eq!(s.triangles().len(), 8);
+    }
+
+    /// `loop_steps` (a palette decoder's rebuild) gives `LoopSubdivision`'s steps and
+    /// triangles bit for bit, at every level, and refuses what `new` refuses.
+    #[test]
+    fn loop_steps_are_the_subdivisions_steps() {
+        let m = quad();
+        for levels in 1..=MAX_LEVELS {
+            let s = LoopSubdivision::new(&m, levels).unwrap();
+            let (steps, triangles) = loop_steps(m.vertex_count(), &m.triangles, levels).unwrap();
+            assert_eq!(steps, s.steps(), "levels {levels}");
+            assert_eq!(triangles, s.triangles(), "levels {levels}");
+        }
+        assert_eq!(
+            loop_steps(4, &m.triangles, 0).unwrap_err(),
+            SubdivisionError::BadLevels { levels: 0 }
+        );
+        assert!(matches!(
+            loop_steps(3, &m.triangles, 1).unwrap_err(),
+            SubdivisionError::IndexOutOfRange { index: 3, .. }
+        ));
     }
 
     /// The documented triangle order (module docs), which `runtime::detail`'s grouped normal

@@ -282,9 +282,7 @@ pub(crate) async fn compare_encodings(
                     let d = synth.detail().unwrap();
                     let h = synth.displacements();
                     let b = (0..got.len())
-                        .map(|v| {
-                            eps + d.displacement_error(v, &frame.xi) + h[v].abs() * dn[v] + 1e-5
-                        })
+                        .map(|v| eps + d.displacement_error(&frame.xi) + h[v].abs() * dn[v] + 1e-5)
                         .collect();
                     (edetail, b)
                 }

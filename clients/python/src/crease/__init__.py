@@ -8,7 +8,8 @@ manage models.
         meshes = c.synthesize("demo-hand", controls)        # (F, C, 3) -> (F, V, 3)
 
 Modules: ``client`` (the gRPC API), ``stream`` (mesh streams to arrays), ``codec`` (crease's frame
-codec), ``palette`` (palette streams skinned on the CPU), ``takes`` (take files), ``errors``.
+codec), ``palette`` (palette streams skinned on the CPU), ``loop`` (the Loop subdivision a palette
+header is rebuilt with), ``takes`` (take files), ``errors``.
 The gRPC stubs (``crease.v1``) are generated from the repository's proto/ when the package is
 built.
 """

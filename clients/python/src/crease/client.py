@@ -34,7 +34,7 @@ _SKINNING_NAME = {pb.SKINNING_LBS: "lbs", pb.SKINNING_DQS: "dqs", pb.SKINNING_UN
 CHUNK_BYTES = 3 << 20
 #: Bytes per UploadModel chunk (the server takes at most 4 MiB of data per chunk).
 UPLOAD_CHUNK = 1 << 20
-#: The receive limit: a detail palette header is several MB, a batch's frames more.
+#: The receive limit: a batch's frames can be large (a detail palette header is ~1.4 MB).
 MAX_RECEIVE = 1 << 30
 
 

@@ -1,10 +1,10 @@
 """Palette streams (issue 18, ``Encoding.ENCODING_PALETTE``) decoded on the CPU with NumPy.
 
 A palette stream sends the bones, not the vertices: first a ``crease.v1.PaletteTopology`` with
-everything that never changes (the rest mesh, its skin, and at the detail level the Loop
-subdivision steps and the detail regressor ``D``, ``b``), then ``core::codec`` frames (keyframes
-and deltas, read by :class:`crease.codec.LaneDecoder`) whose four ``u16`` lanes per "vertex" hold
-(``core/src/codec/palette/mod.rs``, ``PaletteTopology.version`` 1)::
+everything that never changes (the rest mesh, its skin, the base triangles, and at the detail
+level the number of Loop levels and the detail regressor ``D``, ``b``), then ``core::codec``
+frames (keyframes and deltas, read by :class:`crease.codec.LaneDecoder`) whose four ``u16`` lanes
+per "vertex" hold (``core/src/codec/palette/mod.rs``, ``PaletteTopology.version`` 1)::
 
     lane vertex 2k       [a, b, c, i]      bone k's rotation, smallest three: i (0..=3) is the
                                            index of the largest component (dropped, rebuilt
@@ -21,10 +21,18 @@ The drawn mesh of a frame (``core::codec::palette::PaletteSynth``, the reference
     h     = D xi + b                       HZY11 eq. 4, the decoded D and b
     out   = high + h n(high)               n: unit area-weighted vertex normals of ``high``
 
+The detail header is small (issue 41, ~1.4 MB for the demo hand instead of 11.5 MB): the Loop
+steps ``S_1 .. S_L`` and the drawn triangles are not sent but rebuilt here from the base
+triangles by :func:`crease.loop.loop_steps`, with the Rust core's numbering and rounding (bit for
+bit; the base triangles are first turned back to the model's corner order by
+``triangle_turns``, since meshopt's index codec may start a triangle at another corner), and
+``D``, ``b`` come as 16-bit multiples ``q`` of one ``detail_step`` in meshopt vertex-codec blocks
+of two values per vertex.
+
 Arithmetic follows the Rust decoder as built for x86-64: every value is ``float32``, every sum is
 taken in the Rust loop's order (sequential, from +0.0; ``h`` from -0.0 as Rust's ``Sum``), so the
-decoded bones, ``xi`` and, given the same triangles, the drawn vertices are the reference's bit
-for bit (``clients/python/tests/test_palette_vectors.py``). The quaternion's normalisation is
+decoded bones, ``xi`` and the drawn vertices (of the same rebuilt steps and triangles) are the
+reference's bit for bit (``clients/python/tests/test_palette_vectors.py``). The quaternion's normalisation is
 glam's SSE2 form, ``q / sqrt((x^2 + z^2) + (y^2 + w^2))``; glam's NEON and scalar builds group that
 sum and multiply by the reciprocal instead, so a Rust decoder on another architecture may differ
 from this one (and from itself on x86-64) by an ulp there.
@@ -43,9 +51,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import meshopt
 import numpy as np
 
 from . import codec
+from .loop import MAX_LEVELS as MAX_LOOP_LEVELS
+from .loop import LoopError, LoopStep, loop_steps
 
 __all__ = [
     "PALETTE_VERSION",
@@ -56,6 +67,7 @@ __all__ = [
     "PaletteStep",
     "PaletteDecoder",
     "palette_vertex_count",
+    "apply_triangle_turns",
 ]
 
 #: The lane layout this module reads (``PaletteTopology.version``).
@@ -67,6 +79,11 @@ LEVEL_DETAIL = 2
 MAX_INFLUENCES = 8
 #: A quantised vertex's skin weights sum to exactly this.
 WEIGHT_ONE = 65535
+#: Stored detail values per meshopt block (``PaletteTopology.detail_blocks``): two int16 make the
+#: 4-byte "vertex" meshopt's vertex codec takes.
+BLOCK_VALUES = 2
+#: meshopt's vertex codec, version 1: the first byte of every detail block.
+_MESHOPT_VERTEX_V1 = 0xA1
 
 _F32 = np.float32
 # std::f32::consts::FRAC_1_SQRT_2 (the double below rounds to the same float32).
@@ -160,38 +177,31 @@ class _RowSums:
 
 
 @dataclass(frozen=True, eq=False)
-class PaletteStep:
-    """One Loop subdivision step (``SubdivisionStep``): new vertex ``r`` is ``sum_e weights[e] *
-    old[cols[e]]`` over ``e`` in ``row_ptr[r] .. row_ptr[r + 1]``."""
+class PaletteStep(LoopStep):
+    """One Loop subdivision step as the decoder applies it (a :class:`crease.loop.LoopStep`, rebuilt
+    from the base triangles): new vertex ``r`` is ``sum_e weights[e] * old[cols[e]]`` over ``e`` in
+    ``row_ptr[r] .. row_ptr[r + 1]``, summed in float32 in entry order (``SparseMatrix::apply``)."""
 
-    rows: int
-    #: The previous level's vertex count.
-    columns: int
-    #: ``rows + 1`` uint32 offsets into ``cols``.
-    row_ptr: np.ndarray
-    #: One uint32 old vertex per entry.
-    cols: np.ndarray
-    #: One index into ``table`` per entry (uint16; u8 on the wire when ``table`` has <= 256).
-    weight_index: np.ndarray
-    #: The distinct weights, float32.
-    table: np.ndarray
-    #: One float32 weight per entry (``table[weight_index]``).
-    weights: np.ndarray
     _sums: _RowSums = field(repr=False)
 
     @classmethod
-    def _build(cls, rows: int, columns: int, row_ptr, cols, weight_index, table) -> "PaletteStep":
-        weights = table[weight_index.astype(np.intp)]
+    def _build(
+        cls, rows: int, columns: int, row_ptr: np.ndarray, cols: np.ndarray, weights: np.ndarray
+    ) -> "PaletteStep":
+        weights = np.asarray(weights, dtype=_F32)
         return cls(
             rows=rows,
             columns=columns,
             row_ptr=row_ptr,
             cols=cols,
-            weight_index=weight_index,
-            table=table,
             weights=weights,
             _sums=_RowSums(row_ptr, cols, weights),
         )
+
+    @classmethod
+    def from_loop(cls, step: LoopStep) -> "PaletteStep":
+        """The step of :func:`crease.loop.loop_steps`, with its summation plan."""
+        return cls._build(step.rows, step.columns, step.row_ptr, step.cols, step.weights)
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """``S x`` for ``(columns, 3)`` float32 ``x``: ``(rows, 3)`` float32, each row's products
@@ -210,7 +220,8 @@ class PaletteStep:
 @dataclass(frozen=True, eq=False)
 class PaletteHeader:
     """A palette stream's first message decoded and checked: everything that never changes, as
-    NumPy arrays (``core::codec::palette::PaletteHeader`` plus the message's own fields)."""
+    NumPy arrays (``core::codec::palette::PaletteHeader`` plus the message's own fields), the
+    detail level's Loop steps and drawn triangles rebuilt from the base triangles."""
 
     model: str
     #: :data:`LEVEL_BASE` or :data:`LEVEL_DETAIL` (an unspecified level reads as base).
@@ -219,8 +230,9 @@ class PaletteHeader:
     version: int
     #: Drawn vertices: ``base_vertices``, or at the detail level the last step's rows.
     vertex_count: int
-    #: ``(T, 3)`` uint32 triangles of the drawn mesh in model vertex ids, as the index codec
-    #: gives them back (it may rotate a triangle's corners; winding kept).
+    #: ``(T, 3)`` uint32 triangles of the drawn mesh in model vertex ids: at the base level the
+    #: base triangles as the index codec gives them back (it may rotate a triangle's corners;
+    #: winding kept), at the detail level their Loop subdivision (``4^L`` per base triangle).
     triangles: np.ndarray
     bones: int
     base_vertices: int
@@ -230,12 +242,13 @@ class PaletteHeader:
     skin_bones: np.ndarray
     #: ``(base_vertices, K)`` float32 weights, ``float32(q) / 65535`` in float32 as Rust does.
     skin_weights: np.ndarray
-    #: The subdivision steps, first level first (empty at the base level).
+    #: The Loop steps rebuilt from the base triangles, first level first (empty at the base
+    #: level).
     steps: list[PaletteStep]
     #: N, the length of every frame's ``xi`` (0 at the base level).
     examples: int
     #: ``(vertex_count, N + 1)`` float32: row v of ``D``, then ``b_v``, each ``float32(q) *
-    #: scale_v`` (the values the decoder uses); ``None`` at the base level.
+    #: detail_step`` (the values the decoder uses); ``None`` at the base level.
     detail: np.ndarray | None
     actor: str
     actor_index: int
@@ -244,20 +257,25 @@ class PaletteHeader:
     influences: int = 0
     #: ``(base_vertices, K)`` uint16 weights as sent (``q``; each row sums to 65535).
     skin_quantised: np.ndarray | None = None
-    #: ``(vertex_count, N + 1)`` int16 detail rows as sent, and their float32 scales.
+    #: ``(vertex_count, N + 1)`` int16 detail values as sent (``q``), and their step (float32).
     detail_rows: np.ndarray | None = None
-    detail_scales: np.ndarray | None = None
+    detail_step: float = 0.0
     #: ``(2, 3)`` float32: the box of the model's poses, min then max (for framing a camera).
     bounds: np.ndarray | None = None
+    #: L, the Loop levels from the base mesh to the drawn one (0 at the base level).
+    levels: int = 0
+    #: ``(T_base, 3)`` uint32 base triangles in model vertex ids: at the detail level in the
+    #: model's own corner order (``triangle_turns`` applied), at the base level as decoded.
+    base_triangles: np.ndarray | None = None
 
     @classmethod
     def from_message(cls, topology: Any) -> "PaletteHeader":
         """Decodes and checks a ``crease.v1.PaletteTopology`` (or a ``MeshFrame`` holding one):
         the version, every array's byte length against the counts, influences in 1..=8, bone
-        indices below ``bones``, weight sums, the subdivision steps' CSR (offsets from 0,
-        non-decreasing, columns ascending and in range, weight indices in range, finite weights)
-        and the triangles, as ``crease_proto::read_palette_topology`` and
-        ``PaletteHeader::validate`` do.
+        indices below ``bones``, weight sums, the base triangles, and at the detail level the
+        corner turns, the detail blocks, the Loop levels, the rebuilt mesh (manifold, its vertex
+        count ``vertex_count``) and the detail step, as ``crease_proto::read_palette_topology``
+        and ``PaletteHeader::validate`` do.
 
         Raises:
             PaletteError: the first problem found, naming the field.
@@ -285,32 +303,10 @@ class PaletteHeader:
         narrow = t.bones <= 256
         skin_bones = _read_le("skin_bones", t.skin_bones, slots, "u1" if narrow else "<u2")
         quantised = _read_le("skin_weights", t.skin_weights, slots, "<u2")
-
-        steps: list[PaletteStep] = []
-        examples = 0
-        detail = detail_rows = detail_scales = None
         nv = int(t.vertex_count)
-        if level == LEVEL_DETAIL:
-            raw_steps = []
-            for s_index, s in enumerate(t.subdivision):
-                name = f"subdivision[{s_index}]"
-                rows = int(s.rows)
-                row_ptr = _read_le(f"{name}.row_ptr", s.row_ptr, rows + 1, "<u4")
-                entries = int(row_ptr[-1])
-                cols = _read_le(f"{name}.cols", s.cols, entries, "<u4")
-                wide = len(s.weights) > 256
-                weight_index = _read_le(f"{name}.weight_index", s.weight_index, entries, "<u2" if wide else "u1")
-                table = np.array(list(s.weights), dtype=_F32)
-                raw_steps.append((rows, int(s.columns), row_ptr, cols, weight_index.astype(np.uint16), table))
-            examples = int(t.examples)
-            detail_rows = _read_le("detail_rows", t.detail_rows, nv * (examples + 1), "<i2").reshape(nv, examples + 1)
-            detail_scales = _read_le("detail_scales", t.detail_scales, nv, "<f4")
-        else:
-            # As the Rust reader: at the base level the detail fields are not read.
-            raw_steps = []
-
+        # The base mesh's triangles at both levels.
         try:
-            triangles = codec.decode_indices(bytes(t.indices), int(t.triangle_count), nv)
+            base_triangles = codec.decode_indices(bytes(t.indices), int(t.triangle_count), nb)
         except codec.CodecError as e:
             raise _err("indices", str(e)) from e
 
@@ -325,23 +321,43 @@ class PaletteHeader:
         bad = np.flatnonzero(sums != WEIGHT_ONE)
         if len(bad):
             raise _err("skin_weights", f"the weights of vertex {bad[0]} sum to {sums[bad[0]]}, expected {WEIGHT_ONE}")
-        columns = nb
+
+        steps: list[PaletteStep] = []
+        examples = levels = 0
+        detail = detail_rows = None
+        detail_step = 0.0
+        triangles = base_triangles
         if level == LEVEL_DETAIL:
-            if not raw_steps:
-                raise _err("subdivision", "no steps at the detail level")
-            for s_index, (rows, step_columns, row_ptr, cols, weight_index, table) in enumerate(raw_steps):
-                _check_step(f"subdivision[{s_index}]", columns, step_columns, row_ptr, cols, weight_index, table)
-                steps.append(PaletteStep._build(rows, step_columns, row_ptr, cols, weight_index, table))
-                columns = rows
-        if nv != columns:
-            what = "the last subdivision step's rows" if level == LEVEL_DETAIL else "base_vertices"
-            raise _err("vertex_count", f"{nv}, expected {columns} ({what})")
-        if detail_rows is not None and detail_scales is not None:
-            bad = np.flatnonzero(~np.isfinite(detail_scales))
-            if len(bad):
-                raise _err("detail_scales", f"detail scale {bad[0]} is not finite")
-            # PaletteDetail::value: f32::from(q) * s_v, in float32.
-            detail = np.ascontiguousarray(detail_rows.astype(_F32) * detail_scales[:, None])
+            # As the Rust reader: at the base level the detail fields are not read.
+            base_triangles = apply_triangle_turns(base_triangles, bytes(t.triangle_turns))
+            examples = int(t.examples)
+            width = examples + 1
+            blocks = -(-width // BLOCK_VALUES)
+            if len(t.detail_blocks) != blocks:
+                raise _err(
+                    "detail_blocks",
+                    f"{len(t.detail_blocks)} blocks, expected {blocks} "
+                    f"({width} values per row, {BLOCK_VALUES} per block)",
+                )
+            levels = int(t.subdivision_levels)
+            if not 1 <= levels <= MAX_LOOP_LEVELS:
+                raise _err("subdivision_levels", f"{levels}, expected 1..={MAX_LOOP_LEVELS} at the detail level")
+            try:
+                loop, triangles = loop_steps(nb, base_triangles, levels)
+            except LoopError as e:
+                raise _err("indices", f"the base triangles do not subdivide: {e}") from e
+            if nv != loop[-1].rows:
+                raise _err("vertex_count", f"{nv}, but {levels} Loop levels of the base mesh give {loop[-1].rows}")
+            step = _F32(t.detail_step)
+            if not (np.isfinite(step) and step > 0):
+                raise _err("detail_step", f"{float(step)}, expected a finite value > 0")
+            detail_rows = _read_blocks(t.detail_blocks, nv, width)
+            detail_step = float(step)
+            # PaletteDetail::value: f32::from(q) * quantum, in float32.
+            detail = np.ascontiguousarray(detail_rows.astype(_F32) * step)
+            steps = [PaletteStep.from_loop(s) for s in loop]
+        elif nv != nb:
+            raise _err("vertex_count", f"{nv}, expected {nb} (base_vertices)")
 
         bounds_min = bounds_max = (0.0, 0.0, 0.0)
         if hasattr(t, "HasField"):
@@ -373,52 +389,60 @@ class PaletteHeader:
             influences=k,
             skin_quantised=quantised.reshape(nb, k),
             detail_rows=detail_rows,
-            detail_scales=detail_scales,
+            detail_step=detail_step,
             bounds=np.array([bounds_min, bounds_max], dtype=_F32),
+            levels=levels,
+            base_triangles=base_triangles,
         )
 
 
-def _check_step(
-    name: str,
-    columns: int,
-    step_columns: int,
-    row_ptr: np.ndarray,
-    cols: np.ndarray,
-    weight_index: np.ndarray,
-    table: np.ndarray,
-) -> None:
-    """A subdivision step's CSR, as ``SparseMatrix::from_csr`` and ``PaletteHeader::validate``."""
-    if step_columns != columns:
-        raise _err(f"{name}.columns", f"{step_columns}, expected {columns} (the previous level's vertex count)")
-    if row_ptr[0] != 0:
-        raise _err(f"{name}.row_ptr", f"row_ptr[0] is {row_ptr[0]}, expected 0")
-    ptr = row_ptr.astype(np.int64)
-    down = np.flatnonzero(np.diff(ptr) < 0)
-    if len(down):
-        r = down[0] + 1
-        raise _err(f"{name}.row_ptr", f"row_ptr[{r}] is {ptr[r]}, below row_ptr[{r - 1}] = {ptr[r - 1]}")
-    c = cols.astype(np.int64)
-    bad = np.flatnonzero(c >= columns)
+def apply_triangle_turns(triangles: np.ndarray, turns: bytes) -> np.ndarray:
+    """``triangles`` (as the index codec gives them back) each turned left by its entry of
+    ``turns`` (``PaletteTopology.triangle_turns``, ``core::codec::apply_corner_turns``): per
+    triangle ``k`` in 0..3, four to a byte, low bits first; turned left ``k`` times (``[b, c,
+    a]`` for ``k = 1``, ``[c, a, b]`` for ``k = 2``) it is the model's triangle, whose first
+    corner Loop's numbering depends on. Returns a new ``(T, 3)`` uint32 array.
+
+    Raises:
+        PaletteError: ``turns`` not ``ceil(T / 4)`` bytes, or an entry of 3 (naming the
+            triangle).
+    """
+    count = len(triangles)
+    expected = -(-count // 4)
+    if len(turns) != expected:
+        raise _err("triangle_turns", f"{len(turns)} bytes, expected {expected} (2 bits for each of {count} triangles)")
+    packed = np.frombuffer(bytes(turns), dtype=np.uint8)
+    k = ((packed[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3).reshape(-1)[:count].astype(np.intp)
+    bad = np.flatnonzero(k == 3)
     if len(bad):
-        raise _err(f"{name}.cols", f"entry {bad[0]} is column {c[bad[0]]}, expected < {columns}")
-    # Within a row, columns strictly ascending: compare each entry with the one before unless it
-    # starts a row.
-    starts = np.zeros(len(c), dtype=bool)
-    starts[ptr[:-1][ptr[:-1] < len(c)]] = True
-    bad = np.flatnonzero((np.diff(c) <= 0) & ~starts[1:]) + 1
-    if len(bad):
-        e = bad[0]
-        row = int(np.searchsorted(ptr, e, side="right")) - 1
-        raise _err(
-            f"{name}.cols", f"row {row}: column {c[e]} at entry {e} does not follow {c[e - 1]} (ascending, unique)"
-        )
-    bad = np.flatnonzero(weight_index >= len(table))
-    if len(bad):
-        raise _err(f"{name}.weight_index", f"entry {bad[0]} is {weight_index[bad[0]]}, expected < {len(table)}")
-    used = table[weight_index.astype(np.intp)]
-    bad = np.flatnonzero(~np.isfinite(used))
-    if len(bad):
-        raise _err(f"{name}.weights", f"the weight of entry {bad[0]} is {used[bad[0]]}, not finite")
+        raise _err("triangle_turns", f"triangle {bad[0]}: turn 3, expected 0, 1 or 2")
+    corner = (np.arange(3, dtype=np.intp)[None, :] + k[:, None]) % 3
+    return np.ascontiguousarray(np.take_along_axis(triangles, corner, axis=1), dtype=np.uint32)
+
+
+def _read_blocks(blocks: Any, count: int, width: int) -> np.ndarray:
+    """``PaletteTopology.detail_blocks`` back to ``(count, width)`` int16: block ``j`` is
+    ``count`` 4-byte vertices of meshopt's vertex codec (version 1), values ``2 j`` and ``2 j +
+    1`` of every row (the second dropped past the row's end)."""
+    rows = np.zeros((count, width), dtype=np.int16)
+    for j, data in enumerate(blocks):
+        name = f"detail_blocks[{j}]"
+        data = bytes(data)
+        if not data:
+            raise _err(name, "empty, expected a meshopt vertex block")
+        if data[0] != _MESHOPT_VERTEX_V1:
+            raise _err(name, f"starts with {data[0]:#04x}, expected meshopt's vertex codec v1 header 0xa1")
+        if count == 0:
+            continue
+        try:
+            raw = meshopt.decode_vertex_buffer(data, count, 2 * BLOCK_VALUES)
+        except (RuntimeError, ValueError) as e:
+            raise _err(name, f"meshopt refused the block of {count} vertices: {e}") from e
+        values = np.asarray(raw, dtype=np.uint8).reshape(count, 4).view("<i2").astype(np.int16)
+        first = j * BLOCK_VALUES
+        take = min(BLOCK_VALUES, width - first)
+        rows[:, first : first + take] = values[:, :take]
+    return rows
 
 
 class PaletteDecoder:

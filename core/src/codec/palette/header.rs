@@ -1,8 +1,18 @@
 //! The palette stream's header (issue 18): everything a client needs once to turn palette
 //! frames into meshes. The base mesh is linear blend skinning of the rest mesh (FKY08 eq. 1),
-//! so the header carries the rest positions and the skin; the detail layer is
+//! so the header carries the rest positions, the skin and the triangles; the detail layer is
 //! `S · base + h n` with `h = D xi + b` (HZY11 eq. 4), so at the detail level it also carries
-//! the Loop subdivision steps whose product is `S` and the detail regressor's `D` and `b`.
+//! the number of Loop levels whose steps make `S` and the detail regressor's `D` and `b`.
+//!
+//! # The Loop steps are rebuilt, not sent (issue 41)
+//!
+//! `S`'s steps and the drawn triangles follow from the base triangles alone by the rules and
+//! the numbering of [`crate::mesh::subdivision`] (ARCHITECTURE.md, "Palette streams"): a
+//! decoder rebuilds them ([`loop_steps`], [`PaletteDetail::rebuild`]) instead of reading ~6 MB
+//! of sparse matrices and ~0.5 MB of drawn triangles for the demo hand. Every decoder (this
+//! one, `web/palette.js`, the Python package's) builds each step's weights in `f64` and rounds
+//! them once to `f32`, and sums a row in column order, so the decoders agree bit for bit
+//! (`tests/vectors/loop-v1.json`).
 //!
 //! # Quantisation and its error
 //!
@@ -10,18 +20,22 @@
 //!   vertex's `q` sum to exactly 65535: every weight is within `1/65535` of the model's
 //!   ([`quantise_weights`]), and the decoded weights still sum to one, so a weight error moves
 //!   a skinned vertex `v` by at most `sum_k |dw_k| |T_k p - v|` (the errors sum to zero).
-//! - `D` and `b` are 16-bit with a scale per detailed vertex: row `v` (`D_v0 .. D_v(N-1)`,
-//!   `b_v`) is stored as `q / s_v` with `s_v = max |row| / 32767`, so each value is within
-//!   `s_v / 2` of the model's and `h_v` within `s_v / 2 (|xi|_1 + 1)`
-//!   ([`PaletteDetail::displacement_error`]).
-//! - The rest positions and the subdivision weights are exact `f32`s: they are the model's.
+//! - `D` and `b` are 16-bit multiples of one step, the quantum ([`detail_quantum`]): each
+//!   value is within `quantum / 2` of the model's and `h_v` within
+//!   `quantum / 2 (|xi|_1 + 1)` ([`PaletteDetail::displacement_error`]). The quantum is what
+//!   that bound needs: near the training poses it is no more than the bones' own
+//!   quantisation may move the farthest rest vertex. (Issue 18 stored each row with its own
+//!   16-bit scale, ~1000x finer than that, 3.9 MB for the demo hand; one step makes the
+//!   values small integers where the detail is small, which the wire's meshopt coding packs
+//!   into a few bits.)
+//! - The rest positions are exact `f32`s: they are the model's.
 //!
 //! The wire form (protobuf `PaletteTopology`) is `crease-proto`'s; [`PaletteHeader::validate`]
 //! checks one read from the wire before anything indexes with it.
 
 use glam::Vec3;
 
-use crate::mesh::subdivision::{LoopSubdivision, SparseMatrix};
+use crate::mesh::subdivision::{LoopSubdivision, SparseMatrix, loop_steps};
 use crate::runtime::displacement::DetailRegressor;
 use crate::runtime::skin::SkinWeights;
 
@@ -86,102 +100,34 @@ pub struct PaletteSkin {
     pub weights: Vec<u16>,
 }
 
-/// One Loop subdivision step, its weights as indices into a table of the distinct values.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct PaletteStep {
-    /// The previous level's vertex count.
-    pub columns: usize,
-    /// `rows + 1` offsets into `cols` and `weight_index`.
-    pub row_ptr: Vec<u32>,
-    /// One old vertex per entry.
-    pub cols: Vec<u32>,
-    /// One index into `weights` per entry.
-    pub weight_index: Vec<u16>,
-    /// The distinct weights.
-    pub weights: Vec<f32>,
-}
-
-impl PaletteStep {
-    /// Rows: the new level's vertex count.
-    pub fn rows(&self) -> usize {
-        self.row_ptr.len().saturating_sub(1)
-    }
-
-    /// The step of a subdivision matrix (its weights tabulated). `None` with more than 65,536
-    /// distinct weights (Loop's rules give a few per vertex valence).
-    pub fn from_matrix(m: &SparseMatrix) -> Option<PaletteStep> {
-        let mut table: Vec<f32> = m.vals().to_vec();
-        table.sort_by(f32::total_cmp);
-        table.dedup_by(|a, b| a.to_bits() == b.to_bits());
-        if table.len() > 1 << 16 {
-            return None;
-        }
-        let weight_index = m
-            .vals()
-            .iter()
-            .map(|v| {
-                let i = table
-                    .binary_search_by(|t| t.total_cmp(v))
-                    .expect("every value is in the table");
-                i as u16
-            })
-            .collect();
-        Some(PaletteStep {
-            columns: m.columns(),
-            row_ptr: m.row_ptr().to_vec(),
-            cols: m.cols().to_vec(),
-            weight_index,
-            weights: table,
-        })
-    }
-
-    /// The step as a sparse matrix (after [`PaletteHeader::validate`]).
-    ///
-    /// # Errors
-    /// The matrix's own checks (see [`SparseMatrix::from_csr`]).
-    pub fn to_matrix(&self) -> Result<SparseMatrix, PaletteHeaderError> {
-        let vals = self
-            .weight_index
-            .iter()
-            .map(|&i| {
-                self.weights
-                    .get(usize::from(i))
-                    .copied()
-                    .unwrap_or(f32::NAN)
-            })
-            .collect();
-        SparseMatrix::from_csr(self.columns, self.row_ptr.clone(), self.cols.clone(), vals).map_err(
-            |e| PaletteHeaderError::Value {
-                what: "subdivision step".into(),
-                message: e.to_string(),
-            },
-        )
-    }
-}
-
-/// The detail layer's part of the header: the subdivision steps and `D`, `b` quantised.
+/// The detail layer's part of the header: the Loop steps (rebuilt from the base triangles,
+/// never sent) and `D`, `b` quantised with one step.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PaletteDetail {
-    /// The Loop steps, first level first.
-    pub steps: Vec<PaletteStep>,
+    /// Loop levels, `1..=MAX_LEVELS`.
+    pub levels: u32,
+    /// The one-level matrices `S_1 .. S_L` ([`loop_steps`] of the base triangles).
+    pub steps: Vec<SparseMatrix>,
+    /// The drawn (subdivided) mesh's triangles.
+    pub triangles: Vec<[u32; 3]>,
     /// N: the length of every frame's `xi`.
     pub examples: usize,
-    /// Per detailed vertex, `N + 1` values: its row of `D`, then `b`.
+    /// Per detailed vertex, `N + 1` values: its row of `D`, then `b`; each `q * quantum`.
     pub rows: Vec<i16>,
-    /// Per detailed vertex, the scale of its row.
-    pub scales: Vec<f32>,
+    /// The step of every stored value (module docs: [`detail_quantum`]).
+    pub quantum: f32,
 }
 
 impl PaletteDetail {
     /// Detailed vertices.
     pub fn vertex_count(&self) -> usize {
-        self.scales.len()
+        self.rows.len() / self.examples.saturating_add(1)
     }
 
-    /// The decoded value of entry `q` of vertex `v`'s row: `q * s_v`.
+    /// The decoded value of a stored `q`: `q * quantum`.
     #[inline]
-    pub fn value(&self, v: usize, q: i16) -> f32 {
-        f32::from(q) * self.scales[v]
+    pub fn value(&self, q: i16) -> f32 {
+        f32::from(q) * self.quantum
     }
 
     /// `h = D xi + b` with the decoded `D` and `b`, into `out` (one per detailed vertex).
@@ -192,12 +138,8 @@ impl PaletteDetail {
         let n = self.examples;
         assert_eq!(xi.len(), n, "xi length != examples");
         assert_eq!(out.len(), self.vertex_count(), "h length != vertices");
-        for (v, (o, row)) in out
-            .iter_mut()
-            .zip(self.rows.chunks_exact(n + 1))
-            .enumerate()
-        {
-            let s = self.scales[v];
+        let s = self.quantum;
+        for (o, row) in out.iter_mut().zip(self.rows.chunks_exact(n + 1)) {
             let dot: f32 = row[..n]
                 .iter()
                 .zip(xi)
@@ -208,10 +150,80 @@ impl PaletteDetail {
     }
 
     /// A bound on `|h_v - h'_v|` between the model's regressor and the decoded one for kernel
-    /// vector `xi` (module docs), before `f32` rounding.
-    pub fn displacement_error(&self, v: usize, xi: &[f32]) -> f32 {
-        0.5 * self.scales[v] * (xi.iter().map(|x| x.abs()).sum::<f32>() + 1.0)
+    /// vector `xi` (module docs), before `f32` rounding; the same for every vertex.
+    pub fn displacement_error(&self, xi: &[f32]) -> f32 {
+        0.5 * self.quantum * (xi.iter().map(|x| x.abs()).sum::<f32>() + 1.0)
     }
+}
+
+impl PaletteDetail {
+    /// The detail part of a header read from the wire: the Loop steps and the drawn triangles
+    /// rebuilt from the `base_vertices` and `base_triangles` of the base mesh ([`loop_steps`]),
+    /// with the stored `rows` and `quantum`.
+    ///
+    /// # Errors
+    /// [`PaletteHeaderError::Value`] naming the subdivision's error (a triangle past the
+    /// vertices, a non-manifold edge, a bad level count).
+    pub fn rebuild(
+        base_vertices: usize,
+        base_triangles: &[[u32; 3]],
+        levels: u32,
+        examples: usize,
+        rows: Vec<i16>,
+        quantum: f32,
+    ) -> Result<PaletteDetail, PaletteHeaderError> {
+        let (steps, triangles) =
+            loop_steps(base_vertices, base_triangles, levels).map_err(|e| {
+                PaletteHeaderError::Value {
+                    what: "subdivision of the base triangles".into(),
+                    message: e.to_string(),
+                }
+            })?;
+        Ok(PaletteDetail {
+            levels,
+            steps,
+            triangles,
+            examples,
+            rows,
+            quantum,
+        })
+    }
+}
+
+/// The step `D` and `b` are stored with (module docs): the bones' own quantisation error at
+/// the rest vertex farthest from the origin (`2 ROTATION_ERROR |p|`, the rotation part of
+/// [`super::vertex_error_bound`]) spread over `(|xi|_1 + 1) / 2` for the largest `|xi|_1` of
+/// the regressor's training inputs, so that near the examples `D`'s rounding moves a detailed
+/// vertex no more than the bones' rounding already may; raised to `max |value| / 32767` where
+/// that is coarser, so that every value fits 16 bits. 1 when everything is zero.
+pub fn detail_quantum(rest: &[Vec3], regressor: &DetailRegressor) -> f32 {
+    let op = &regressor.operator;
+    let max =
+        op.m.iter()
+            .chain(&op.b)
+            .filter(|x| x.is_finite())
+            .fold(0.0f32, |m, x| m.max(x.abs()));
+    let radius = rest
+        .iter()
+        .filter(|p| p.is_finite())
+        .fold(0.0f32, |m, p| m.max(p.length()));
+    let n = regressor.example_count();
+    let d = regressor.d_in;
+    let mut xi = vec![0.0f32; n];
+    let mut xi_norm = 0.0f32;
+    if d > 0 && regressor.examples.len() == n * d {
+        for x in regressor.examples.chunks_exact(d) {
+            regressor.kernel_vector(x, &mut xi);
+            let norm: f32 = xi.iter().map(|v| v.abs()).sum();
+            if norm.is_finite() {
+                xi_norm = xi_norm.max(norm);
+            }
+        }
+    }
+    let target = 2.0 * (2.0 * super::ROTATION_ERROR * radius) / (xi_norm + 1.0);
+    let floor = max / DETAIL_Q_MAX;
+    let q = target.max(floor);
+    if q.is_finite() && q > 0.0 { q } else { 1.0 }
 }
 
 /// A palette stream's header, decoded (module docs).
@@ -223,7 +235,8 @@ pub struct PaletteHeader {
     pub rest: Vec<Vec3>,
     /// Its skin.
     pub skin: PaletteSkin,
-    /// The triangles of the drawn mesh (base, or detailed with [`PaletteHeader::detail`]).
+    /// The base mesh's triangles (the drawn ones at the detail level are
+    /// [`PaletteDetail::triangles`], their subdivision: [`PaletteHeader::drawn_triangles`]).
     pub triangles: Vec<[u32; 3]>,
     /// The detail layer, at the detail level.
     pub detail: Option<PaletteDetail>,
@@ -304,7 +317,7 @@ impl PaletteHeader {
     }
 
     /// This header at the detail level: `subdivision`'s steps and triangles, `regressor`'s
-    /// `D` and `b` quantised (module docs).
+    /// `D` and `b` quantised with [`detail_quantum`] (module docs).
     ///
     /// # Errors
     /// [`PaletteHeaderError`] when the regressor or the subdivision does not fit the mesh.
@@ -322,46 +335,35 @@ impl PaletteHeader {
         length("detail regressor rows", regressor.vertex_count(), nv)?;
         let n = regressor.example_count();
         let op = &regressor.operator;
-        let mut rows = Vec::with_capacity(nv * (n + 1));
-        let mut scales = Vec::with_capacity(nv);
-        for v in 0..nv {
-            let d = &op.m[v * n..(v + 1) * n];
-            let b = op.b[v];
-            let max = d.iter().chain([&b]).fold(0.0f32, |m, x| m.max(x.abs()));
-            let s = if max.is_finite() && max > 0.0 {
-                max / DETAIL_Q_MAX
+        let quantum = detail_quantum(&self.rest, regressor);
+        let q = |x: f32| {
+            if x.is_finite() {
+                (x / quantum).round().clamp(-DETAIL_Q_MAX, DETAIL_Q_MAX) as i16
             } else {
-                0.0
-            };
-            let q = |x: f32| {
-                if s > 0.0 {
-                    (x / s).round().clamp(-DETAIL_Q_MAX, DETAIL_Q_MAX) as i16
-                } else {
-                    0
-                }
-            };
-            rows.extend(d.iter().map(|&x| q(x)));
-            rows.push(q(b));
-            scales.push(s);
+                0
+            }
+        };
+        let mut rows = Vec::with_capacity(nv * (n + 1));
+        for v in 0..nv {
+            rows.extend(op.m[v * n..(v + 1) * n].iter().map(|&x| q(x)));
+            rows.push(q(op.b[v]));
         }
-        let steps = subdivision
-            .steps()
-            .iter()
-            .map(|m| {
-                PaletteStep::from_matrix(m).ok_or_else(|| PaletteHeaderError::Value {
-                    what: "subdivision step".into(),
-                    message: "more than 65536 distinct weights".into(),
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        self.triangles = subdivision.triangles().to_vec();
         self.detail = Some(PaletteDetail {
-            steps,
+            levels: subdivision.levels(),
+            steps: subdivision.steps().to_vec(),
+            triangles: subdivision.triangles().to_vec(),
             examples: n,
             rows,
-            scales,
+            quantum,
         });
         Ok(self)
+    }
+
+    /// The drawn mesh's triangles: the base mesh's, or at the detail level their subdivision.
+    pub fn drawn_triangles(&self) -> &[[u32; 3]] {
+        self.detail
+            .as_ref()
+            .map_or(&self.triangles, |d| &d.triangles)
     }
 
     /// Vertices of the drawn mesh.
@@ -433,55 +435,52 @@ impl PaletteHeader {
                 });
             }
         }
-        let mut columns = nb;
+        if let Some((t, &tri)) = self
+            .triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&i| i as usize >= nb))
+        {
+            return Err(PaletteHeaderError::Index {
+                what: "triangle".into(),
+                index: t,
+                value: u64::from(*tri.iter().max().expect("three corners")),
+                limit: nb,
+            });
+        }
         if let Some(d) = &self.detail {
+            length("subdivision steps", d.steps.len(), d.levels as usize)?;
+            let mut columns = nb;
+            for (l, step) in d.steps.iter().enumerate() {
+                length(format!("subdivision[{l}] columns"), step.columns(), columns)?;
+                columns = step.rows();
+            }
             if d.steps.is_empty() {
                 return Err(PaletteHeaderError::Value {
                     what: "subdivision".into(),
                     message: "no steps at the detail level".into(),
                 });
             }
-            for (l, step) in d.steps.iter().enumerate() {
-                length(format!("subdivision[{l}] columns"), step.columns, columns)?;
-                step.to_matrix().map_err(|e| PaletteHeaderError::Value {
-                    what: format!("subdivision[{l}]"),
-                    message: e.to_string(),
-                })?;
-                if let Some(e) = step
-                    .weight_index
-                    .iter()
-                    .position(|&i| usize::from(i) >= step.weights.len())
-                {
-                    return Err(PaletteHeaderError::Index {
-                        what: format!("subdivision[{l}] weight_index"),
-                        index: e,
-                        value: u64::from(step.weight_index[e]),
-                        limit: step.weights.len(),
-                    });
-                }
-                columns = step.rows();
-            }
-            length("detail scales", d.scales.len(), columns)?;
             length("detail rows", d.rows.len(), columns * (d.examples + 1))?;
-            if let Some(v) = d.scales.iter().position(|s| !s.is_finite()) {
+            if !(d.quantum.is_finite() && d.quantum > 0.0) {
                 return Err(PaletteHeaderError::Value {
-                    what: format!("detail scale {v}"),
-                    message: "not finite".into(),
+                    what: "detail quantum".into(),
+                    message: format!("{}, expected a finite value > 0", d.quantum),
                 });
             }
-        }
-        if let Some((t, &tri)) = self
-            .triangles
-            .iter()
-            .enumerate()
-            .find(|(_, t)| t.iter().any(|&i| i as usize >= columns))
-        {
-            return Err(PaletteHeaderError::Index {
-                what: "triangle".into(),
-                index: t,
-                value: u64::from(*tri.iter().max().expect("three corners")),
-                limit: columns,
-            });
+            if let Some((t, &tri)) = d
+                .triangles
+                .iter()
+                .enumerate()
+                .find(|(_, t)| t.iter().any(|&i| i as usize >= columns))
+            {
+                return Err(PaletteHeaderError::Index {
+                    what: "drawn triangle".into(),
+                    index: t,
+                    value: u64::from(*tri.iter().max().expect("three corners")),
+                    limit: columns,
+                });
+            }
         }
         Ok(())
     }
@@ -516,18 +515,97 @@ mod tests {
         assert_eq!(q, [65535, 0]);
     }
 
+    /// A small detail regressor: `rows` vertices, two examples of one input, a Gaussian.
+    fn regressor(m: Vec<f32>, b: Vec<f32>) -> DetailRegressor {
+        use crate::runtime::displacement::DetailInput;
+        use crate::runtime::kernel::Kernel;
+        use crate::runtime::predict::LinearOperator;
+        DetailRegressor {
+            input: DetailInput::Rotations,
+            kernel: Kernel::Gaussian { sigma: 1.0 },
+            d_in: 1,
+            examples: vec![0.0, 1.0],
+            operator: LinearOperator {
+                rows: b.len(),
+                cols: 2,
+                m,
+                b,
+            },
+        }
+    }
+
+    /// The quantum by its rule, computed here from its parts: the Gaussian's kernel vectors at
+    /// the two inputs are `[1, e^-1/2]` and `[e^-1/2, 1]`, so `|xi|_1 = 1 + e^-1/2`; the
+    /// farthest rest vertex is at 2.
     #[test]
-    fn a_step_tabulates_its_weights_and_rebuilds_the_same_matrix() {
-        let m = SparseMatrix::from_csr(
-            3,
-            vec![0, 2, 3, 6],
-            vec![0, 2, 1, 0, 1, 2],
-            vec![0.375, 0.625, 1.0, 0.375, 0.25, 0.375],
-        )
-        .unwrap();
-        let step = PaletteStep::from_matrix(&m).unwrap();
-        assert_eq!(step.weights, vec![0.25, 0.375, 0.625, 1.0]);
-        assert_eq!(step.weight_index, vec![1, 2, 3, 1, 0, 1]);
-        assert_eq!(step.to_matrix().unwrap(), m);
+    fn the_quantum_follows_the_bones_error_and_the_largest_value() {
+        let rest = [Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, -2.0, 0.0)];
+        let small = regressor(vec![1e-6, -2e-6, 3e-7, 0.0], vec![5e-7, 0.0]);
+        let xi_norm = 1.0 + (-0.5f64).exp();
+        let bones = 2.0 * f64::from(super::super::ROTATION_ERROR) * 2.0;
+        let want = 2.0 * bones / (xi_norm + 1.0);
+        let got = f64::from(detail_quantum(&rest, &small));
+        assert!((got - want).abs() <= 1e-6 * want, "{got} vs {want}");
+        // Values too large for 16 bits at that step raise it to max / 32767.
+        let large = regressor(vec![3.0, -7.0, 0.5, 0.0], vec![1.0, 0.0]);
+        assert_eq!(detail_quantum(&rest, &large), 7.0 / 32767.0);
+        // Nothing at all: 1 (every value is 0 at any step).
+        let zero = regressor(vec![0.0; 4], vec![0.0; 2]);
+        assert_eq!(detail_quantum(&[Vec3::ZERO], &zero), 1.0);
+    }
+
+    /// Every stored value is within half a quantum of the model's, and `h` within the bound,
+    /// checked against `h` computed in `f64` from the model's own `D` and `b`.
+    #[test]
+    fn stored_values_stay_within_half_a_quantum() {
+        use crate::mesh::Mesh;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(0.1, 0.0, 0.0),
+                Vec3::new(0.0, 0.1, 0.0),
+                Vec3::new(0.0, 0.0, 0.1),
+            ],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        };
+        let sub = LoopSubdivision::new(&mesh, 2).unwrap();
+        let nv = sub.vertex_count();
+        let m: Vec<f32> = (0..nv * 2).map(|_| rng.random_range(-1e-4..1e-4)).collect();
+        let b: Vec<f32> = (0..nv).map(|_| rng.random_range(-1e-4..1e-4)).collect();
+        let reg = regressor(m.clone(), b.clone());
+        let skin = SkinWeights::new(1, vec![0; 4], vec![1.0; 4]).unwrap();
+        let header = PaletteHeader::base(&mesh.positions, &mesh.triangles, &skin, 1)
+            .unwrap()
+            .with_detail(&sub, &reg)
+            .unwrap();
+        header.validate().unwrap();
+        let d = header.detail.as_ref().unwrap();
+        assert_eq!(d.quantum, detail_quantum(&mesh.positions, &reg));
+        assert_eq!(header.drawn_triangles(), sub.triangles());
+        for v in 0..nv {
+            let row = &d.rows[v * 3..v * 3 + 3];
+            for (j, want) in [m[v * 2], m[v * 2 + 1], b[v]].into_iter().enumerate() {
+                let err = (d.value(row[j]) - want).abs();
+                assert!(err <= 0.5 * d.quantum * (1.0 + 1e-5), "v {v} j {j}: {err}");
+            }
+        }
+        let xi = [0.7f32, -1.3];
+        let mut h = vec![0.0; nv];
+        d.displacements(&xi, &mut h);
+        let bound = d.displacement_error(&xi);
+        for v in 0..nv {
+            let exact =
+                f64::from(m[v * 2]) * 0.7 + f64::from(m[v * 2 + 1]) * -1.3 + f64::from(b[v]);
+            let err = (f64::from(h[v]) - exact).abs();
+            assert!(
+                err <= f64::from(bound) * 1.001 + 1e-9,
+                "v {v}: {err} > {bound}"
+            );
+        }
+        // The rebuild from the base triangles is the same detail part.
+        let again =
+            PaletteDetail::rebuild(4, &mesh.triangles, 2, 2, d.rows.clone(), d.quantum).unwrap();
+        assert_eq!(&again, d);
     }
 }

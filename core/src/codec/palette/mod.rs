@@ -50,7 +50,7 @@ pub mod header;
 pub mod synth;
 
 pub use header::{
-    PaletteDetail, PaletteHeader, PaletteHeaderError, PaletteSkin, PaletteStep, quantise_weights,
+    PaletteDetail, PaletteHeader, PaletteHeaderError, PaletteSkin, detail_quantum, quantise_weights,
 };
 pub use synth::{PaletteSynth, PaletteSynthError};
 

@@ -16,7 +16,6 @@ use glam::Vec3;
 
 use super::PaletteFrame;
 use super::header::{PaletteDetail, PaletteHeader, PaletteHeaderError};
-use crate::mesh::subdivision::SparseMatrix;
 use crate::runtime::detail::{displace, scatter_normals};
 use crate::runtime::skin::{BonePalette, SkinWeights, skin_lbs};
 
@@ -39,7 +38,6 @@ pub enum PaletteSynthError {
 #[derive(Debug)]
 struct DetailState {
     header: PaletteDetail,
-    steps: Vec<SparseMatrix>,
     /// Each step's output (the last is `high`).
     levels: Vec<Vec<Vec3>>,
     h: Vec<f32>,
@@ -67,18 +65,13 @@ impl PaletteSynth {
     pub fn new(header: PaletteHeader) -> Result<PaletteSynth, PaletteHeaderError> {
         header.validate()?;
         let skin = header.skin_weights()?;
+        let triangles = header.drawn_triangles().to_vec();
         let detail = match header.detail {
             Some(d) => {
-                let steps = d
-                    .steps
-                    .iter()
-                    .map(|s| s.to_matrix())
-                    .collect::<Result<Vec<_>, _>>()?;
-                let levels = steps.iter().map(|m| vec![Vec3::ZERO; m.rows()]).collect();
+                let levels = d.steps.iter().map(|m| vec![Vec3::ZERO; m.rows()]).collect();
                 let n = d.vertex_count();
                 Some(DetailState {
                     header: d,
-                    steps,
                     levels,
                     h: vec![0.0; n],
                     normals: vec![Vec3::ZERO; n],
@@ -88,11 +81,11 @@ impl PaletteSynth {
             None => None,
         };
         Ok(PaletteSynth {
+            triangles,
             base: header.rest.clone(),
             rest: header.rest,
             skin,
             bones: header.bones,
-            triangles: header.triangles,
             palette: BonePalette::new(),
             detail,
         })
@@ -167,7 +160,7 @@ impl PaletteSynth {
         let Some(d) = &mut self.detail else {
             return Ok(&self.base);
         };
-        for (k, step) in d.steps.iter().enumerate() {
+        for (k, step) in d.header.steps.iter().enumerate() {
             let (done, rest) = d.levels.split_at_mut(k);
             let input = done.last().map_or(self.base.as_slice(), Vec::as_slice);
             step.apply(input, &mut rest[0])
