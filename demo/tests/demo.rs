@@ -95,6 +95,23 @@ fn run_the_printed_watch_command(line: &str) {
     assert!(stderr.contains("watching room \"demo\""), "{stderr}");
 }
 
+/// A subscription to `room`'s base level (vertex frames).
+#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
+async fn subscribe_base(
+    client: &mut CreaseClient<tonic::transport::Channel>,
+    room: &str,
+) -> tonic::Streaming<v1::MeshFrame> {
+    client
+        .subscribe(v1::SubscribeRequest {
+            room: room.into(),
+            level: v1::Level::Base as i32,
+            ..Default::default()
+        })
+        .await
+        .unwrap()
+        .into_inner()
+}
+
 /// The frames `room` has published so far (`RoomInfo.published`).
 #[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
 async fn room_published(client: &mut CreaseClient<tonic::transport::Channel>, room: &str) -> u64 {
@@ -239,15 +256,7 @@ fn demo_trains_animates_and_serves() {
             .into_inner();
         assert_eq!(info.base_vertices as usize, model.rig.rest.vertex_count());
         assert_eq!(info.control_points.len(), 15);
-        let mut sub = client
-            .subscribe(v1::SubscribeRequest {
-                room: DEMO_ROOM.into(),
-                level: v1::Level::Base as i32,
-                ..Default::default()
-            })
-            .await
-            .unwrap()
-            .into_inner();
+        let mut sub = subscribe_base(&mut client, DEMO_ROOM).await;
         let Some(v1::mesh_frame::Body::Topology(topo)) = sub.message().await.unwrap().unwrap().body
         else {
             panic!("no topology");
@@ -292,15 +301,7 @@ fn demo_trains_animates_and_serves() {
             }
         }
         let before = still.expect("the demo room kept publishing with nobody watching");
-        let mut sub = client
-            .subscribe(v1::SubscribeRequest {
-                room: DEMO_ROOM.into(),
-                level: v1::Level::Base as i32,
-                ..Default::default()
-            })
-            .await
-            .unwrap()
-            .into_inner();
+        let mut sub = subscribe_base(&mut client, DEMO_ROOM).await;
         let mut frames = 0;
         while frames < 3 {
             let msg = tokio::time::timeout(Duration::from_secs(5), sub.message())

@@ -29,12 +29,21 @@ pub fn encode_vertex_block(values: &[[u8; 4]]) -> Result<Vec<u8>, CodecError> {
 /// [`CodecError::PayloadEmpty`], [`CodecError::PayloadVersion`] or
 /// [`CodecError::PayloadCorrupt`] for bytes that are not such a block of `count` values.
 pub fn decode_vertex_block(data: &[u8], count: usize) -> Result<Vec<[u8; 4]>, CodecError> {
+    decode_vertex_buffer_v1(data, count)
+}
+
+/// `count` vertices of type `T` from a meshopt vertex buffer of codec version 1 (a frame's
+/// payload, a block): its header byte checked first, then meshopt's own checks.
+pub(super) fn decode_vertex_buffer_v1<T: Clone + Default>(
+    data: &[u8],
+    count: usize,
+) -> Result<Vec<T>, CodecError> {
     match data.first() {
         None => return Err(CodecError::PayloadEmpty),
         Some(&b) if b != MESHOPT_VERTEX_V1 => return Err(CodecError::PayloadVersion(b)),
         Some(_) => {}
     }
-    meshopt::decode_vertex_buffer::<[u8; 4]>(data, count)
+    meshopt::decode_vertex_buffer::<T>(data, count)
         .map_err(|e| CodecError::PayloadCorrupt(meshopt_code(e)))
 }
 

@@ -3,9 +3,9 @@
 
 use glam::Vec3;
 
+use super::CodecError;
 use super::frame::{FrameHeader, FrameKind, MESHOPT_VERTEX_V1, parse_frame};
 use super::quant::{QuantBox, lane_normal, normal_lane};
-use super::{CodecError, meshopt_code};
 
 /// Default keyframe interval of [`FrameEncoder`]: half a second at 60 Hz. Keyframes cost about
 /// 1.5x a delta on the horse gallop (4.5 vs 3.0 bytes per vertex), so one in 30 frames adds 1-2%
@@ -86,13 +86,7 @@ fn write_frame(
 
 /// Decodes a payload of `vertex_count` vertices into lanes.
 fn decode_payload(payload: &[u8], vertex_count: usize) -> Result<Lanes, CodecError> {
-    match payload.first() {
-        None => return Err(CodecError::PayloadEmpty),
-        Some(&b) if b != MESHOPT_VERTEX_V1 => return Err(CodecError::PayloadVersion(b)),
-        Some(_) => {}
-    }
-    meshopt::decode_vertex_buffer::<[u16; 4]>(payload, vertex_count)
-        .map_err(|e| CodecError::PayloadCorrupt(meshopt_code(e)))
+    super::block::decode_vertex_buffer_v1::<[u16; 4]>(payload, vertex_count)
 }
 
 /// Parses a frame and checks it is for `vertex_count` vertices.

@@ -89,6 +89,28 @@ fn length(what: impl Into<String>, got: usize, expected: usize) -> Result<(), Pa
     }
 }
 
+/// Checks that every corner of `triangles` is below `limit`; the error names the first
+/// triangle that is not, as `what`.
+fn triangles_below(
+    what: &str,
+    triangles: &[[u32; 3]],
+    limit: usize,
+) -> Result<(), PaletteHeaderError> {
+    match triangles
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t.iter().any(|&i| i as usize >= limit))
+    {
+        Some((t, tri)) => Err(PaletteHeaderError::Index {
+            what: what.into(),
+            index: t,
+            value: u64::from(*tri.iter().max().expect("three corners")),
+            limit,
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The skin of the base mesh, quantised: `influences` (K) slots per vertex.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct PaletteSkin {
@@ -435,19 +457,7 @@ impl PaletteHeader {
                 });
             }
         }
-        if let Some((t, &tri)) = self
-            .triangles
-            .iter()
-            .enumerate()
-            .find(|(_, t)| t.iter().any(|&i| i as usize >= nb))
-        {
-            return Err(PaletteHeaderError::Index {
-                what: "triangle".into(),
-                index: t,
-                value: u64::from(*tri.iter().max().expect("three corners")),
-                limit: nb,
-            });
-        }
+        triangles_below("triangle", &self.triangles, nb)?;
         if let Some(d) = &self.detail {
             length("subdivision steps", d.steps.len(), d.levels as usize)?;
             let mut columns = nb;
@@ -468,19 +478,7 @@ impl PaletteHeader {
                     message: format!("{}, expected a finite value > 0", d.quantum),
                 });
             }
-            if let Some((t, &tri)) = d
-                .triangles
-                .iter()
-                .enumerate()
-                .find(|(_, t)| t.iter().any(|&i| i as usize >= columns))
-            {
-                return Err(PaletteHeaderError::Index {
-                    what: "drawn triangle".into(),
-                    index: t,
-                    value: u64::from(*tri.iter().max().expect("three corners")),
-                    limit: columns,
-                });
-            }
+            triangles_below("drawn triangle", &d.triangles, columns)?;
         }
         Ok(())
     }
