@@ -338,8 +338,9 @@ fn the_fuzz_workspace_lock_is_up_to_date() {
         .expect("cargo metadata runs");
     let stderr = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() && !stderr.contains("lock file") {
-        eprintln!("skipped: cargo metadata of fuzz/ failed for another reason than its lock:
-{stderr}");
+        eprintln!(
+            "skipped: cargo metadata of fuzz/ failed for another reason than its lock:\n{stderr}"
+        );
         return;
     }
     assert!(
