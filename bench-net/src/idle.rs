@@ -10,8 +10,10 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use crease_proto::v1;
+use crease_proto::{Encoding, v1};
+use crease_remote::client::get_room;
 use crease_remote::connect;
+use crease_remote::mesh_stream::subscribe_encoded;
 use tokio::time::Instant;
 
 use super::args::BenchNetArgs;
@@ -99,11 +101,7 @@ async fn measure(
                 bail!("{} exited ({status}) before answering", bin.display());
             }
             if let Ok(mut c) = connect(&url, None).await
-                && c.get_room(v1::GetRoomRequest {
-                    room: DEMO_ROOM.into(),
-                })
-                .await
-                .is_ok()
+                && get_room(&mut c, DEMO_ROOM).await.is_ok()
             {
                 break c;
             }
@@ -130,40 +128,26 @@ async fn measure(
         let rss_mib = rss_kib(pid).unwrap_or(0) as f64 / 1024.0;
         let mut first_frames = Vec::new();
         for (level, encoding) in [
-            (v1::Level::Base, v1::Encoding::Vertices),
-            (v1::Level::Detail, v1::Encoding::Palette),
-            (v1::Level::Detail, v1::Encoding::Vertices),
+            (v1::Level::Base, Encoding::Vertices),
+            (v1::Level::Detail, Encoding::Palette),
+            (v1::Level::Detail, Encoding::Vertices),
         ] {
             let start = Instant::now();
-            let mut stream = client
-                .subscribe(v1::SubscribeRequest {
-                    room: DEMO_ROOM.into(),
-                    level: level as i32,
-                    encoding: encoding as i32,
-                })
+            let mut sub = subscribe_encoded(&mut client, DEMO_ROOM, level, encoding).await?;
+            let header_ms = start.elapsed().as_secs_f64() * 1e3;
+            tokio::time::timeout(Duration::from_secs(30), sub.next_frame())
                 .await
-                .context("subscribing to the demo room")?
-                .into_inner();
-            let (mut header, mut header_at) = (0, None);
-            let ms = loop {
-                let msg = tokio::time::timeout(Duration::from_secs(30), stream.message())
-                    .await
-                    .context("no frame within 30 s")??
-                    .context("the stream ended before a frame")?;
-                if let Some(v1::mesh_frame::Body::Frame(_)) = msg.body {
-                    break start.elapsed().as_secs_f64() * 1e3;
-                }
-                header += prost::Message::encoded_len(&msg);
-                header_at = Some(start.elapsed().as_secs_f64() * 1e3);
-            };
-            drop(stream);
+                .context("no frame within 30 s")??
+                .context("the stream ended before a frame")?;
+            let frame_ms = start.elapsed().as_secs_f64() * 1e3;
             first_frames.push(FirstFrame {
                 level: format!("{level:?}").to_lowercase(),
-                encoding: format!("{encoding:?}").to_lowercase(),
-                header_ms: header_at.unwrap_or(0.0),
-                frame_ms: ms,
-                header_bytes: header,
+                encoding: encoding.name().to_owned(),
+                header_ms,
+                frame_ms,
+                header_bytes: prost::Message::encoded_len(&sub.first),
             });
+            drop(sub);
             // The viewer gone, the room pauses again before the next one comes.
             tokio::time::sleep(Duration::from_secs(1)).await;
         }
