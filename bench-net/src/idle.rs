@@ -17,7 +17,7 @@ use crease_remote::mesh_stream::subscribe_encoded;
 use tokio::time::Instant;
 
 use super::args::BenchNetArgs;
-use super::server::{clock_ticks, cpu_seconds, random_token, server_binary};
+use super::server::{clock_ticks, cpu_seconds, free_address, random_token, server_binary};
 
 /// The demo's room and model names (`crease_demo::DEMO_ROOM`; bench-net does not depend on
 /// the demo crate).
@@ -78,8 +78,10 @@ async fn measure(
     cache: &Path,
     seconds: f64,
 ) -> anyhow::Result<()> {
-    let grpc = free_port()?;
-    let http = free_port()?;
+    let mut held = Vec::new();
+    let grpc = free_address(&mut held)?.to_string();
+    let http = free_address(&mut held)?.to_string();
+    drop(held);
     let takes = std::env::temp_dir().join(format!("crease-idle-{}", &random_token()[..8]));
     let mut child = Command::new(bin)
         .arg("--cache")
@@ -184,12 +186,6 @@ async fn measure(
         }
     }
     Ok(())
-}
-
-/// A loopback address with a port that was free a moment ago.
-fn free_port() -> anyhow::Result<String> {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").context("finding a free port")?;
-    Ok(listener.local_addr()?.to_string())
 }
 
 /// The resident set of `pid` in KiB (`VmRSS` of `/proc/PID/status`).

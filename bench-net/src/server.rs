@@ -76,7 +76,9 @@ pub(super) fn random_token() -> String {
 }
 
 /// A loopback address with a port that was free a moment ago.
-fn free_address(held: &mut Vec<std::net::TcpListener>) -> anyhow::Result<std::net::SocketAddr> {
+pub(super) fn free_address(
+    held: &mut Vec<std::net::TcpListener>,
+) -> anyhow::Result<std::net::SocketAddr> {
     let listener =
         std::net::TcpListener::bind("127.0.0.1:0").context("finding a free loopback port")?;
     let addr = listener.local_addr()?;

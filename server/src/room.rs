@@ -435,7 +435,13 @@ impl Room {
     /// take being recorded. A room's own source (the demo's animation) publishes nothing
     /// while nobody does (issue 41: nothing computed for nobody).
     pub fn watched(&self) -> bool {
-        Channel::ALL.iter().any(|&c| self.fanout.interest(c)) || self.take_id().is_some()
+        Channel::ALL.iter().any(|&c| self.fanout.interest(c))
+            || self
+                .work
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take
+                .is_some()
     }
 
     /// Changes whenever a subscription starts here ([`Room::subscribe`]): a paused source

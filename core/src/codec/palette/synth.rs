@@ -51,6 +51,7 @@ pub struct PaletteSynth {
     rest: Vec<Vec3>,
     skin: SkinWeights,
     bones: usize,
+    /// The base mesh's triangles (the drawn ones at the detail level are its header's).
     triangles: Vec<[u32; 3]>,
     palette: BonePalette,
     base: Vec<Vec3>,
@@ -65,7 +66,6 @@ impl PaletteSynth {
     pub fn new(header: PaletteHeader) -> Result<PaletteSynth, PaletteHeaderError> {
         header.validate()?;
         let skin = header.skin_weights()?;
-        let triangles = header.drawn_triangles().to_vec();
         let detail = match header.detail {
             Some(d) => {
                 let levels = d.steps.iter().map(|m| vec![Vec3::ZERO; m.rows()]).collect();
@@ -81,7 +81,7 @@ impl PaletteSynth {
             None => None,
         };
         Ok(PaletteSynth {
-            triangles,
+            triangles: header.triangles,
             base: header.rest.clone(),
             rest: header.rest,
             skin,
@@ -99,9 +99,11 @@ impl PaletteSynth {
         }
     }
 
-    /// The drawn mesh's triangles.
+    /// The drawn mesh's triangles: the base mesh's, or at the detail level their subdivision.
     pub fn triangles(&self) -> &[[u32; 3]] {
-        &self.triangles
+        self.detail
+            .as_ref()
+            .map_or(&self.triangles, |d| &d.header.triangles)
     }
 
     /// The skinned base mesh of the last frame.
@@ -168,7 +170,7 @@ impl PaletteSynth {
         }
         let high = d.levels.last().expect("at least one step");
         d.header.displacements(&frame.xi, &mut d.h);
-        scatter_normals(high, &self.triangles, &mut d.normals).expect("one normal per vertex");
+        scatter_normals(high, &d.header.triangles, &mut d.normals).expect("one normal per vertex");
         d.out.copy_from_slice(high);
         displace(&mut d.out, &d.normals, &d.h).expect("one h per vertex");
         Ok(&d.out)
