@@ -925,7 +925,7 @@ async fn detail_frames_stream_in_a_spatial_order_and_decode_to_the_prediction() 
 /// acked, as fast as the room predicts): every frame is either predicted (an ok ack) or
 /// superseded by a newer frame of the room while it waited (ABORTED, latest wins: the
 /// server's `mailbox`), never refused otherwise or left unanswered; the metrics count the
-/// same; and a subscriber ends on the last frame predicted.
+/// same; and the room counts as published exactly the frames acked ok.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
     use futures_util::StreamExt as _;
@@ -984,12 +984,15 @@ async fn concurrent_publishers_get_latest_wins_never_a_backlog() {
         }));
     }
     let (mut ok, mut superseded) = (0, 0);
+    // Latest wins promises no fairness between publishers of one room (a room has one
+    // publisher; the others are overlaps): on CI's two cores one publisher's every frame was
+    // once superseded (2026-12-07), so only the room as a whole must make progress.
     for p in publishers {
         let (o, s) = p.await.unwrap();
-        assert!(o > 0, "a publisher had none of its frames predicted");
         ok += o;
         superseded += s;
     }
+    assert!(ok > 0, "no frame of any publisher was predicted");
     eprintln!(
         "{ok} predicted, {superseded} superseded of {}",
         4 * PER_PUBLISHER
