@@ -58,6 +58,17 @@ pub enum ScenarioChoice {
     Both,
 }
 
+/// How the subscribers of the benchmark connect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TransportChoice {
+    /// The gRPC `Subscribe` RPC, one HTTP/2 connection per subscriber.
+    Grpc,
+    /// The WebSocket endpoint browsers use (`/ws/rooms/{id}`), one socket per subscriber.
+    Ws,
+    /// Every scenario twice in one run: gRPC, then WebSocket.
+    Both,
+}
+
 /// Options of `crease bench-net`.
 #[derive(Clone, Debug, clap::Args)]
 #[command(after_long_help = AFTER_HELP)]
@@ -134,6 +145,15 @@ pub struct BenchNetArgs {
     /// the detail kernel vector; the checking subscriber decodes them on the CPU).
     #[arg(long, default_value = "vertices", value_parser = ["vertices", "palette"])]
     pub encoding: String,
+    /// How the subscribers connect: `grpc`, `ws` (the WebSocket endpoint browsers use) or
+    /// `both` (each scenario on gRPC, then on WebSocket). Every scenario also measures this
+    /// machine's floor for its fan-out: one thread writing one frame-sized message to each of
+    /// as many loopback sockets per frame (issue 41).
+    #[arg(long, value_enum, default_value = "grpc")]
+    pub transport: TransportChoice,
+    /// With --server: its HTTP address (host:port), which --transport ws connects to.
+    #[arg(long, value_name = "ADDR", requires = "server")]
+    pub server_http: Option<std::net::SocketAddr>,
     /// Bench a cluster instead: a local `nats-server` (JetStream) and this many `crease-server`
     /// replicas joined to it; one room, opened on the first replica (its owner), its
     /// --subscribers (default 300) spread over the replicas, and the same count / replicas
@@ -210,17 +230,58 @@ pub(crate) struct Scenario {
     /// The subscribers are spread round-robin over the first this many servers (1: all on
     /// the one where the rooms are opened).
     pub(crate) spread: usize,
+    /// How the subscribers connect.
+    pub(crate) transport: Transport,
+}
+
+/// How one scenario's subscribers connect.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Transport {
+    /// The gRPC `Subscribe` RPC.
+    Grpc,
+    /// `GET /ws/rooms/{id}`, as the browser viewer subscribes.
+    WebSocket,
+}
+
+impl Transport {
+    /// As the report names it.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Transport::Grpc => "grpc",
+            Transport::WebSocket => "websocket",
+        }
+    }
 }
 
 /// Viewers of the cluster scenario when --subscribers is not given (issue 17).
 const CLUSTER_VIEWERS: usize = 300;
 
+/// The scenarios of a run, each on every transport --transport names.
 pub(crate) fn scenarios(args: &BenchNetArgs) -> Vec<Scenario> {
+    let transports: &[Transport] = match args.transport {
+        TransportChoice::Grpc => &[Transport::Grpc],
+        TransportChoice::Ws => &[Transport::WebSocket],
+        TransportChoice::Both => &[Transport::Grpc, Transport::WebSocket],
+    };
+    shapes(args)
+        .into_iter()
+        .flat_map(|sc| {
+            transports.iter().map(move |&transport| Scenario {
+                transport,
+                ..sc.clone()
+            })
+        })
+        .collect()
+}
+
+/// The load shapes of a run (on gRPC; [`scenarios`] sets the transport).
+fn shapes(args: &BenchNetArgs) -> Vec<Scenario> {
     let named = |name: &str, (rooms, subscribers): (usize, usize)| Scenario {
         name: name.to_owned(),
         rooms,
         subscribers,
         spread: 1,
+        transport: Transport::Grpc,
     };
     if let Some(n) = args.replicas {
         let viewers = args.subscribers.unwrap_or(CLUSTER_VIEWERS);

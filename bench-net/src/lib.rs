@@ -2,9 +2,11 @@
 //! `crease-bench` (this crate's binary) or `crease bench-net` (the same options, a call into
 //! [`run`]). Publishers send control frames
 //! into rooms at a fixed rate over gRPC, subscribers (one connection each, like separate
-//! viewers) read the encoded meshes, and the report gives the server's latency from control
-//! frame received to mesh frame handed to each subscriber's stream (`Frame.server_latency_us`),
-//! the server's CPU, and bytes per vertex per frame.
+//! viewers, over gRPC or the browsers' WebSocket: `--transport`) read the encoded meshes, and
+//! the report gives the server's latency from control frame received to mesh frame handed to
+//! each subscriber's stream (`Frame.server_latency_us`), the server's CPU (also per
+//! viewer-frame, beside this machine's floor for the same fan-out measured in the same run),
+//! and bytes per vertex per frame.
 //!
 //! The server under test is by default the real `crease-server` binary, spawned as a child
 //! process on two free loopback ports so that its CPU (`/proc/PID/stat`) is measured apart from
@@ -21,6 +23,8 @@
 //! Layout (private modules):
 //! - `args`: the options ([`BenchNetArgs`]) and the scenarios they choose;
 //! - `load`: publishers, subscribers, one scenario's run;
+//! - `floor`: this machine's floor for a fan-out (one write per viewer-frame to loopback
+//!   sockets), measured beside each scenario;
 //! - `server`: the spawned or running server under test, CPU from `/proc`;
 //! - `report`: the figures and the table (its types re-exported here);
 //! - `soak`: `--soak MINUTES`, the server held under churn and faults (and its `/proc` probe);
@@ -33,6 +37,7 @@
 
 mod args;
 mod chaos;
+mod floor;
 mod idle;
 mod load;
 mod report;
@@ -47,11 +52,11 @@ use crease_core::mesh::ExampleSet;
 use crease_core::model::TrainedModel;
 use crease_proto::{control_frame, v1};
 
-pub use args::{BenchNetArgs, ScenarioChoice};
+pub use args::{BenchNetArgs, ScenarioChoice, TransportChoice};
 use args::{DEFAULT_GALLOP, scenarios};
 use crease_remote::control_file::read_control_frames;
 pub use report::{
-    BenchReport, Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread,
+    BenchReport, Cpu, Floor, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread,
 };
 use server::Target;
 
@@ -185,7 +190,7 @@ async fn bench(
                 None => format!("{url} (no --server-pid: no CPU figure)"),
             },
             spawned: None,
-            http: None,
+            http: args.server_http,
         }],
         None => vec![server::spawn_server(args).await?],
     };

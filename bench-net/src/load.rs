@@ -15,12 +15,16 @@ use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 use tonic::transport::Channel;
 
-use super::args::{BenchNetArgs, Scenario};
+use super::args::{BenchNetArgs, Scenario, Transport};
+use super::floor;
 use super::report::{Cpu, FrameBytes, Percentiles, ReplicaFigures, ScenarioReport, Spread};
 use super::server::{Target, clock_ticks, cpu_seconds, random_token};
 use crease_remote::mesh_stream::{self, StreamReader, Subscription};
 use crease_remote::publish::{PublishOptions, Sink, publish};
 use crease_remote::{authorized, connect, unix_us};
+
+/// The longest the floor is measured for (its figure settles within a second or two).
+const FLOOR_SECONDS: f64 = 5.0;
 
 /// Control frames queued per publisher before it waits: a few periods, so a slow ack stream
 /// shows up as late sends instead of a growing queue.
@@ -128,8 +132,8 @@ struct SubscriberStats {
 
 /// A subscribed stream, its topology read.
 struct Subscribed {
-    // Holds the connection for the stream's life.
-    _client: CreaseClient<Channel>,
+    // Holds a gRPC subscriber's connection for the stream's life.
+    _client: Option<CreaseClient<Channel>>,
     sub: Subscription,
     /// The decoders (one per actor) of the subscriber that checks its room's frames.
     readers: Vec<StreamReader>,
@@ -141,14 +145,28 @@ struct Subscribed {
 /// `check`, reads the first message to decode the frames (the other subscribers only count
 /// bytes).
 async fn subscribe(
-    url: String,
+    target: (String, Option<std::net::SocketAddr>),
+    transport: Transport,
     room: String,
     check: bool,
     level: v1::Level,
     encoding: Encoding,
 ) -> anyhow::Result<Subscribed> {
-    let mut client = connect(&url, None).await?;
-    let sub = mesh_stream::subscribe_encoded(&mut client, &room, level, encoding).await?;
+    let (url, http) = target;
+    let (client, sub) = match transport {
+        Transport::Grpc => {
+            let mut client = connect(&url, None).await?;
+            let sub = mesh_stream::subscribe_encoded(&mut client, &room, level, encoding).await?;
+            (Some(client), sub)
+        }
+        Transport::WebSocket => {
+            let http = http.with_context(|| {
+                format!("{url}: no HTTP address for --transport ws (give --server-http)")
+            })?;
+            let sub = mesh_stream::subscribe_ws(&http.to_string(), &room, level, encoding).await?;
+            (None, sub)
+        }
+    };
     let readers = if check {
         sub.stream_readers()
             .with_context(|| format!("room {room:?}: first message"))?
@@ -352,12 +370,15 @@ async fn drive(
     let mut connecting = JoinSet::new();
     for (r, (id, _)) in rooms.iter().enumerate() {
         for s in 0..sc.subscribers {
-            let (url, id) = (targets[replica_of(s)].url.clone(), id.clone());
+            let to = &targets[replica_of(s)];
+            let (to, id) = ((to.url.clone(), to.http), id.clone());
             // One checking (decoding) subscriber per room and replica.
             let check = s < spread;
-            let (level, encoding) = (level, encoding);
-            connecting
-                .spawn(async move { (r, s, subscribe(url, id, check, level, encoding).await) });
+            let (level, encoding, transport) = (level, encoding, sc.transport);
+            connecting.spawn(async move {
+                let sub = subscribe(to, transport, id, check, level, encoding).await;
+                (r, s, sub)
+            });
         }
     }
     let mut subscribed = Vec::with_capacity(rooms.len() * sc.subscribers);
@@ -473,6 +494,22 @@ async fn drive(
         )
     });
     let frames_received = key.0 + delta.0;
+    // The floor of this fan-out, measured now on the same machine: a write per viewer-frame.
+    let sockets = rooms.len() * sc.subscribers;
+    let mean_bytes = ((key.1 + delta.1) / frames_received.max(1)) as usize;
+    let floor = floor::measure(
+        sockets,
+        mean_bytes,
+        args.rate,
+        args.seconds.min(FLOOR_SECONDS),
+    )
+    .await
+    .context("measuring the fan-out's floor")?;
+    let server_cpu = cpu(server0, server1);
+    let server_us_per_viewer_frame = match (server0, server1) {
+        (Some(a), Some(b)) if frames_received > 0 => Some((b - a) * 1e6 / frames_received as f64),
+        _ => None,
+    };
     let replicas = if spread > 1 {
         by_replica
             .iter()
@@ -516,7 +553,13 @@ async fn drive(
         ack_latency_us: Percentiles::of(&mut ack_latency),
         fan_out_us: Percentiles::of(&mut fan_out),
         outside_server_us: Percentiles::of(&mut outside),
-        server_cpu: cpu(server0, server1),
+        server_cpu,
+        transport: sc.transport.name().to_owned(),
+        server_cpu_us_per_viewer_frame: server_us_per_viewer_frame,
+        floor_ratio: server_us_per_viewer_frame
+            .zip(floor.cpu_us_per_write)
+            .map(|(us, f)| us / f),
+        floor,
         client_cpu: cpu(client0, client1),
         all_frames: FrameBytes::new(frames_received, key.1 + delta.1, vertices),
         keyframes: FrameBytes::new(key.0, key.1, vertices),

@@ -108,6 +108,8 @@ impl FrameBytes {
 pub struct ScenarioReport {
     /// `one-room`, `many-rooms` or `custom`.
     pub name: String,
+    /// How the subscribers connected: `grpc` or `websocket`.
+    pub transport: String,
     /// Rooms.
     pub rooms: usize,
     /// Subscribers per room.
@@ -147,6 +149,13 @@ pub struct ScenarioReport {
     pub outside_server_us: Percentiles,
     /// The server's CPU (`None`: not measurable, e.g. not Linux or no --server-pid).
     pub server_cpu: Option<Cpu>,
+    /// The server's CPU per mesh frame received by a subscriber, µs: everything the server
+    /// did in the window (predictions included) over the viewer-frames it served.
+    pub server_cpu_us_per_viewer_frame: Option<f64>,
+    /// This machine's floor for the same fan-out, measured after the window.
+    pub floor: Floor,
+    /// `server_cpu_us_per_viewer_frame / floor.cpu_us_per_write` (goal ≤ 2, issue 41).
+    pub floor_ratio: Option<f64>,
     /// This process's CPU (publishers and subscribers).
     pub client_cpu: Option<Cpu>,
     /// Every received frame.
@@ -171,6 +180,24 @@ pub struct ScenarioReport {
     /// every room), from its `crease_cluster_nats_bytes_out_total`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nats_bytes_per_frame: Option<f64>,
+}
+
+/// This machine's floor for a scenario's fan-out (`floor`): one thread writing one message
+/// of the scenario's mean frame size to each of as many loopback sockets as it has
+/// subscribers, per frame period.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Floor {
+    /// Sockets written (the scenario's subscribers, all rooms).
+    pub sockets: usize,
+    /// Bytes per write (the scenario's mean mesh frame).
+    pub bytes: usize,
+    /// Writes measured.
+    pub writes: u64,
+    /// The writing thread's CPU per write, µs (`/proc/thread-self/stat`); `None` when the
+    /// run was too short for its clock ticks to measure it.
+    pub cpu_us_per_write: Option<f64>,
+    /// Its wall time in the write loops per write, µs.
+    pub wall_us_per_write: f64,
 }
 
 /// One replica of a cluster scenario.
@@ -221,7 +248,12 @@ pub(super) fn print_table(report: &BenchReport) {
     let s = &report.scenarios;
     let header: Vec<String> = s
         .iter()
-        .map(|r| format!("{} ({} x {})", r.name, r.rooms, r.subscribers_per_room))
+        .map(|r| {
+            format!(
+                "{} ({} x {}, {})",
+                r.name, r.rooms, r.subscribers_per_room, r.transport
+            )
+        })
         .collect();
     println!("| | {} |", header.join(" | "));
     println!("|---|{}", "---|".repeat(s.len()));
@@ -269,6 +301,18 @@ pub(super) fn print_table(report: &BenchReport) {
         &|r| pct(&r.outside_server_us),
     );
     row("server CPU", &|r| cpu(&r.server_cpu));
+    row(
+        "server CPU per viewer-frame µs / floor µs per write (ratio)",
+        &|r| {
+            let us = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.2}"));
+            format!(
+                "{} / {} ({}x)",
+                us(r.server_cpu_us_per_viewer_frame),
+                us(r.floor.cpu_us_per_write),
+                us(r.floor_ratio)
+            )
+        },
+    );
     row("client CPU (this process)", &|r| cpu(&r.client_cpu));
     row("bytes / vertex / frame, all", &|r| {
         format!("{:.3}", r.all_frames.bytes_per_vertex)

@@ -92,12 +92,17 @@ pub(super) async fn spawn_server(args: &BenchNetArgs) -> anyhow::Result<Target> 
     // The rate limit counts actors x frames (issue 38): room for every actor at the bench's
     // rate, with the default's headroom.
     let hz = (args.rate * f64::from(args.actors) * 4.0).max(240.0);
-    let extra = [
+    // Every subscriber comes from this one address: the caps on what one address may hold,
+    // and on a room's subscribers, are raised as the soak raises them.
+    let mut extra = vec![
         "--max-publish-hz".to_owned(),
         hz.to_string(),
         "--max-actors".to_owned(),
         args.actors.max(8).to_string(),
+        "--max-subscribers".to_owned(),
+        "100000".to_owned(),
     ];
+    extra.extend(SOAK_LIMITS[..8].iter().map(|s| (*s).to_owned()));
     spawn_server_with(args, &extra, &random_token()).await
 }
 
@@ -328,7 +333,7 @@ pub(super) fn cpu_seconds(pid: u32, hz: f64) -> Option<f64> {
 }
 
 /// utime + stime, in clock ticks, of a `/proc/PID/stat` line.
-fn stat_ticks(stat: &str) -> Option<u64> {
+pub(super) fn stat_ticks(stat: &str) -> Option<u64> {
     // Field 2 (the command name, in parentheses) may hold spaces and parentheses: count from
     // after its last `)`.
     let rest = &stat[stat.rfind(')')? + 1..];

@@ -69,15 +69,24 @@ fn check_percentiles(p: &Value, what: &str) {
     assert!(u(&p["count"]) > 0, "{what}: {p}");
 }
 
-/// What every short run must show, whichever server ran it.
-fn check_short_run(stdout: &[u8]) -> Value {
+/// What every short run must show, whichever server ran it: one scenario per transport, in
+/// `transports`' order.
+fn check_short_run(stdout: &[u8], transports: &[&str]) -> Value {
     let report: Value = serde_json::from_slice(stdout)
         .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(stdout)));
     assert_eq!(u(&report["vertices"]), tube().vertex_count() as u64);
     assert_eq!(u(&report["control_points"]), CONTROLS.len() as u64);
     let scenarios = report["scenarios"].as_array().unwrap();
-    assert_eq!(scenarios.len(), 1, "{report}");
-    let s = &scenarios[0];
+    assert_eq!(scenarios.len(), transports.len(), "{report}");
+    for (s, transport) in scenarios.iter().zip(transports) {
+        assert_eq!(s["transport"], *transport, "{s}");
+        check_scenario(s);
+    }
+    report
+}
+
+/// One scenario of a short run (2 rooms x 3 subscribers).
+fn check_scenario(s: &Value) {
     assert_eq!((u(&s["rooms"]), u(&s["subscribers_per_room"])), (2, 3));
     assert_eq!(u(&s["frames_refused"]), 0, "{s}");
     assert_eq!(u(&s["decode_errors"]), 0, "{s}");
@@ -126,7 +135,18 @@ fn check_short_run(stdout: &[u8]) -> Value {
             "{s}"
         );
     }
-    report
+    // The floor wrote a frame-sized message to as many sockets as there were subscribers,
+    // at the run's rate over its window (1 s at 30 Hz); its CPU is too little for /proc's
+    // ticks, so only the wall time is given, and no ratio.
+    let floor = &s["floor"];
+    assert_eq!(u(&floor["sockets"]), 6, "{s}");
+    assert_eq!(u(&floor["writes"]), 6 * 30, "{s}");
+    let mean = u(&s["all_frames"]["bytes"]) / u(&s["all_frames"]["frames"]);
+    assert_eq!(u(&floor["bytes"]), mean.max(1), "{s}");
+    assert!(f(&floor["wall_us_per_write"]) > 0.0, "{s}");
+    if floor["cpu_us_per_write"].is_null() {
+        assert!(s["floor_ratio"].is_null(), "{s}");
+    }
 }
 
 #[test]
@@ -151,6 +171,8 @@ fn bench_net_against_a_server_in_this_process() {
             "admin",
         ])
         .args(["--server-pid", &std::process::id().to_string()])
+        .args(["--server-http", &served.http.to_string()])
+        .args(["--transport", "both"])
         .args(SHORT_RUN)
         .output()
         .unwrap();
@@ -159,7 +181,8 @@ fn bench_net_against_a_server_in_this_process() {
         "bench-net failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let report = check_short_run(&out.stdout);
+    // The same rooms and frames over gRPC, then over the browsers' WebSocket.
+    let report = check_short_run(&out.stdout, &["grpc", "websocket"]);
     assert!(
         report["server"]
             .as_str()
@@ -196,7 +219,7 @@ fn bench_net_spawns_the_server_binary_when_it_is_built() {
         "bench-net failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let report = check_short_run(&out.stdout);
+    let report = check_short_run(&out.stdout, &["grpc"]);
     assert!(report["server"].as_str().unwrap().contains("spawned"));
     if cfg!(target_os = "linux") {
         // The child's own CPU is measured (it is null for a server in another process). It

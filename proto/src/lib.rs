@@ -52,6 +52,10 @@ pub use mesh::{
 pub use palette::{PaletteParts, StreamPalette, palette_topology_message, read_palette_topology};
 pub use room::{RoomOptions, RoomSpec, StreamSettings};
 
+/// The WebSocket subprotocol of `/ws/rooms/{id}` (the server selects it when the client
+/// offers it; a publish token travels beside it as `crease.token.<base64url>`).
+pub const WS_PROTOCOL: &str = "crease.v1";
+
 /// The generated `crease.v1` package.
 #[allow(missing_docs, clippy::all, missing_debug_implementations)]
 pub mod v1 {

@@ -6,7 +6,9 @@
 //! ([`PaletteReader`], `core::codec::palette`'s reference decoder); [`StreamReader`] reads
 //! either. `crease watch`, `stream --check` and
 //! `bench-net` read subscriptions; `synth --server` reads `Synthesize` answers, which have the
-//! same shape.
+//! same shape. A subscription comes over gRPC ([`subscribe_encoded`]) or over the WebSocket
+//! endpoint browsers use ([`subscribe_ws`]: each binary message one `MeshFrame`, the same
+//! messages in the same order), and reads the same either way.
 
 use anyhow::{Context, bail};
 use crease_core::codec::palette::{PaletteFrame, PaletteSynth, read_palette_lanes};
@@ -14,6 +16,9 @@ use crease_core::codec::{CodecError, FrameDecoder, FrameHeader};
 use crease_core::glam::Vec3;
 use crease_proto::v1::crease_client::CreaseClient;
 use crease_proto::{Encoding, StreamTopology, read_palette_topology, read_topology, v1};
+use futures_util::StreamExt as _;
+use prost::Message as _;
+use tokio_tungstenite::tungstenite;
 use tonic::transport::Channel;
 
 /// Decodes the frames of one stream: its topology (vertex count, spatial vertex order), the
@@ -229,7 +234,51 @@ pub struct Subscription {
     /// A room of several actors (issue 38): every actor's first message, in the room's actor
     /// order (`ActorFrame.actor` indexes them); empty in a one-actor room.
     pub actors: Vec<v1::MeshFrame>,
-    stream: tonic::Streaming<v1::MeshFrame>,
+    stream: Source,
+}
+
+/// A WebSocket to the server's `/ws/rooms/{id}` endpoint.
+type WebSocket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Where a subscription's messages come from.
+enum Source {
+    /// The `Subscribe` RPC's response stream.
+    Grpc(Box<tonic::Streaming<v1::MeshFrame>>),
+    /// `GET /ws/rooms/{id}`: each binary message is one `MeshFrame`.
+    WebSocket(Box<WebSocket>),
+}
+
+impl std::fmt::Debug for Source {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Source::Grpc(_) => "Source::Grpc",
+            Source::WebSocket(_) => "Source::WebSocket",
+        })
+    }
+}
+
+impl Source {
+    /// The next message; `None` when the stream ends. Cancel-safe (both sources are).
+    async fn message(&mut self) -> anyhow::Result<Option<v1::MeshFrame>> {
+        match self {
+            Source::Grpc(stream) => Ok(stream.message().await?),
+            Source::WebSocket(ws) => loop {
+                match ws.next().await {
+                    None | Some(Ok(tungstenite::Message::Close(_))) => return Ok(None),
+                    Some(Ok(tungstenite::Message::Binary(bytes))) => {
+                        let msg = v1::MeshFrame::decode(bytes)
+                            .context("a WebSocket message is not a crease.v1.MeshFrame")?;
+                        return Ok(Some(msg));
+                    }
+                    // Text messages are acks of what this socket published (it publishes
+                    // nothing); pings are answered by tungstenite.
+                    Some(Ok(_)) => {}
+                    Some(Err(e)) => return Err(anyhow::Error::new(e).context("the WebSocket")),
+                }
+            },
+        }
+    }
 }
 
 impl Subscription {
@@ -352,7 +401,7 @@ pub async fn subscribe_encoded(
     level: v1::Level,
     encoding: Encoding,
 ) -> anyhow::Result<Subscription> {
-    let mut stream = client
+    let stream = client
         .subscribe(v1::SubscribeRequest {
             room: room.to_owned(),
             level: level as i32,
@@ -361,6 +410,64 @@ pub async fn subscribe_encoded(
         .await
         .with_context(|| format!("subscribing to room {room:?}"))?
         .into_inner();
+    first_messages(Source::Grpc(Box::new(stream)), room, encoding).await
+}
+
+/// Subscribes to `room` at `level` in `encoding` over the WebSocket endpoint browsers use,
+/// `ws://{http}/ws/rooms/{room}` (`http`: the server's HTTP address, `host:port`), and reads
+/// the stream's first message as [`subscribe_encoded`] does.
+///
+/// # Errors
+/// The server's refusal (its HTTP status and message), or a stream that ends or starts with
+/// something else.
+pub async fn subscribe_ws(
+    http: &str,
+    room: &str,
+    level: v1::Level,
+    encoding: Encoding,
+) -> anyhow::Result<Subscription> {
+    use tungstenite::client::IntoClientRequest as _;
+    let level = match level {
+        v1::Level::Detail => "detail",
+        _ => "base",
+    };
+    let url = format!(
+        "ws://{http}/ws/rooms/{room}?level={level}&encoding={}",
+        encoding.name()
+    );
+    let mut request = url
+        .as_str()
+        .into_client_request()
+        .with_context(|| format!("{url}: not a WebSocket URL"))?;
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        tungstenite::http::HeaderValue::from_static(crease_proto::WS_PROTOCOL),
+    );
+    let (ws, _) = match tokio_tungstenite::connect_async(request).await {
+        Ok(done) => done,
+        Err(tungstenite::Error::Http(response)) => {
+            let body = response
+                .body()
+                .as_deref()
+                .map(String::from_utf8_lossy)
+                .unwrap_or_default();
+            bail!(
+                "{url}: the server refused the WebSocket ({}): {}",
+                response.status(),
+                body.trim()
+            );
+        }
+        Err(e) => return Err(anyhow::Error::new(e).context(format!("{url}: connecting"))),
+    };
+    first_messages(Source::WebSocket(Box::new(ws)), room, encoding).await
+}
+
+/// Reads a new subscription's first message (and every actor's in a room of several actors).
+async fn first_messages(
+    mut stream: Source,
+    room: &str,
+    encoding: Encoding,
+) -> anyhow::Result<Subscription> {
     let first = stream
         .message()
         .await?

@@ -3,8 +3,9 @@
 //! palette frames (`core::codec::palette`: codec frames of lanes, keyframes and deltas like
 //! vertex frames).
 //!
-//! A subscription's task waits on its level's fan-out receiver, so it always sends the newest
-//! frame and skips what it was too slow for (`Frame.skipped` counts them). Frames are encoded
+//! A subscription waits on its level's fan-out receiver, polled by the transport's own task,
+//! so it always sends the newest frame and skips what it was too slow for (`Frame.skipped`
+//! counts them). Frames are encoded
 //! once by the room's pipeline; the task sends the shared delta when it has the delta's base,
 //! else the frame's shared keyframe ([`MeshUpdate::frame_for`], encoded on the blocking pool
 //! the first time a subscriber needs it). A batch runs its frames through a private room, in
@@ -31,7 +32,7 @@ use crate::pipeline::Pipeline;
 use crate::room::{Channel, Encoding, MeshUpdate, Room, Subscription};
 use crate::state::AppState;
 
-/// Frames buffered per mesh stream: one in flight, one ready.
+/// Frames buffered per batch stream: one in flight, one ready.
 const BUFFER: usize = 2;
 
 /// Why a mesh stream ended early.
@@ -180,84 +181,153 @@ fn frame_bytes(msg: &v1::MeshFrame) -> usize {
 
 /// The live stream of a room's `channel` through `sub`, a subscription taken from the room
 /// (module docs).
+///
+/// The stream is polled by the transport's own task (hyper's connection task for gRPC, the
+/// WebSocket session's writer): a frame wakes that one task, which builds the message and
+/// writes it, with no task or queue of its own between the room's channel and the socket
+/// (issue 41: the fan-out's cost per viewer-frame against a plain write's). It ends when the
+/// room closes (after a frame already waiting), when the server shuts down, and when the
+/// transport drops it (the subscriber went away: its subscriber slot is given back then).
 pub fn subscribe(
     state: Arc<AppState>,
     room: Arc<Room>,
     channel: Channel,
     sub: Subscription,
 ) -> impl Stream<Item = Result<v1::MeshFrame, StreamError>> + Send + 'static {
-    let (tx, rx) = mpsc::channel(BUFFER);
-    let receiver_gone = tx.clone();
-    let closing = state.closing();
     let gauge = state.metrics().subscribers.clone();
-    let stream = async move {
-        // The whole subscription moves in (a closure would capture only `sub.frames.rx`, and
-        // the subscriber slot would be given back at once).
-        let mut sub = sub;
-        let metrics = state.metrics();
-        match first_messages(&room, channel).await {
-            Ok(messages) => {
-                for m in messages {
-                    if tx.send(Ok(m)).await.is_err() {
-                        return;
-                    }
-                }
-            }
-            Err(e) => {
-                let _ = tx.send(Err(e)).await;
-                return;
-            }
-        }
-        let named = room.has_actors();
-        let mut last_seq: Option<u64> = None;
-        let mut last_sent = vec![None; room.actors().len()];
-        let rx = &mut sub.frames.rx;
-        // The current frame first (if any), then every change.
-        rx.mark_changed();
-        // A closed room ends the stream (after a frame already waiting).
-        let closed = room.closed();
-        tokio::pin!(closed);
-        loop {
+    gauge.inc();
+    let ended = {
+        let (closing, closed) = (state.closing(), room.closed());
+        Box::pin(async move {
             tokio::select! {
-                biased;
-                changed = rx.changed() => if changed.is_err() { break },
-                () = &mut closed => break,
+                () = closing => {}
+                () = closed => {}
             }
-            let Some(update) = rx.borrow_and_update().clone() else {
-                continue;
-            };
-            let skipped = last_seq.map_or(0, |s| update.seq.saturating_sub(s + 1)) as u32;
-            last_seq = Some(update.seq);
-            let latency = update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
-            let msg = match frame_for(&update, &mut last_sent, named, latency, skipped).await {
-                Ok(msg) => msg,
-                Err(e) => {
-                    let _ = tx.send(Err(e)).await;
-                    return;
-                }
-            };
-            metrics.bytes_out.inc_by(frame_bytes(&msg) as u64);
-            metrics.frames_out.inc();
-            // The frame goes back to its pool once sent, not while this task waits.
-            drop(update);
-            if tx.send(Ok(msg)).await.is_err() {
-                return;
-            }
-        }
+        })
     };
-    // The stream ends (and its sender drops) when the server shuts down, even while it waits
-    // for a frame or for a subscriber who stopped reading; and when the subscriber goes away,
-    // even while no frames come (its subscriber slot is given back then).
-    tokio::spawn(async move {
-        gauge.inc();
-        tokio::select! {
-            () = stream => {}
-            () = closing => {}
-            () = receiver_gone.closed() => {}
+    let live = Live {
+        state,
+        named: room.has_actors(),
+        last_sent: vec![None; room.actors().len()],
+        room,
+        channel,
+        sub,
+        step: Step::First,
+        first: Vec::new().into_iter(),
+        last_seq: None,
+        ended,
+        _gauge: SubscriberGauge(gauge),
+    };
+    futures_util::stream::unfold(live, |mut live| async move {
+        let item = live.next().await?;
+        Some((item, live))
+    })
+}
+
+/// Where a live stream is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Step {
+    /// The first messages are still to be built.
+    First,
+    /// Sending the first messages, then frames.
+    Frames,
+    /// Ended.
+    Done,
+}
+
+/// Holds one unit of the subscribers gauge while the stream lives.
+#[derive(Debug)]
+struct SubscriberGauge(prometheus_client::metrics::gauge::Gauge);
+
+impl Drop for SubscriberGauge {
+    fn drop(&mut self) {
+        self.0.dec();
+    }
+}
+
+/// A live stream's state between the frames it sends ([`subscribe`]).
+struct Live {
+    state: Arc<AppState>,
+    room: Arc<Room>,
+    channel: Channel,
+    // The whole subscription is held: its subscriber slot is given back when the stream drops.
+    sub: Subscription,
+    step: Step,
+    /// First messages not yet sent.
+    first: std::vec::IntoIter<v1::MeshFrame>,
+    /// A room of several actors: frames carry every actor's, named.
+    named: bool,
+    last_seq: Option<u64>,
+    /// Per actor, the codec frame this subscriber received last.
+    last_sent: Vec<Option<u32>>,
+    /// The server shutting down or the room closing.
+    ended: std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>,
+    _gauge: SubscriberGauge,
+}
+
+impl Live {
+    /// The stream's next message; `None` once it has ended.
+    async fn next(&mut self) -> Option<Result<v1::MeshFrame, StreamError>> {
+        loop {
+            match self.step {
+                Step::Done => return None,
+                Step::First => match first_messages(&self.room, self.channel).await {
+                    Ok(messages) => {
+                        self.first = messages.into_iter();
+                        self.step = Step::Frames;
+                        // The current frame first (if any), then every change.
+                        self.sub.frames.rx.mark_changed();
+                    }
+                    Err(e) => {
+                        self.step = Step::Done;
+                        return Some(Err(e));
+                    }
+                },
+                Step::Frames => {
+                    if let Some(m) = self.first.next() {
+                        return Some(Ok(m));
+                    }
+                    let rx = &mut self.sub.frames.rx;
+                    // A closed room ends the stream after a frame already waiting.
+                    tokio::select! {
+                        biased;
+                        changed = rx.changed() => if changed.is_err() {
+                            self.step = Step::Done;
+                            return None;
+                        },
+                        () = &mut self.ended => {
+                            self.step = Step::Done;
+                            return None;
+                        }
+                    }
+                    let Some(update) = rx.borrow_and_update().clone() else {
+                        continue;
+                    };
+                    let skipped = self
+                        .last_seq
+                        .map_or(0, |s| update.seq.saturating_sub(s + 1))
+                        as u32;
+                    self.last_seq = Some(update.seq);
+                    let latency =
+                        update.received.elapsed().as_micros().min(u32::MAX as u128) as u32;
+                    let msg =
+                        frame_for(&update, &mut self.last_sent, self.named, latency, skipped).await;
+                    return Some(match msg {
+                        Ok(msg) => {
+                            let metrics = self.state.metrics();
+                            metrics.bytes_out.inc_by(frame_bytes(&msg) as u64);
+                            metrics.frames_out.inc();
+                            Ok(msg)
+                        }
+                        Err(e) => {
+                            self.step = Step::Done;
+                            Err(e)
+                        }
+                    });
+                }
+            }
         }
-        gauge.dec();
-    });
-    ReceiverStream::new(rx)
+    }
 }
 
 /// A batch: every control frame in order through `room` (module docs). A bad frame ends the

@@ -59,7 +59,7 @@ pub struct Params {
 }
 
 /// The subprotocol the server speaks (selected when the client offers it).
-pub const PROTOCOL: &str = "crease.v1";
+pub const PROTOCOL: &str = crease_proto::WS_PROTOCOL;
 
 /// The prefix of the subprotocol that carries the publish token (base64url, no padding).
 pub const TOKEN_PROTOCOL_PREFIX: &str = "crease.token.";
@@ -193,57 +193,44 @@ async fn session(
     socket: WebSocket,
 ) {
     let (mut sink, mut source) = socket.split();
+    // Acks (and a closing frame) from the reading loop below; mesh frames come straight from
+    // the room's channel: one task writes both, and a frame wakes only it.
     let (out, mut outgoing) = mpsc::channel::<Message>(4);
+    let frames = subscription.map(|subscription| {
+        Box::pin(crate::stream::subscribe(
+            Arc::clone(&state),
+            Arc::clone(&room),
+            channel,
+            subscription,
+        ))
+    });
+    let writer_room = Arc::clone(&room);
     let writer = tokio::spawn(async move {
-        while let Some(m) = outgoing.recv().await {
-            if sink.send(m).await.is_err() {
+        let mut frames = frames;
+        loop {
+            let message = tokio::select! {
+                biased;
+                m = outgoing.recv() => match m {
+                    Some(m) => m,
+                    None => break,
+                },
+                msg = next_message(&mut frames) => {
+                    match message_bytes(msg, &writer_room, channel).await {
+                        Some(bytes) => Message::Binary(bytes),
+                        // The stream ended (the room closed) or failed: no more frames, but
+                        // the socket stays for its acks.
+                        None => {
+                            frames = None;
+                            continue;
+                        }
+                    }
+                }
+            };
+            if sink.send(message).await.is_err() {
                 break;
             }
         }
         let _ = sink.close().await;
-    });
-    let frames = subscription.map(|subscription| {
-        let out = out.clone();
-        let frames =
-            crate::stream::subscribe(Arc::clone(&state), Arc::clone(&room), channel, subscription);
-        let model = Arc::clone(&room.model);
-        let named = Arc::clone(&room);
-        tokio::spawn(async move {
-            let mut frames = std::pin::pin!(frames);
-            while let Some(Ok(msg)) = frames.next().await {
-                // A one-actor room's palette header is sent as the model encoded it (once, with
-                // the header, on the blocking pool: `first_messages`); an actor's header (it
-                // names the actor; megabytes at the detail level) as the actor encoded it
-                // (once, on the blocking pool: `Actor::named_palette_encoded`); the rest is
-                // small and encoded here.
-                let bytes = match &msg.body {
-                    Some(v1::mesh_frame::Body::PaletteTopology(p)) if p.actor_count == 0 => model
-                        .palette_topology_encoded(channel.level)
-                        .unwrap_or_else(|_| msg.encode_to_vec().into()),
-                    Some(v1::mesh_frame::Body::PaletteTopology(p)) => {
-                        let (room, i, n) = (
-                            Arc::clone(&named),
-                            p.actor_index as usize,
-                            p.actor_count as usize,
-                        );
-                        let encoded = tokio::task::spawn_blocking(move || {
-                            room.actors()
-                                .get(i)
-                                .map(|a| a.named_palette_encoded(channel.level, i, n))
-                        })
-                        .await;
-                        match encoded {
-                            Ok(Some(Ok(bytes))) => bytes,
-                            _ => break,
-                        }
-                    }
-                    _ => msg.encode_to_vec().into(),
-                };
-                if out.send(Message::Binary(bytes)).await.is_err() {
-                    break;
-                }
-            }
-        })
     });
     let mut closing = std::pin::pin!(state.closing());
     loop {
@@ -290,9 +277,57 @@ async fn session(
             break;
         }
     }
-    if let Some(f) = frames {
-        f.abort();
-    }
     drop(out);
     let _ = writer.await;
+}
+
+/// The next message of a subscription's stream; pending forever without one (a publishing
+/// session, or once its stream ended), `None` when it ends now.
+async fn next_message<S>(frames: &mut Option<std::pin::Pin<Box<S>>>) -> Option<v1::MeshFrame>
+where
+    S: futures_util::Stream<Item = Result<v1::MeshFrame, crate::stream::StreamError>>,
+{
+    match frames {
+        Some(frames) => frames.next().await.and_then(Result::ok),
+        None => std::future::pending().await,
+    }
+}
+
+/// The bytes of a stream's message `msg` on the socket, or `None` when the stream ended.
+///
+/// A one-actor room's palette header is sent as the model encoded it (once, with the header,
+/// on the blocking pool: `stream::first_messages`); an actor's header (it names the actor;
+/// megabytes at the detail level) as the actor encoded it (once, on the blocking pool:
+/// `Actor::named_palette_encoded`); the rest is small and encoded here.
+async fn message_bytes(
+    msg: Option<v1::MeshFrame>,
+    room: &Arc<Room>,
+    channel: Channel,
+) -> Option<axum::body::Bytes> {
+    let msg = msg?;
+    match &msg.body {
+        Some(v1::mesh_frame::Body::PaletteTopology(p)) if p.actor_count == 0 => Some(
+            room.model
+                .palette_topology_encoded(channel.level)
+                .unwrap_or_else(|_| msg.encode_to_vec().into()),
+        ),
+        Some(v1::mesh_frame::Body::PaletteTopology(p)) => {
+            let (room, i, n) = (
+                Arc::clone(room),
+                p.actor_index as usize,
+                p.actor_count as usize,
+            );
+            let encoded = tokio::task::spawn_blocking(move || {
+                room.actors()
+                    .get(i)
+                    .map(|a| a.named_palette_encoded(channel.level, i, n))
+            })
+            .await;
+            match encoded {
+                Ok(Some(Ok(bytes))) => Some(bytes),
+                _ => None,
+            }
+        }
+        _ => Some(msg.encode_to_vec().into()),
+    }
 }
