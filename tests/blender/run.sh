@@ -16,7 +16,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 
 target="${CARGO_TARGET_DIR:-target}"
-bin="$target/release"
+# CREASE_PREBUILT=1: the binaries a test build of cargo profile $CREASE_PROFILE (.ci/run: ci) left.
+bin="$target/${CREASE_PROFILE:-release}"
 work="$target/blender-test"
 log="$work/server.log"
 site="$target/blender-site"

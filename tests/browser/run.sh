@@ -19,7 +19,8 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 
 target="${CARGO_TARGET_DIR:-target}"
-bin="$target/release"
+# CREASE_PREBUILT=1: the binaries a test build of cargo profile $CREASE_PROFILE (.ci/run: ci) left.
+bin="$target/${CREASE_PROFILE:-release}"
 work="$target/browser-test"
 log="$work/server.log"
 chromium_bin="/usr/bin/chromium"

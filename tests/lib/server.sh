@@ -6,8 +6,8 @@
 server_pid=""
 
 # Builds crease-server and crease in release into "$bin", unless CREASE_PREBUILT=1 says the
-# caller built them: .ci/run does, since `cargo test --workspace --release` has just left both
-# binaries there (integration tests need them). They differ from this build only in the
+# caller built them: .ci/run does, since `cargo test --workspace --profile ci` has just left both
+# binaries in target/ci (integration tests need them; CREASE_PROFILE=ci points "$bin" there). They differ from this build only in the
 # dev-dependencies' features (the test meshes), which nothing here reaches; rebuilding them
 # with the command line's features took 4 of the suite's 28 minutes.
 build_binaries() {
@@ -17,6 +17,7 @@ build_binaries() {
     else
         echo "== build (crease-server, crease)"
         cargo build --release --locked -p crease-demo -p crease-cli
+        bin="${CARGO_TARGET_DIR:-target}/release"
     fi
 }
 
