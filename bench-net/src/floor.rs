@@ -38,6 +38,7 @@ pub(super) async fn measure(
     rate: f64,
     seconds: f64,
 ) -> anyhow::Result<Floor> {
+    let bytes = bytes.max(1);
     let listener = TcpListener::bind("127.0.0.1:0")
         .await
         .context("the floor: binding a loopback listener")?;
@@ -71,7 +72,7 @@ pub(super) async fn measure(
     }
     let frames = (rate * seconds).ceil().max(1.0) as u64;
     let period = Duration::from_secs_f64(1.0 / rate);
-    let message = vec![0x5au8; bytes.max(1)];
+    let message = vec![0x5au8; bytes];
     let hz = clock_ticks();
     let writing = tokio::task::spawn_blocking(move || -> anyhow::Result<(f64, f64)> {
         let cpu0 = thread_cpu_seconds(hz).context("the floor: no /proc/thread-self/stat")?;
@@ -98,16 +99,16 @@ pub(super) async fn measure(
     }
     let writes = frames * sockets as u64;
     anyhow::ensure!(
-        received == writes * bytes.max(1) as u64,
+        received == writes * bytes as u64,
         "the floor: the readers got {received} bytes of {}",
-        writes * bytes.max(1) as u64
+        writes * bytes as u64
     );
     // /proc counts CPU in clock ticks (10 ms here): a figure from fewer than MIN_TICKS is
     // noise, and none is given.
     let measured = cpu * hz >= MIN_TICKS;
     Ok(Floor {
         sockets,
-        bytes: bytes.max(1),
+        bytes,
         writes,
         cpu_us_per_write: measured.then(|| cpu * 1e6 / writes as f64),
         wall_us_per_write: busy * 1e6 / writes as f64,

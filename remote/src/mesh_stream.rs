@@ -427,10 +427,9 @@ pub async fn subscribe_ws(
     encoding: Encoding,
 ) -> anyhow::Result<Subscription> {
     use tungstenite::client::IntoClientRequest as _;
-    let level = match level {
-        v1::Level::Detail => "detail",
-        _ => "base",
-    };
+    // `?level=` spells it as the domain level names it.
+    let level = crease_proto::Level::from_wire("level", level as i32)
+        .map_or("base", crease_proto::Level::name);
     let url = format!(
         "ws://{http}/ws/rooms/{room}?level={level}&encoding={}",
         encoding.name()
