@@ -5,7 +5,7 @@
 //! checks that every frame was acknowledged and that the mesh follows the markers.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::net::Ipv4Addr;

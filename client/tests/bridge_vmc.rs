@@ -6,7 +6,7 @@
 //! in this process, with a subscriber checking that the room's mesh follows the curl.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::f32::consts::FRAC_1_SQRT_2 as H;
 use std::path::{Path, PathBuf};

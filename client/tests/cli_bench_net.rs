@@ -8,7 +8,7 @@
 //! the same rooms, publishers, subscribers and CPU reading as a spawned server.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! level), and `crease eval --json` carries `base_rms_mean` and `detail_rms_mean` for every
 //! predictor and the `static-detail` and `cascaded-detail` rows.
 
-mod common;
+use crate::common;
 
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;

@@ -2,7 +2,7 @@
 //! skinned glTF, and prints the JSON summary the issue specifies.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

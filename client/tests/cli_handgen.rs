@@ -2,7 +2,7 @@
 //! can read (manifests, control-point layouts), joint angles that `crease pose` turns back
 //! into the same meshes, and a contact sheet that is not blank.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

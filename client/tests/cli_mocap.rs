@@ -4,7 +4,7 @@
 //! Every test skips with a note when the shared data is absent.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -3,7 +3,7 @@
 //! missing file is refused with a message naming it.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use crease_core::glam::Vec3;
 use crease_core::model::{MirrorPlane, TrainedModel};

@@ -4,7 +4,7 @@
 //! poses the evaluation found worst. On the horse split (`bench/horse`, skipped without
 //! `../shared/data`) and the generated hand (`--hands`).
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

@@ -5,7 +5,7 @@
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 
-mod common;
+use crate::common;
 use common::{CONTROLS, bent, crease, train_model, tube};
 
 #[test]

@@ -6,7 +6,7 @@
 //! and an occluded point starts a request. Errors name the model, the CSV line and the URL.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Output;

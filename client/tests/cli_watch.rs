@@ -2,7 +2,7 @@
 //! frames into a room; `crease watch --frames 5 --dump DIR` decodes five frames, prints the
 //! summary line and writes five OBJ meshes with the model's topology.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

@@ -13,7 +13,7 @@
 //! tmpfs, which needs root (CAP_SYS_ADMIN); without it, it is skipped with the reason printed.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -10,7 +10,7 @@
 //! - the fuzz workspace's own `Cargo.lock` is up to date with the crates it uses.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod source_scan;
+use crate::source_scan;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::PathBuf;

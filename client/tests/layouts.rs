@@ -14,7 +14,7 @@
 //! The crates are the workspace's members, read from the root `Cargo.toml`.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod source_scan;
+use crate::source_scan;
 
 use std::collections::BTreeSet;
 

@@ -18,7 +18,7 @@
 //!
 //! The crates checked are the workspace's members, read from the root `Cargo.toml`.
 
-mod source_scan;
+use crate::source_scan;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;

@@ -16,7 +16,7 @@
 //! tokens (`source_scan`), comments, strings and unit-test modules dropped.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod source_scan;
+use crate::source_scan;
 
 use std::collections::BTreeSet;
 use std::path::Path;

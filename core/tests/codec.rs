@@ -3,7 +3,7 @@
 //! `tests/vectors/codec-v1.json` (repository root).
 //!
 //! The vectors are regenerated (after a deliberate format change only) with
-//! `cargo test -p crease-core --test codec -- --ignored regenerate_test_vectors`;
+//! `cargo test -p crease-core --test all -- --ignored codec::regenerate_test_vectors`;
 //! `test_vectors_match` re-encodes the file's inputs and decodes its bytes.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
@@ -924,7 +924,7 @@ fn build_vectors() -> Value {
                   meshopt's index codec may rotate a triangle's corners (winding kept): \
                   decoded_triangles is what decoding gives. Positions decode bit-exactly as \
                   fround(min + q * step); normals as core::codec::oct_decode. Regenerate with \
-                  `cargo test -p crease-core --test codec -- --ignored regenerate_test_vectors`.",
+                  `cargo test -p crease-core --test all -- --ignored codec::regenerate_test_vectors`.",
         "format_version": 1,
         "header_len": HEADER_LEN,
         "streams": streams,

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use crease_core::glam::Vec3;
 use crease_core::mesh::{ExampleSet, Mesh, MeshError, PlyFormat, ply};
 
-mod common;
+use crate::common;
 use common::shared_data as data;
 
 /// A small strip of two triangles, moved by `t`.

@@ -7,7 +7,7 @@ use crease_core::mesh::{Mesh, MeshError, PlyFormat, gltf, obj, ply};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 /// A path below the shared data folder, or `None` (with a note) when it is not there.
 use common::shared_data as data;
 

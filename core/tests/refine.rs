@@ -11,7 +11,7 @@ use crease_core::runtime::translations::TranslationSolver;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-mod common;
+use crate::common;
 use common::rig::{Problem, dense_weights, problem, random_point, random_rotation};
 
 fn refiner(pb: &Problem, beta: f32) -> BoneRefiner {

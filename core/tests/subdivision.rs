@@ -5,7 +5,7 @@
 //! neighbours and opposite vertices found from the shape's own construction), never by calling
 //! the code under test; normals are recomputed here in f64.
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -571,7 +571,7 @@ fn loop_vectors() -> serde_json::Value {
         })
         .collect();
     json!({
-        "about": "crease Loop subdivision test vectors (core::mesh::subdivision::loop_steps; issue 41): per topology, its vertex count, triangles and level count, then each one-level step as CSR (row_ptr, cols, weights: shortest decimals of exact f32s, built in f64 and rounded once) and the subdivided triangles. A palette decoder rebuilds these from the base triangles and must match them exactly. Rules and numbering: core/src/mesh/subdivision.rs and ARCHITECTURE.md (Palette streams). Regenerate with `cargo test -p crease-core --test subdivision -- --ignored regenerate_loop_vectors`.",
+        "about": "crease Loop subdivision test vectors (core::mesh::subdivision::loop_steps; issue 41): per topology, its vertex count, triangles and level count, then each one-level step as CSR (row_ptr, cols, weights: shortest decimals of exact f32s, built in f64 and rounded once) and the subdivided triangles. A palette decoder rebuilds these from the base triangles and must match them exactly. Rules and numbering: core/src/mesh/subdivision.rs and ARCHITECTURE.md (Palette streams). Regenerate with `cargo test -p crease-core --test all -- --ignored subdivision::regenerate_loop_vectors`.",
         "version": 1,
         "meshes": meshes,
     })

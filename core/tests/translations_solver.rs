@@ -11,7 +11,7 @@ use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
-mod common;
+use crate::common;
 use common::rig::{Problem, dense_weights, problem, random_point, random_rotation};
 
 fn rotation_f64(q: Quat) -> nalgebra::Matrix3<f64> {

@@ -17,9 +17,8 @@
 //! Skips, saying why, when `nats-server` is not installed (`.ci/run` installs it).
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod cluster_kit;
-#[path = "../../server/tests/common/mod.rs"]
-mod common;
+use crate::cluster_kit;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};

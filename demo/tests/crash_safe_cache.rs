@@ -109,6 +109,12 @@ fn killed_cache_writers_leave_one_whole_model() {
         save_cache(&cache_dir, &b).unwrap();
     }
     let save = start.elapsed() / 5;
+    // The child runs this binary's writer test by its full name: its module path inside the
+    // test binary (tests/all.rs), without the binary's own crate name.
+    let writer_test = match module_path!().split_once("::") {
+        Some((_, module)) => format!("{module}::cache_writer_loop"),
+        None => "cache_writer_loop".to_owned(),
+    };
     let mut state = 0x2545_F491_4F6C_DD1Du64;
     let (mut saw_old, mut saw_new, mut mid_write) = (0, 0, 0);
     for k in 0..kills {
@@ -116,7 +122,7 @@ fn killed_cache_writers_leave_one_whole_model() {
         let mut child = Command::new(std::env::current_exe().unwrap())
             .args([
                 "--exact",
-                "cache_writer_loop",
+                &writer_test,
                 "--ignored",
                 "--nocapture",
                 "--test-threads=1",

@@ -6,8 +6,7 @@
 //! frame, within both encodings' bounds; the bytes per frame of both are printed.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-#[path = "../../server/tests/common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::path::Path;
 

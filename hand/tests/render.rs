@@ -495,7 +495,7 @@ fn renderer_reuse_gives_identical_pictures() {
     assert_eq!(image, render(&a, &camera, &settings));
 }
 
-/// `cargo test -p crease-core --release --test render -- --ignored --nocapture timing`
+/// `cargo test -p crease-hand --release --test all -- --ignored --nocapture render::timing`
 #[test]
 #[ignore = "timing report, not a check"]
 fn timing_of_large_meshes_at_400_pixels() {

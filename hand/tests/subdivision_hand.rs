@@ -5,8 +5,7 @@
 //! Expected values come from independent computations here (f64 normals by a plain loop, exact
 //! point-to-triangle distances), never from the code under test.
 
-#[path = "../../core/tests/common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 use std::sync::OnceLock;

@@ -490,7 +490,7 @@ fn sampled_poses_stay_finite_and_resolved() {
 }
 
 /// Per-frame cost of `apply` in the fist (single thread; `deform_into` is not parallel).
-/// `cargo test --release -p crease-hand --test sweep_collide -- --ignored --nocapture`
+/// `cargo test --release -p crease-hand --test all -- --ignored --nocapture sweep_collide::apply_timing`
 #[test]
 #[ignore = "timing, not a check"]
 fn apply_timing() {

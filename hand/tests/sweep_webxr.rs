@@ -5,8 +5,7 @@
 //!
 //! Needs `../shared/data/hand`; every test skips with a note when it is absent.
 
-#[path = "../../core/tests/common/mod.rs"]
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::sync::OnceLock;

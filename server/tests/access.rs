@@ -21,7 +21,7 @@ use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::Limits;
 use crease_server::admission::Caps;
 
-mod common;
+use crate::common;
 use common::*;
 
 const ADMIN: &str = "admin-secret";

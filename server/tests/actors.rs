@@ -18,7 +18,7 @@ use crease_proto::v1::crease_client::CreaseClient;
 use crease_server::Limits;
 
 const ADMIN: &str = "admin-secret";
-mod common;
+use crate::common;
 use common::*;
 
 /// The reflection across x = 0.

@@ -18,7 +18,7 @@ use crease_server::Limits;
 
 const ADMIN: &str = "admin-secret";
 const LOCALHOST: std::net::IpAddr = std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
-mod common;
+use crate::common;
 use common::*;
 
 /// A server on free loopback ports hosting `model` as `tube`, with the admin token and `limits`.

@@ -6,7 +6,7 @@
 //! the folder and the list.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::net::SocketAddr;
 use std::path::Path;

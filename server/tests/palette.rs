@@ -4,7 +4,7 @@
 //! (`common::palette_check`).
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use common::palette_check::compare_encodings;
 use common::{control_frame, model_with_detail};

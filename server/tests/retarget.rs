@@ -6,7 +6,7 @@
 //! naming what is wrong.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use common::{authed, bent, model, serve_model, unthrottled};
 use crease_core::glam::{Quat, Vec3};

@@ -16,7 +16,7 @@ use crease_core::runtime::skin::{BonePalette, Skinning, skin_dqs};
 use crease_proto::v1;
 use crease_proto::v1::crease_client::CreaseClient;
 
-mod common;
+use crate::common;
 use common::*;
 
 const ADMIN: &str = "admin-secret";

@@ -5,7 +5,7 @@
 //! triangle; the maximum distance is respected; bad input is refused by index; and the base
 //! sweep hand measured against the detailed one gives sub-millimetre displacements (timed).
 
-mod common;
+use crate::common;
 use std::time::Instant;
 
 use crease_core::glam::Vec3;

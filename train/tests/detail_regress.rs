@@ -158,7 +158,8 @@ fn bad_input_is_refused() {
 }
 
 /// Fit and per-frame cost at the hand's size: 14 examples, 45 control coordinates, 151K
-/// vertices. `cargo test --release -p crease-train --test detail_regress -- --ignored --nocapture`
+/// vertices. `cargo test --release -p crease-train --test all -- --ignored --nocapture
+/// detail_regress::hand_sized`
 #[test]
 #[ignore = "timing"]
 fn hand_sized_fit_and_predict_timing() {

@@ -3,7 +3,7 @@
 //! cases, and the errors.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 use common::icosphere;
 use std::collections::HashMap;
 use std::time::Instant;

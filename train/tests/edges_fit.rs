@@ -4,7 +4,7 @@
 //! beat the endpoints' averaged weights. The objective is recomputed here from its definition.
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 use crease_core::glam::{DVec3, Quat, Vec3};
 use crease_core::mesh::Mesh;
 use crease_core::runtime::skin::SkinWeights;

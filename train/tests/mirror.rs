@@ -6,7 +6,7 @@
 //! mirrored original's by position (not through the mirror's own vertex order).
 #![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 
