@@ -508,6 +508,17 @@ pub async fn run(
     Ok(())
 }
 
+/// The binary's whole life: [`run`] until [`shutdown_signal`], on `runtime`. Not generic, so
+/// the async code it drives (the server's, async-nats's, hyper's) is compiled here and in the
+/// crates that define it, not once more in the binary: a `block_on` of the generic [`run`] in
+/// `main.rs` instantiated all of it there, 44 s of the binary's compile (issue 41).
+pub fn run_until_signal(
+    runtime: &tokio::runtime::Runtime,
+    config: Config,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    runtime.block_on(run(config, shutdown_signal()))
+}
+
 /// Resolves on Ctrl-C, or on SIGTERM (what container runtimes send) on Unix; also when the
 /// signal handlers cannot be installed (the server then stops rather than run unstoppable).
 pub async fn shutdown_signal() {

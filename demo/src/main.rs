@@ -265,7 +265,7 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         .build()?;
     // An error that stops the server is said once, as a sentence (its Display, not a debug
     // dump), in the log and on stderr, and the exit status is 1.
-    if let Err(e) = runtime.block_on(launch::run(args.into(), launch::shutdown_signal())) {
+    if let Err(e) = launch::run_until_signal(&runtime, args.into()) {
         tracing::error!("{e}");
         eprintln!("crease-server: {e}");
         std::process::exit(1);
