@@ -127,7 +127,7 @@ async fn measure(
         let cpu1 = cpu_seconds(pid, hz).context("reading /proc/PID/stat")?;
         let elapsed = t0.elapsed().as_secs_f64();
         let cpu = cpu1 - cpu0;
-        let rss_mib = rss_kib(pid).unwrap_or(0) as f64 / 1024.0;
+        let rss_mib = crate::soak::probe::rss_kib(pid).unwrap_or(0.0) / 1024.0;
         let mut first_frames = Vec::new();
         for (level, encoding) in [
             (v1::Level::Base, Encoding::Vertices),
@@ -186,11 +186,4 @@ async fn measure(
         }
     }
     Ok(())
-}
-
-/// The resident set of `pid` in KiB (`VmRSS` of `/proc/PID/status`).
-fn rss_kib(pid: u32) -> Option<u64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
-    line.split_whitespace().nth(1)?.parse().ok()
 }

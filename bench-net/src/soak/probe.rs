@@ -76,6 +76,23 @@ pub(super) async fn settle(
     }
 }
 
+/// The number after `name` (e.g. `VmRSS:`, in kB) in the text of `/proc/PID/status`.
+fn status_field(status: &str, name: &str) -> Option<f64> {
+    status
+        .lines()
+        .find(|l| l.starts_with(name))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
+/// Process `pid`'s resident set in KiB (`VmRSS` of `/proc/PID/status`); `None` once it is gone.
+pub(crate) fn rss_kib(pid: u32) -> Option<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status_field(&status, "VmRSS:")
+}
+
 /// The server's RSS, fds and threads (`/proc`) and tasks (`/metrics`); `None` once it is gone.
 pub(crate) async fn sample(
     pid: u32,
@@ -83,18 +100,9 @@ pub(crate) async fn sample(
     started: Instant,
 ) -> Option<Sample> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let field = |name: &str| -> Option<f64> {
-        status
-            .lines()
-            .find(|l| l.starts_with(name))?
-            .split_whitespace()
-            .nth(1)?
-            .parse()
-            .ok()
-    };
     // A zombie (exited, not yet reaped) has no VmRSS.
-    let rss_kib = field("VmRSS:")?;
-    let threads = field("Threads:").unwrap_or(0.0) as usize;
+    let rss_kib = status_field(&status, "VmRSS:")?;
+    let threads = status_field(&status, "Threads:").unwrap_or(0.0) as usize;
     let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count());
     let metrics = metrics(http).await.unwrap_or_default();
     Some(Sample {
