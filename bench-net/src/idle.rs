@@ -17,7 +17,7 @@ use crease_remote::mesh_stream::subscribe_encoded;
 use tokio::time::Instant;
 
 use super::args::BenchNetArgs;
-use super::server::{clock_ticks, cpu_seconds, free_address, random_token, server_binary};
+use super::server::{clock_ticks, cpu_seconds, free_address, random_token, rss_kib, server_binary};
 
 /// The demo's room and model names (`crease_demo::DEMO_ROOM`; bench-net does not depend on
 /// the demo crate).
@@ -127,7 +127,7 @@ async fn measure(
         let cpu1 = cpu_seconds(pid, hz).context("reading /proc/PID/stat")?;
         let elapsed = t0.elapsed().as_secs_f64();
         let cpu = cpu1 - cpu0;
-        let rss_mib = crate::soak::probe::rss_kib(pid).unwrap_or(0.0) / 1024.0;
+        let rss_mib = rss_kib(pid).unwrap_or(0.0) / 1024.0;
         let mut first_frames = Vec::new();
         for (level, encoding) in [
             (v1::Level::Base, Encoding::Vertices),

@@ -332,6 +332,23 @@ pub(super) fn cpu_seconds(pid: u32, hz: f64) -> Option<f64> {
     Some(stat_ticks(&stat)? as f64 / hz)
 }
 
+/// The number after `name` (e.g. `VmRSS:`, in kB) in the text of `/proc/PID/status`.
+pub(super) fn status_field(status: &str, name: &str) -> Option<f64> {
+    status
+        .lines()
+        .find(|l| l.starts_with(name))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
+/// Process `pid`'s resident set in KiB (`VmRSS` of `/proc/PID/status`); `None` once it is gone.
+pub(super) fn rss_kib(pid: u32) -> Option<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status_field(&status, "VmRSS:")
+}
+
 /// utime + stime, in clock ticks, of a `/proc/PID/stat` line.
 pub(super) fn stat_ticks(stat: &str) -> Option<u64> {
     // Field 2 (the command name, in parentheses) may hold spaces and parentheses: count from

@@ -5,6 +5,8 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
+use crate::server::status_field;
+
 /// How long the server has, once every client left, to come back to its baseline's fds and
 /// tasks (a blocking-pool thread idles out in 10 s).
 pub(super) const SETTLE: Duration = Duration::from_secs(30);
@@ -74,23 +76,6 @@ pub(super) async fn settle(
         }
         tokio::time::sleep(Duration::from_secs(1)).await;
     }
-}
-
-/// The number after `name` (e.g. `VmRSS:`, in kB) in the text of `/proc/PID/status`.
-fn status_field(status: &str, name: &str) -> Option<f64> {
-    status
-        .lines()
-        .find(|l| l.starts_with(name))?
-        .split_whitespace()
-        .nth(1)?
-        .parse()
-        .ok()
-}
-
-/// Process `pid`'s resident set in KiB (`VmRSS` of `/proc/PID/status`); `None` once it is gone.
-pub(crate) fn rss_kib(pid: u32) -> Option<f64> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    status_field(&status, "VmRSS:")
 }
 
 /// The server's RSS, fds and threads (`/proc`) and tasks (`/metrics`); `None` once it is gone.
