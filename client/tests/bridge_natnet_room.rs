@@ -3,7 +3,6 @@
 //! over UDP to the real `crease` binary, which publishes them into a retargeting room of a
 //! crease server running in this process; a subscriber decodes the room's base meshes and
 //! checks that every frame was acknowledged and that the mesh follows the markers.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -4,7 +4,6 @@
 //! right-handed mirror, validity, and the UDP receive loop surviving junk, against a channel;
 //! and the `crease bridge vmc` command end to end into a retargeting room of a server running
 //! in this process, with a subscriber checking that the room's mesh follows the curl.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -6,7 +6,6 @@
 //! The server runs in the test process because crease-server is only a dev-dependency of
 //! crease-cli (its library, not its binary): `--server URL --server-pid <this process>` drives
 //! the same rooms, publishers, subscribers and CPU reading as a spawned server.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -1,6 +1,5 @@
 //! End to end: the real `crease` binary fits a rig from example files, writes the rig and a
 //! skinned glTF, and prints the JSON summary the issue specifies.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

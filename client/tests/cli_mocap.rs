@@ -2,7 +2,6 @@
 //! `crease handgen`, `crease retarget` + `crease synth` offline, and `crease stream --tsv/--c3d`
 //! into a room of a server running in this process, with every mesh decoded and checked.
 //! Every test skips with a note when the shared data is absent.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

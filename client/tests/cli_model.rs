@@ -1,7 +1,6 @@
 //! `crease model mirror` (issue 38): the real binary writes the mirrored model, which the
 //! library would build, with its rest mesh reflected and its winding reversed; a bad plane or a
 //! missing file is refused with a message naming it.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -4,7 +4,6 @@
 //! 16-bit quantisation bound of the server's batches (computed here from the `Topology` the
 //! server sends to a plain gRPC client), also when the frames are split over several requests
 //! and an occluded point starts a request. Errors name the model, the CSV line and the URL.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -4,7 +4,6 @@
 //! replayed into a fresh room reproduces the recorded meshes, and its skinned glTF export,
 //! skinned here from the file's own joints and weights, matches the room's meshes frame by
 //! frame.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -11,7 +11,6 @@
 //!
 //! `CREASE_KILLS` sets the number of kills (default 100). The full-disk case mounts a small
 //! tmpfs, which needs root (CAP_SYS_ADMIN); without it, it is skipped with the reason printed.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

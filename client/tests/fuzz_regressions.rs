@@ -1,6 +1,5 @@
 //! Fuzz findings of the client-side targets (`fuzz/regressions/`, README there), replayed on
 //! the stable toolchain as the fuzz target reads them: every one is refused with an error.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::{Path, PathBuf};
 

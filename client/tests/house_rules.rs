@@ -8,7 +8,6 @@
 //! - no library source file (`*/src/**/*.rs`) is over 1,000 lines unless ARCHITECTURE.md's
 //!   "Files kept whole" section names it;
 //! - the fuzz workspace's own `Cargo.lock` is up to date with the crates it uses.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::source_scan;
 

@@ -12,7 +12,6 @@
 //! - a file the crate docs name (`` `client/tests/house_rules.rs` ``) exists.
 //!
 //! The crates are the workspace's members, read from the root `Cargo.toml`.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::source_scan;
 

@@ -14,7 +14,6 @@
 //!
 //! The message names are read from `proto/crease/v1/*.proto`; the sources are scanned as
 //! tokens (`source_scan`), comments, strings and unit-test modules dropped.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::source_scan;
 

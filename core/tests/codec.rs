@@ -5,7 +5,6 @@
 //! The vectors are regenerated (after a deliberate format change only) with
 //! `cargo test -p crease-core --test all -- --ignored codec::regenerate_test_vectors`;
 //! `test_vectors_match` re-encodes the file's inputs and decodes its bytes.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::fmt::Write as _;
 use std::path::Path;

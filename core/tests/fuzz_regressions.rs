@@ -1,6 +1,5 @@
 //! Fuzz findings (`fuzz/regressions/`, README there), replayed on the stable toolchain: each
 //! input once crashed a parser; now it is refused with an error.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 

@@ -1,5 +1,4 @@
 //! Example sets: folders and TOML manifests, ordering, validation errors, the real data sets.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::{Path, PathBuf};
 

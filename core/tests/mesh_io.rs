@@ -1,6 +1,5 @@
 //! Mesh file formats end to end: round trips through real files, the shared data sets, and the
 //! error messages a user sees.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::Vec3;
 use crease_core::mesh::{Mesh, MeshError, PlyFormat, gltf, obj, ply};

@@ -1,6 +1,5 @@
 //! The skinned GLB export, read back with the `gltf` crate: the skin and the animation, applied
 //! as a glTF viewer would, reproduce the rig's LBS at every example keyframe.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{Mat4, Quat, Vec3, Vec4};
 use crease_core::mesh::Mesh;

@@ -1,5 +1,4 @@
 //! The rig file: exact round trips, and every kind of damage rejected with a clear error.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::mesh::Mesh;

@@ -3,7 +3,6 @@
 //! energy never rises over the iterations on random frames, the refinement without a prior
 //! finds a rigid pose from the control points alone, and an infinitely trusted prior moves
 //! nothing.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{DMat3, DVec3, Quat, Vec3};
 use crease_core::runtime::refine::BoneRefiner;

@@ -1,5 +1,4 @@
 //! Dual quaternion skinning against analytically known cases.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{EulerRot, Quat, Vec3};
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_dqs, skin_lbs};

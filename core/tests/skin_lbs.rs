@@ -1,6 +1,5 @@
 //! Linear blend skinning against an independent per-vertex computation in f64 with 4x4
 //! homogeneous matrices (blending transformed points, not matrices).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{DMat4, DVec3, Quat, Vec3};
 use crease_core::runtime::skin::{BonePalette, RigidTransform, SkinWeights, skin_lbs};

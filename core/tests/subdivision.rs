@@ -514,7 +514,6 @@ fn vertex_fans_list_every_incident_triangle_once() {
 /// column).
 const LOOP_VECTORS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/vectors/loop-v1.json");
 
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
 fn loop_vectors() -> serde_json::Value {
     use crease_core::mesh::subdivision::loop_steps;
     use serde_json::{Value, json};

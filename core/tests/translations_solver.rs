@@ -2,7 +2,6 @@
 //! solve (the full `3 (n_e + n_c) x 3 n_b` system assembled edge by edge and solved by SVD in
 //! f64), an analytically known rigid case, and its input checks. The edge skin is a general
 //! vector skin (`e_k^s = sum_b R_b a_kb`), not just FKY08's scalar weights.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{Mat3A, Quat, Vec3};
 use crease_core::runtime::skin::RigidTransform;

@@ -10,7 +10,6 @@
 //! corrupt, or absent, is never adopted by a replica that lacks it.
 //!
 //! Skips, saying why, when `nats-server` is not installed (`.ci/run` installs it).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::cluster_kit;
 use crate::common;

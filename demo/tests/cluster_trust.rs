@@ -15,7 +15,6 @@
 //!   with the first owner's stale epoch is dropped by the relays and counted.
 //!
 //! Skips, saying why, when `nats-server` is not installed (`.ci/run` installs it).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::cluster_kit;
 use crate::common;

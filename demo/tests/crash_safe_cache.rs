@@ -7,7 +7,6 @@
 //! re-run as a child (`CREASE_CACHE_WRITER` set) that saves two models, A and B, alternately
 //! through `save_cache` until it is killed: every kill lands in or between saves. `CREASE_KILLS`
 //! sets the number of kills (default 100).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -111,10 +110,8 @@ fn killed_cache_writers_leave_one_whole_model() {
     let save = start.elapsed() / 5;
     // The child runs this binary's writer test by its full name: its module path inside the
     // test binary (tests/all.rs), without the binary's own crate name.
-    let writer_test = match module_path!().split_once("::") {
-        Some((_, module)) => format!("{module}::cache_writer_loop"),
-        None => "cache_writer_loop".to_owned(),
-    };
+    let (_, module) = module_path!().split_once("::").unwrap();
+    let writer_test = format!("{module}::cache_writer_loop");
     let mut state = 0x2545_F491_4F6C_DD1Du64;
     let (mut saw_old, mut saw_new, mut mid_write) = (0, 0, 0);
     for k in 0..kills {

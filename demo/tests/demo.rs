@@ -96,7 +96,6 @@ fn run_the_printed_watch_command(line: &str) {
 }
 
 /// A subscription to `room`'s base level (vertex frames).
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
 async fn subscribe_base(
     client: &mut CreaseClient<tonic::transport::Channel>,
     room: &str,
@@ -113,7 +112,6 @@ async fn subscribe_base(
 }
 
 /// The frames `room` has published so far (`RoomInfo.published`).
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
 async fn room_published(client: &mut CreaseClient<tonic::transport::Channel>, room: &str) -> u64 {
     client
         .get_room(v1::GetRoomRequest { room: room.into() })
@@ -545,7 +543,6 @@ fn demo_trains_animates_and_serves() {
 /// poses: per pose every bundle acknowledged and the marker residual printed (the frame's
 /// worst hand); the right hand's mesh follows (its index finger's nail far from the fist's
 /// when the finger points, and the relaxed hand's far from the fist's).
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 async fn a_vmc_sender_drives_room_vmc(grpc: &str, vmc_line: &str, token: &str) {
     let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let python = match crease_testkit::python::python_osc(&repo) {

@@ -4,7 +4,6 @@
 //! room streams both encodings at once and `server/tests/common/palette_check.rs` compares the
 //! palette stream decoded by `core` with the vertex stream and the predictor's mesh, frame by
 //! frame, within both encodings' bounds; the bytes per frame of both are printed.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

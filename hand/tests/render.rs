@@ -1,7 +1,6 @@
 //! The software rasteriser against independent computations: analytic coverage of squares,
 //! triangles and discs, the Lambert formula evaluated here (with its own sRGB transfer
 //! functions), depth order, a PNG round trip through the `png` decoder, and contact-sheet layout.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::f32::consts::PI;
 use std::io::Cursor;

@@ -5,7 +5,6 @@
 //!
 //! Other client addresses are other loopback addresses (127.0.0.2): the kernel routes all of
 //! 127/8 to the loopback interface.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::net::{IpAddr, Ipv4Addr};
 use std::time::Duration;

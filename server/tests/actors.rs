@@ -5,7 +5,6 @@
 //! from a frame holds its pose and is flagged in the frame and the ack; a frame that names an
 //! unknown actor, or whose actor part does not fit, is refused naming the actor and field,
 //! and changes nothing; GetRoom and `/api/rooms/{id}` list the actors.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::codec::FrameDecoder;
 use crease_core::codec::palette::{

@@ -4,7 +4,6 @@
 //! the quantisation bound; bad frames are answered with the field named and the room goes on;
 //! publishing without the token is refused; a batch returns every frame in order; shutdown
 //! drains.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::sync::Arc;
 

@@ -4,7 +4,6 @@
 //! name no model or a bad name, or come without the admin token are refused naming why and
 //! leave the folder as it was; a model in use cannot be deleted, and one deleted is gone from
 //! the folder and the list.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

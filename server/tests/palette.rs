@@ -2,7 +2,6 @@
 //! palette stream decoded by `core` matches the same room's vertex stream and the predictor's
 //! own mesh, frame by frame, within both encodings' bounds, at the base and the detail level
 //! (`common::palette_check`).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -4,7 +4,6 @@
 //! against the same frames sent as control points to a plain room: the same residual, and the
 //! capture-units residual is the model one divided by the fitted scale. Bad input is refused
 //! naming what is wrong.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

@@ -4,7 +4,6 @@
 //! codec's quantisation bound, while an LBS room on the same frames does not; the batch follows
 //! its request; a model's default comes from its file; GetRoom reports the skinning; and a DQS
 //! room refuses palette subscriptions (whose clients skin with LBS) on gRPC and WebSocket.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::sync::Arc;
 

@@ -11,7 +11,6 @@ use crease_server::{AppState, Config, TlsFiles};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// A self-signed certificate for `localhost`, written with its key as PEM files in `dir`.
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check
 fn self_signed(
     dir: &std::path::Path,
 ) -> (rcgen::Certificate, std::path::PathBuf, std::path::PathBuf) {
@@ -141,7 +140,6 @@ async fn grpc_and_https_over_tls() {
 }
 
 /// One TLS connection to `addr` trusting `cert` (DER), or the handshake's error.
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 async fn tls_connect(
     addr: std::net::SocketAddr,
     cert: &rustls::pki_types::CertificateDer<'static>,
@@ -164,7 +162,6 @@ async fn tls_connect(
 }
 
 /// `GET path` over `stream` (keep-alive), the whole response as text.
-#[allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 async fn https_get(
     stream: &mut tokio_rustls::client::TlsStream<tokio::net::TcpStream>,
     path: &str,

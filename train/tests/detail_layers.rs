@@ -4,7 +4,6 @@
 //! detail synthesis recomputed independently (subdivided mesh, area-weighted normals, one kernel
 //! row per vertex), training poses come back closer to their detailed truth with detail than
 //! without, and the evaluation's detail rows are complete and consistent.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::sync::Arc;
 

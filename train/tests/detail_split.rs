@@ -1,7 +1,6 @@
 //! The automatic base/detail split (HZY11 §4): the simplified vertex subset on the horse
 //! (skipped when the data is absent) and on an icosphere, the umbrella smoothing on analytic
 //! cases, and the errors.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 use common::icosphere;

@@ -4,7 +4,6 @@
 //! out from its definition; an infinite ridge gives the endpoints' blend; and the
 //! cross-validation prefers the vectors over the scalar blend when the data has stretch the
 //! blend cannot express.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::glam::{Quat, Vec3};
 use crease_core::runtime::skin::SkinWeights;

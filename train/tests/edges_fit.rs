@@ -2,7 +2,6 @@
 //! all share one rotation per frame (any weights fit exactly), an edge generated from known
 //! weights (recovered), a zero-length edge (endpoint blend), and random data where the fit must
 //! beat the endpoints' averaged weights. The objective is recomputed here from its definition.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 use crease_core::glam::{DVec3, Quat, Vec3};

@@ -1,7 +1,6 @@
 //! Kernel CCA regression (FKY08 §4) and the RBF baseline against independent computations:
 //! a least-squares linear fit, an explicit centred-kernel prediction, a bordered RBF solve, and
 //! analytically known degenerate cases.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crease_core::runtime::kernel::Kernel;
 use crease_train::kcca::{

@@ -4,7 +4,6 @@
 //! here with each regression (global, both local ones), both skinnings, the bone refinement, and
 //! detail layers reading control points and rotations; the detail vertices are matched to the
 //! mirrored original's by position (not through the mirror's own vertex order).
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use crate::common;
 

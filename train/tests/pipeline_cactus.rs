@@ -1,6 +1,5 @@
 //! Training, prediction, model files and evaluation on the real cactus set (19 poses), and
 //! issue 20's refinement and confidence on it.
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::sync::Arc;
 

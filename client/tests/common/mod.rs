@@ -1,7 +1,6 @@
 //! Helpers shared by the command-line tests: the `crease` binary and a bending tube (the
 //! crease-testkit tube model's) trained into a small model through it.
 #![allow(dead_code)]
-#![allow(clippy::unwrap_used)] // test code: a failed unwrap is a failed check, with its line
 
 use std::path::Path;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! What the server's end-to-end tests share (and `demo/tests/cluster.rs`, through `#[path]`):
 //! crease-testkit's tube model and in-process server (below), the in-process prediction a
 //! decoded frame is checked against, control frames, and small HTTP and metrics helpers.
-#![allow(dead_code, clippy::unwrap_used)] // each test binary uses some of these
+#![allow(dead_code)] // each test binary uses some of these
 
 pub(crate) mod palette_check;
 
