@@ -19,6 +19,9 @@
 //!   core (the reference decoder other clients are checked against).
 //! - [`commands::bridge`]: `crease bridge vmc|natnet` — the options of the capture bridges;
 //!   the protocols and the bridges are `crease_bridge`'s.
+//! - [`commands::bench_net`]: `crease bench-net` — runs the `crease-bench` binary beside
+//!   `crease` (the network load benchmark and the soaks, package `crease-bench`), which the run
+//!   command does not build.
 //!
 //! Shared by the commands (these use no command module):
 //! - [`commands::common`]: example loading, control-point specs, progress display, the server
@@ -31,8 +34,7 @@
 //!
 //! From `crease_remote` (a client of a server, shared with the bridges and `crease-bench`):
 //! connecting, the one publish loop every publishing command runs through, the mesh-stream
-//! reader, control-frame files. `crease bench-net` is `crease_bench`'s options and run (the
-//! network load benchmark and the soak; also the `crease-bench` binary).
+//! reader, control-frame files.
 //!
 //! No module cycles: `tests/module_cycles.rs` fails on any, in every workspace crate.
 
@@ -87,9 +89,10 @@ pub enum Command {
     /// Decode a recorded mesh stream (`watch --record`; vertex or palette) with the Rust core
     /// and write its last frame's mesh: the reference for other decoders.
     DecodeStream(commands::decode_stream::DecodeStreamArgs),
-    /// Network load benchmark (issue 6): rooms, publishers and subscribers on loopback;
-    /// latency, server CPU and bytes per vertex per frame.
-    BenchNet(crease_bench::BenchNetArgs),
+    /// Network load benchmark (issue 6) and soaks: rooms, publishers and subscribers on
+    /// loopback; latency, server CPU and bytes per vertex per frame. Runs the `crease-bench`
+    /// binary beside `crease` (`cargo build --release -p crease-bench`) with these arguments.
+    BenchNet(commands::bench_net::BenchNetArgs),
 }
 
 /// Runs a parsed command line.
@@ -113,7 +116,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bridge(args) => commands::bridge::run(&args),
         Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),
-        Command::BenchNet(args) => crease_bench::run(&args),
+        Command::BenchNet(args) => commands::bench_net::run(&args),
     }
 }
 

@@ -1,5 +1,6 @@
 //! One module per subcommand, plus the pieces they share.
 
+pub mod bench_net;
 pub mod bridge;
 pub mod common;
 pub mod decode_stream;
