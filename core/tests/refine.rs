@@ -224,3 +224,62 @@ fn a_fully_trusted_prior_moves_nothing() {
         );
     }
 }
+
+#[test]
+fn moving_the_mesh_and_its_controls_moves_the_result_and_turns_no_rotation() {
+    // Each bone turns about its own pivot (module docs), so where the mesh lies does not
+    // change the iterates: the same problem 40 units away gives the same rotations and
+    // translations that carry the pivots to the same places, moved by the offset. (About the
+    // origin, the far copy's bones could barely turn in a local step: its rotations stayed
+    // near the start.)
+    let near = problem(21, 6, 6);
+    let offset = Vec3::new(40.0, -30.0, 25.0);
+    let mut far = near.clone();
+    for p in &mut far.mesh.positions {
+        *p += offset;
+    }
+    let beta = 3.0;
+    let mut rng = StdRng::seed_from_u64(21);
+    let motion = Quat::from_axis_angle(Vec3::new(0.2, 1.0, 0.4).normalize(), 0.9);
+    let start: Vec<Quat> = (0..near.bones)
+        .map(|_| {
+            let axis = random_point(&mut rng, 1.0).normalize_or(Vec3::X);
+            Quat::from_axis_angle(axis, rng.random_range(-0.3..0.3))
+        })
+        .collect();
+    let bend: Vec<Vec3> = (0..near.controls.len())
+        .map(|_| random_point(&mut rng, 0.2))
+        .collect();
+    let controls = |pb: &Problem, o: Vec3| -> Vec<Vec3> {
+        pb.controls
+            .iter()
+            .zip(&bend)
+            .map(|(&i, d)| motion * (pb.mesh.positions[i as usize] - o) + o + *d)
+            .collect()
+    };
+    let (near_c, far_c) = (controls(&near, Vec3::ZERO), controls(&far, offset));
+    let run = |pb: &Problem, c: &[Vec3]| {
+        refined(&refiner(pb, beta), &pb.solver(beta), &start, 0.01, c, 8)
+    };
+    let ((rn, tn), (rf, tf)) = (run(&near, &near_c), run(&far, &far_c));
+    let moved_from_start = rn
+        .iter()
+        .zip(&start)
+        .map(|(a, b)| a.angle_between(*b))
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved_from_start > 0.3,
+        "the refinement did not turn the bones ({moved_from_start} rad): nothing is tested"
+    );
+    for b in 0..near.bones {
+        let turn = rn[b].angle_between(rf[b]);
+        assert!(turn < 2e-3, "bone {b}: the far copy's rotation is {turn} rad off");
+        // x -> R x + t near is x -> R (x - o) + t + o far: t_far = t_near + o - R o.
+        let want = tn[b] + offset - rn[b] * offset;
+        assert!(
+            (tf[b] - want).length() < 0.1,
+            "bone {b}: translation {} against {want}",
+            tf[b]
+        );
+    }
+}

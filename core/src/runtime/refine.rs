@@ -9,17 +9,35 @@
 //!
 //! - **global** (translations, rotations fixed): eq. 11 itself, the prefactored
 //!   [`TranslationSolver`] (the prior does not involve `t`), its exact minimiser;
-//! - **local** (rotations, translations fixed): every residual of eq. 11 is linear in the
-//!   rotations, `u = sum_b R_b x_b + y`, and `|R_b x_b| = |x_b|` whatever `R_b`, so with the
-//!   other bones fixed the energy of one bone's rotation is a Procrustes problem: maximise
-//!   `tr(R_b^T M_b)`,
-//!   `M_b = - sum_{a != b} R_a G_ab - sum_c t_c H_cb^T + beta sum_l c_l q_lb^T + lambda_b R^_b`
+//! - **local** (rotations, each bone turning about its own pivot): a bone's transform is
+//!   written `x -> R_b (x - p_b) + s_b`, so `t_b = s_b - R_b p_b`, with `p_b` the bone's
+//!   weighted centroid in the rest pose (`sum_i w_ib v_i^0 / sum_i w_ib`), and the local step
+//!   holds every `s_b` (where the pivot goes) while it turns the rotations. Every residual of
+//!   eq. 11 is linear in the rotations, `u = sum_b R_b x_b + sum_b d_b s_b + y` with
+//!   `x_b = (the rest-pose coefficient of R_b) - d_b p_b` (`d_b` the residual's translation
+//!   coefficient), and `|R_b x_b| = |x_b|` whatever `R_b`, so with the other bones fixed the
+//!   energy of one bone's rotation is a Procrustes problem: maximise `tr(R_b^T M_b)`,
+//!   `M_b = - sum_{a != b} R_a G_ab - sum_c s_c H_cb^T + beta sum_l c_l q_lb^T + lambda_b R^_b`
 //!   with `G_ab = sum x_a x_b^T` (pairs of bones sharing a residual), `H_cb = sum d_c x_b`
-//!   (`d_c` the residual's translation coefficient) and `q_lb = w_{i_l} b v_{i_l}^0`, weighted
-//!   1 for edges and `beta` for controls, all precomputed here. The bones are visited in turn,
-//!   each seeing the others' latest rotations (block coordinate descent, Gauss-Seidel order),
-//!   so a local step costs one 3x3 product per bone pair of the eq. 11 pattern, independent
-//!   of the vertex and edge counts (like the solve itself).
+//!   and `q_lb = w_{i_l} b (v_{i_l}^0 - p_b)`, weighted 1 for edges and `beta` for controls,
+//!   all precomputed here. The bones are visited in turn, each seeing the others' latest
+//!   rotations (block coordinate descent, Gauss-Seidel order), so a local step costs one 3x3
+//!   product per bone pair of the eq. 11 pattern, independent of the vertex and edge counts
+//!   (like the solve itself).
+//!
+//! *Why the pivots* (issue 42): the energy is the same whatever point a bone turns about, but
+//! the descent is not. Turning a bone about the origin with its translation held swings its
+//! vertices by `|R - I| |v|`, far from where its neighbours and the control points hold them,
+//! so each local step could only turn bones a little, and 20 iterations left the horse's
+//! far-from-the-examples poses almost where the regression put them (LOO of the horse's
+//! `poses/` with 8 control points: refined 0.0581 against the regression's 0.0582, from rest
+//! 0.1251). Turning about the centroid moves the bone's vertices least for a given turn, the
+//! split of a rigid motion into a rotation about the centroid and a translation that makes
+//! the least-squares fits of Kabsch and of ARAP's local step (Sorkine and Alexa, "As-rigid-
+//! as-possible surface modeling", SGP 2007) decouple; with it the same 20 iterations reach
+//! 0.0507 (from rest 0.0767), BENCHMARKS.md "Poses far from few examples". It also makes the
+//! iterates independent of where the mesh lies (tested): moving the mesh and its controls
+//! moves the result and turns no rotation.
 //!
 //! Each bone's rotation is the polar factor of `M_b`, found by Müller et al.'s iteration
 //! ("A robust method to extract the rotational part of deformations", MIG 2016) warm-started
@@ -99,6 +117,8 @@ pub struct BoneRefiner {
     q: Cols<Vec3A>,
     /// `tr(G_bb) / 3`.
     scale: Vec<f64>,
+    /// `p_b`, each bone's pivot: its weighted centroid in the rest pose (module docs).
+    pivots: Vec<Vec3A>,
 }
 
 /// One residual's bones: `(bone, x_b, d_b)`.
@@ -127,15 +147,20 @@ impl BoneRefiner {
         beta: f32,
     ) -> BoneRefiner {
         let beta = beta as f64;
+        let pivots = pivots(rest, vertex_skin, bone_count);
         let mut pairs: BTreeMap<(u32, u32), (DMat3, DVec3)> = BTreeMap::new();
         let mut q: BTreeMap<(u32, u32), DVec3> = BTreeMap::new();
         let mut r: Residual = Vec::new();
-        let mut accumulate = |r: &Residual, weight: f64| {
-            for &(b, xb, _) in r {
+        let mut accumulate = |r: &mut Residual, weight: f64| {
+            // The rest-pose coefficients turned about the pivots: x_b - d_b p_b.
+            for (b, x, d) in r.iter_mut() {
+                *x -= pivots[*b as usize] * *d;
+            }
+            for &(b, xb, _) in r.iter() {
                 if xb == DVec3::ZERO {
                     continue;
                 }
-                for &(a, xa, da) in r {
+                for &(a, xa, da) in r.iter() {
                     let e = pairs.entry((b, a)).or_insert((DMat3::ZERO, DVec3::ZERO));
                     e.0 += outer(xa, xb) * weight;
                     e.1 += xb * (da * weight);
@@ -158,7 +183,7 @@ impl BoneRefiner {
                     add(&mut r, b, -a.as_dvec3(), 0.0);
                 }
             }
-            accumulate(&r, 1.0);
+            accumulate(&mut r, 1.0);
         }
         for (l, &i) in control_vertices.iter().enumerate() {
             r.clear();
@@ -166,9 +191,10 @@ impl BoneRefiner {
             // v_i - c_l = sum_b R_b (w_ib v_i^0) + sum_b w_ib t_b - c_l.
             for (b, w) in influences(vertex_skin, i as usize) {
                 add(&mut r, b, v * w, w);
-                *q.entry((b, l as u32)).or_insert(DVec3::ZERO) += v * (w * beta);
+                *q.entry((b, l as u32)).or_insert(DVec3::ZERO) +=
+                    (v - pivots[b as usize]) * (w * beta);
             }
-            accumulate(&r, beta);
+            accumulate(&mut r, beta);
         }
         let scale = (0..bone_count as u32)
             .map(|b| {
@@ -183,6 +209,7 @@ impl BoneRefiner {
                 .map(|(g, h)| (Mat3A::from(g.as_mat3()), Vec3A::from(h.as_vec3()))),
             q: Cols::from_map(bone_count, &q).map(|v| Vec3A::from(v.as_vec3())),
             scale,
+            pivots: pivots.iter().map(|p| Vec3A::from(p.as_vec3())).collect(),
         }
     }
 
@@ -197,13 +224,13 @@ impl BoneRefiner {
     }
 
     /// One local step: every bone's rotation in turn, in place in `r` (f64, and its f32
-    /// copy `r32`, which the products read), with the translations `t` and the prior `r_hat`
-    /// at `strength` (module docs).
+    /// copy `r32`, which the products read), with the pivots' places `s` held and the prior
+    /// `r_hat` at `strength` (module docs).
     fn local_step(
         &self,
         r: &mut [DMat3],
         r32: &mut [Mat3A],
-        t: &[Vec3],
+        s: &[Vec3A],
         controls: &[Vec3],
         r_hat: &[DMat3],
         strength: f64,
@@ -214,7 +241,7 @@ impl BoneRefiner {
                 if a != b {
                     m -= r32[a] * *gab;
                 }
-                m -= outer32(Vec3A::from(t[a]), *hab);
+                m -= outer32(s[a], *hab);
             }
             for (l, qlb) in self.q.col(b) {
                 m += outer32(Vec3A::from(controls[l]), *qlb);
@@ -253,6 +280,7 @@ impl BoneRefiner {
             r32,
             r_hat,
             t32,
+            s32,
             q32,
             solve,
         } = scratch;
@@ -271,7 +299,16 @@ impl BoneRefiner {
         q32.copy_from_slice(rotations);
         solver.solve(q32, controls, solve, t32)?;
         for _ in 0..iterations {
-            self.local_step(r, r32, t32, controls, r_hat, strength);
+            // Where the pivots are now: s_b = t_b + R_b p_b.
+            for (((s, t), m), p) in s32
+                .iter_mut()
+                .zip(t32.iter())
+                .zip(r32.iter())
+                .zip(&self.pivots)
+            {
+                *s = Vec3A::from(*t) + *m * *p;
+            }
+            self.local_step(r, r32, s32, controls, r_hat, strength);
             for (q, m) in q32.iter_mut().zip(r.iter()) {
                 *q = DQuat::from_mat3(m).normalize().as_quat();
             }
@@ -297,6 +334,7 @@ pub struct RefineScratch {
     r32: Vec<Mat3A>,
     r_hat: Vec<DMat3>,
     t32: Vec<Vec3>,
+    s32: Vec<Vec3A>,
     q32: Vec<Quat>,
     solve: TranslationScratch,
 }
@@ -308,9 +346,26 @@ impl RefineScratch {
             self.r32 = vec![Mat3A::IDENTITY; bones];
             self.r_hat = vec![DMat3::IDENTITY; bones];
             self.t32 = vec![Vec3::ZERO; bones];
+            self.s32 = vec![Vec3A::ZERO; bones];
             self.q32 = vec![Quat::IDENTITY; bones];
         }
     }
+}
+
+/// Each bone's weighted centroid in the rest pose, `sum_i w_ib v_i^0 / sum_i w_ib` (the
+/// origin for a bone no vertex uses).
+fn pivots(rest: &[Vec3], skin: &SkinWeights, bones: usize) -> Vec<DVec3> {
+    let mut sum = vec![(DVec3::ZERO, 0.0f64); bones];
+    for (i, v) in rest.iter().enumerate() {
+        for (b, w) in influences(skin, i) {
+            let e = &mut sum[b as usize];
+            e.0 += v.as_dvec3() * w;
+            e.1 += w;
+        }
+    }
+    sum.into_iter()
+        .map(|(p, w)| if w > 0.0 { p / w } else { DVec3::ZERO })
+        .collect()
 }
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {

@@ -71,6 +71,7 @@ pub(crate) fn dense_weights(skin: &SkinWeights, row: usize, bones: usize) -> Vec
 }
 
 /// Everything eq. 11 needs.
+#[derive(Clone)]
 pub(crate) struct Problem {
     pub(crate) mesh: Mesh,
     pub(crate) edges: Vec<[u32; 2]>,
