@@ -98,7 +98,7 @@ fn bench(c: &mut Criterion) {
         // Issue 20's bone-level refinement on top of the transforms (test frames lie off the
         // examples, so every one is refined).
         if method == Method::Global {
-            for iterations in [1usize, 4] {
+            for iterations in [1usize, 4, 8, 20] {
                 let mut refined = Predictor::new(model.clone(), None).expect("predictor");
                 refined.set_refinement(Some(Refinement {
                     iterations,
