@@ -273,7 +273,10 @@ fn moving_the_mesh_and_its_controls_moves_the_result_and_turns_no_rotation() {
     );
     for b in 0..near.bones {
         let turn = rn[b].angle_between(rf[b]);
-        assert!(turn < 2e-3, "bone {b}: the far copy's rotation is {turn} rad off");
+        assert!(
+            turn < 2e-3,
+            "bone {b}: the far copy's rotation is {turn} rad off"
+        );
         // x -> R x + t near is x -> R (x - o) + t + o far: t_far = t_near + o - R o.
         let want = tn[b] + offset - rn[b] * offset;
         assert!(

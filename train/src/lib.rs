@@ -20,6 +20,8 @@
 //!   every method shares ([`base::TrainedBase`]).
 //! - [`select`]: kernel, width, regularisation and beta chosen by leave-one-out inside the
 //!   training set; control points improved the same way.
+//! - [`coverage`]: how many control points (the leave-one-out error per count of automatic
+//!   points) and which bones the chosen ones leave undetermined (issue 42).
 //! - [`pipeline`]: `crease train` as a function (bones, controls, regressors, edge weights).
 //! - [`eval`]: held-out and leave-one-out evaluation of every method against the oracles.
 //! - `linalg`: small dense kernels the per-vertex and per-edge fits share (no allocation).
@@ -32,6 +34,7 @@
 pub mod base;
 pub mod bones;
 pub mod controls;
+pub mod coverage;
 pub mod detail;
 pub mod edges;
 pub mod eval;

@@ -93,7 +93,7 @@ pub fn select_with_progress(
 /// Mean leave-one-out mesh error over the non-rest examples, per `(kernel, kappa)` of
 /// `candidates` (major) and `beta` of `betas`, with the control points `controls` (the rig and
 /// its edge skin from `base`); `on_fold(done, folds)` after each fold.
-fn loo_errors(
+pub(crate) fn loo_errors(
     base: &TrainedBase,
     controls: &[u32],
     frames: &[&[Vec3]],

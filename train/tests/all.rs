@@ -8,6 +8,7 @@ mod common;
 
 mod bones_fit;
 mod controls_auto;
+mod coverage;
 mod detail_extract;
 mod detail_hand;
 mod detail_layers;
