@@ -10,6 +10,7 @@ mod source_scan;
 mod bridge_natnet_room;
 mod bridge_vmc;
 mod cli_bench_net;
+mod cli_coverage;
 mod cli_detail;
 mod cli_fit;
 mod cli_handgen;

@@ -15,7 +15,7 @@ use crate::detail::layer::{DetailOptions, DetailReport, DetailTrainError};
 use crate::edges;
 use crate::group_rig::GroupRig;
 use crate::regress::{self, RegressInput, RegressOptions};
-use crate::selection::{ControlSelection, SelectGrid, Selection};
+use crate::selection::{ControlCoverage, ControlSelection, SelectGrid, Selection};
 
 /// Where the control points come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,6 +59,13 @@ pub struct TrainOptions {
     /// of this many bones fitted beside them ([`crate::group_rig`]); `None`, or not fewer than
     /// the rig's bones, keeps each bone's own nearest points (HZY11 §5.1.1).
     pub group_bones: Option<usize>,
+    /// Measure the control points inside the training set after training
+    /// ([`crate::coverage`]): the bones they leave undetermined, and the control-point curve
+    /// at these counts of automatic points (none: no curve). Off by default (the library's
+    /// callers, the demo's start among them, do not pay for it); `crease train` turns it on.
+    pub coverage: bool,
+    /// The counts of the control-point curve ([`TrainOptions::coverage`]).
+    pub control_curve: Vec<usize>,
 }
 
 impl Default for TrainOptions {
@@ -74,6 +81,8 @@ impl Default for TrainOptions {
             select: None,
             detail: DetailOptions::default(),
             group_bones: None,
+            coverage: false,
+            control_curve: Vec::new(),
         }
     }
 }
@@ -141,6 +150,9 @@ pub struct TrainReport {
     pub detail: Option<DetailReport>,
     /// The coarse rig that groups the bones, when asked for (its time is part of `seconds`).
     pub group_rig: Option<GroupRigReport>,
+    /// What [`crate::coverage`] measured of the control points, when
+    /// [`TrainOptions::coverage`] is on.
+    pub coverage: Option<ControlCoverage>,
     /// Total seconds.
     pub seconds: f64,
 }

@@ -29,6 +29,7 @@ use crate::base::{TrainError, TrainedBase};
 use crate::controls::auto_control_points;
 use crate::regress::{self, RegressInput, RegressOptions};
 use crate::select::loo_errors;
+pub use crate::selection::{Coverage, CurvePoint, Region};
 
 /// A bone the examples turn by less than this mean angle (degrees) is never undetermined.
 pub const MIN_SPREAD_DEG: f64 = 5.0;
@@ -39,43 +40,6 @@ pub const UNDETERMINED_RATIO: f64 = 0.5;
 pub const SHARED_WEIGHT: f32 = 0.1;
 /// Regions with fewer vertices than this share of the mesh's are not reported.
 pub const MIN_REGION_SHARE: f64 = 0.01;
-
-/// One point of the control-point curve.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct CurvePoint {
-    /// Number of automatic control points.
-    pub count: usize,
-    /// The control vertices chosen for it.
-    pub controls: Vec<u32>,
-    /// Mean leave-one-out RMS mesh error with them (bbox side = 1).
-    pub rms: f64,
-}
-
-/// A connected group of bones the control points leave undetermined.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Region {
-    /// Its bones.
-    pub bones: Vec<u32>,
-    /// The vertices whose heaviest bone is one of them.
-    pub vertices: Vec<u32>,
-    /// Their centroid in the rest pose.
-    pub centroid: [f32; 3],
-    /// The bones' mean spread over the examples, degrees.
-    pub spread_deg: f64,
-    /// The bones' mean leave-one-out rotation error, degrees.
-    pub error_deg: f64,
-}
-
-/// What [`undetermined`] measured.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct Coverage {
-    /// Per bone: mean angle to its rest rotation over the non-rest examples, degrees.
-    pub spread_deg: Vec<f64>,
-    /// Per bone: mean leave-one-out rotation error, degrees.
-    pub error_deg: Vec<f64>,
-    /// The undetermined regions, largest first.
-    pub regions: Vec<Region>,
-}
 
 /// The control-point curve (module docs): one point per count of `counts`, with the model's
 /// regression `options` and `beta`. `frames` are the training meshes, rest pose first, as

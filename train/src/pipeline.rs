@@ -22,11 +22,13 @@ pub use crate::base::{
 };
 use crate::bones::{self, FitInput, IterationStat};
 use crate::controls;
+use crate::coverage;
 use crate::detail::layer::{self as detail_layer, DetailFrames};
 use crate::edges;
 use crate::group_rig;
 use crate::regress::{Method, RegressOptions};
 use crate::select;
+use crate::selection::ControlCoverage;
 
 /// Trains a model's base layer. `progress` sees the bone fit's steps.
 pub fn train(
@@ -114,6 +116,15 @@ pub fn train_layers_with(
     }
     base.report.regress_seconds = t.elapsed().as_secs_f64();
     base.report.seconds += base.report.regress_seconds;
+    if options.coverage && input.frames.len() >= 3 {
+        base.report.coverage = Some(measure_coverage(
+            &base,
+            input.frames,
+            &regress,
+            beta,
+            &options.control_curve,
+        )?);
+    }
     if let Some(detailed) = detailed {
         let (layer, report, _) = detail_layer::train(
             input.rest,
@@ -129,6 +140,36 @@ pub fn train_layers_with(
         model.detail = Some(layer);
     }
     Ok((model, base.report))
+}
+
+/// [`coverage`] of `base`'s control points with the chosen regression: the undetermined
+/// bones, and the curve at `counts` up to the first count the automatic choice cannot give.
+fn measure_coverage(
+    base: &TrainedBase,
+    frames: &[&[Vec3]],
+    regress: &RegressOptions,
+    beta: f32,
+    counts: &[usize],
+) -> Result<ControlCoverage, TrainError> {
+    let t = Instant::now();
+    let bones = coverage::undetermined(base, regress)?;
+    let mut curve = Vec::with_capacity(counts.len());
+    let mut curve_stopped = None;
+    for &count in counts {
+        match coverage::control_curve(base, frames, regress, beta, &[count], &mut |_, _| {}) {
+            Ok(mut point) => curve.append(&mut point),
+            Err(e) => {
+                curve_stopped = Some(e.to_string());
+                break;
+            }
+        }
+    }
+    Ok(ControlCoverage {
+        curve,
+        curve_stopped,
+        bones,
+        seconds: t.elapsed().as_secs_f64(),
+    })
 }
 
 /// Fits everything but the regressors (see [`TrainedBase`]).
@@ -264,6 +305,7 @@ pub fn train_base(
         control_selection: None,
         detail: None,
         group_rig: group_rig_report,
+        coverage: None,
         seconds: start.elapsed().as_secs_f64(),
     };
     let mut base = TrainedBase {

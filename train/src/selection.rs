@@ -1,6 +1,7 @@
 //! What model selection searches and what it finds: the candidate grid of kernels, KCCA
 //! regularisations and betas, the scored candidates, and the outcomes of choosing the regression
-//! ([`crate::select::select`]) and the control points ([`crate::select::select_controls`]).
+//! ([`crate::select::select`]) and the control points ([`crate::select::select_controls`]),
+//! and what [`crate::coverage`] measures of the control points (the curve, undetermined bones).
 //! Plain data, so the training options and reports ([`crate::base`]) can hold them without
 //! depending on the search itself.
 
@@ -97,6 +98,59 @@ pub struct ControlSelection {
     pub swaps: Vec<(u32, u32)>,
     /// The candidate pool.
     pub pool: Vec<u32>,
+    /// Wall time.
+    pub seconds: f64,
+}
+
+/// One point of the control-point curve.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CurvePoint {
+    /// Number of automatic control points.
+    pub count: usize,
+    /// The control vertices chosen for it.
+    pub controls: Vec<u32>,
+    /// Mean leave-one-out RMS mesh error with them (bbox side = 1).
+    pub rms: f64,
+}
+
+/// A connected group of bones the control points leave undetermined.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Region {
+    /// Its bones.
+    pub bones: Vec<u32>,
+    /// The vertices whose heaviest bone is one of them.
+    pub vertices: Vec<u32>,
+    /// Their centroid in the rest pose.
+    pub centroid: [f32; 3],
+    /// The bones' mean spread over the examples, degrees.
+    pub spread_deg: f64,
+    /// The bones' mean leave-one-out rotation error, degrees.
+    pub error_deg: f64,
+}
+
+/// What [`crate::coverage::undetermined`] measured.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Coverage {
+    /// Per bone: mean angle to its rest rotation over the non-rest examples, degrees.
+    pub spread_deg: Vec<f64>,
+    /// Per bone: mean leave-one-out rotation error, degrees.
+    pub error_deg: Vec<f64>,
+    /// The undetermined regions, largest first.
+    pub regions: Vec<Region>,
+}
+
+/// What `crease train` measured of its control points ([`crate::coverage`], issue 42).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ControlCoverage {
+    /// The control-point curve, one point per count asked for
+    /// ([`crate::base::TrainOptions::control_curve`]) up to the first the automatic choice
+    /// cannot give.
+    pub curve: Vec<CurvePoint>,
+    /// Why the curve stops before the last count asked for, if it does.
+    pub curve_stopped: Option<String>,
+    /// Per-bone spread and leave-one-out error with the model's own control points, and the
+    /// regions they leave undetermined.
+    pub bones: Coverage,
     /// Wall time.
     pub seconds: f64,
 }

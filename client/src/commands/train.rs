@@ -41,6 +41,13 @@ pub struct TrainArgs {
     /// refuses palette subscriptions (their clients skin with LBS).
     #[arg(long, value_name = "lbs|dqs", default_value_t)]
     pub skinning: crease_core::runtime::skin::Skinning,
+    /// Measure the control points inside the training set (issue 42): the leave-one-out error
+    /// with this many automatic control points each (the control-point curve, in the output,
+    /// `--json` and the report), and the bones the model's own points leave undetermined
+    /// (moved by the examples, not predicted from the points; a warning names where).
+    /// `none` skips both.
+    #[arg(long, value_name = "N,N,...|none", default_value = "4,8,12,16", value_parser = parse_curve)]
+    pub control_curve: CurveCounts,
     /// Print one JSON object with the training report on stdout.
     #[arg(long)]
     pub json: bool,
@@ -59,6 +66,10 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let set = &layers.base;
     let mut options = args.regress.train_options(args.method, &layers)?;
     options.detail = layers::detail_options(&args.detail, &layers)?;
+    if let Some(counts) = &args.control_curve.0 {
+        options.coverage = true;
+        options.control_curve.clone_from(counts);
+    }
     let frames: Vec<&[crease_core::glam::Vec3]> = set.frames();
     let names: Vec<String> = set.names();
     let progress = Progress::new(options.fit.max_iterations as u64);
@@ -133,6 +144,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             s.seconds
         );
     }
+    if let Some(c) = &report.coverage {
+        print_coverage(c, &model);
+    }
     if let Some(d) = &report.detail {
         eprintln!(
             "detail layer: {} levels, {} vertices; rays {} hits, {} closest-point fallbacks (max |h| {:.3e}); resampling {:.1} s, regression {:.1} s",
@@ -184,4 +198,65 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `--control-curve`'s counts; `None` for `none`.
+#[derive(Clone, Debug)]
+pub struct CurveCounts(pub Option<Vec<usize>>);
+
+fn parse_curve(text: &str) -> Result<CurveCounts, String> {
+    if text.trim() == "none" {
+        return Ok(CurveCounts(None));
+    }
+    let mut counts = Vec::new();
+    for field in text.split(',') {
+        let n: usize = field
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{field}` is not a count of control points (N,N,... or none)"))?;
+        if n == 0 {
+            return Err("a count of control points must be at least 1".into());
+        }
+        counts.push(n);
+    }
+    counts.sort_unstable();
+    counts.dedup();
+    Ok(CurveCounts(Some(counts)))
+}
+
+/// The control-point curve and the undetermined regions, on stderr (warnings for the regions).
+fn print_coverage(
+    c: &crease_train::selection::ControlCoverage,
+    model: &crease_core::model::TrainedModel,
+) {
+    if !c.curve.is_empty() {
+        let points: Vec<String> = c
+            .curve
+            .iter()
+            .map(|p| format!("{}: {:.4e}", p.count, p.rms))
+            .collect();
+        eprintln!(
+            "control-point curve (leave-one-out inside the training set, automatic points; this model has {}): {}{}",
+            model.controls.len(),
+            points.join(", "),
+            c.curve_stopped
+                .as_ref()
+                .map_or(String::new(), |why| format!(" (stopped: {why})"))
+        );
+    }
+    for r in &c.bones.regions {
+        eprintln!(
+            "warning: the control points leave {} bone(s) undetermined around ({:.3}, {:.3}, {:.3}) \
+             ({} vertices): the examples turn them by {:.1} deg on average, and leave-one-out \
+             predicts them {:.1} deg off; a control point there would constrain them (bones {:?})",
+            r.bones.len(),
+            r.centroid[0],
+            r.centroid[1],
+            r.centroid[2],
+            r.vertices.len(),
+            r.spread_deg,
+            r.error_deg,
+            r.bones
+        );
+    }
 }

@@ -163,6 +163,9 @@ impl RegressArgs {
             select: self.select.then(SelectGrid::default),
             detail: Default::default(),
             group_bones: self.group_bones(method.geometry_local())?,
+            // `crease train --control-curve` turns these on.
+            coverage: false,
+            control_curve: Vec::new(),
         })
     }
 }

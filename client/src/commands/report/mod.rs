@@ -759,11 +759,11 @@ pub fn write_train(
     }
     sections.push(html::section("selection", "Model selection", &body));
     let names: Vec<String> = model.controls.iter().map(|c| c.name.clone()).collect();
-    sections.push(html::section(
-        "controls",
-        "Control points",
-        &controls_figure(dir, rest, &named_controls(&controls, Some(&names)))?,
-    ));
+    let mut body = controls_figure(dir, rest, &named_controls(&controls, Some(&names)))?;
+    if let Some(c) = &report.coverage {
+        body.push_str(&coverage_figures(dir, rest, &controls, c)?);
+    }
+    sections.push(html::section("controls", "Control points", &body));
 
     let mut items = vec![("bone fit".to_owned(), report.fit.seconds)];
     if let Some(g) = &report.group_rig {
@@ -803,6 +803,87 @@ pub fn write_train(
     let page = html::page(&format!("crease train report: {}", r.source), &sections);
     std::fs::write(&index, page).with_context(|| format!("writing {}", index.display()))?;
     Ok(index)
+}
+
+/// The control-point curve and the undetermined regions (issue 42, `crate::coverage` of the
+/// training report) as figures.
+fn coverage_figures(
+    dir: &Path,
+    rest: &crease_core::mesh::Mesh,
+    controls: &[u32],
+    c: &crease_train::selection::ControlCoverage,
+) -> anyhow::Result<String> {
+    let mut body = String::new();
+    if !c.curve.is_empty() {
+        let pts: Vec<(f64, f64)> = c.curve.iter().map(|p| (p.count as f64, p.rms)).collect();
+        plots::lines(
+            &dir.join("control-curve.svg"),
+            "leave-one-out RMS by number of automatic control points",
+            ("control points", "RMS error"),
+            &[("automatic".to_owned(), pts)],
+            false,
+        )?;
+        let table: Vec<String> = c
+            .curve
+            .iter()
+            .map(|p| format!("{}: {:.4e}", p.count, p.rms))
+            .collect();
+        body.push_str(&html::figure(
+            "control-curve.svg",
+            "control-point curve",
+            &format!(
+                "How the error falls with the number of control points: for each count, the automatic points (FKY08 &sect;3) and the leave-one-out mesh error inside the training set (each non-rest pose held out, the rotations regressed from the others, eq. 11, LBS; the bones fitted on every pose). {}. This model has {} points.{}",
+                table.join(", "),
+                controls.len(),
+                c.curve_stopped
+                    .as_ref()
+                    .map_or(String::new(), |w| format!(" The curve stops: {}.", html::escape(w)))
+            ),
+        ));
+    }
+    let regions = &c.bones.regions;
+    if regions.is_empty() {
+        body.push_str("<p>Every bone the examples move is predicted from these control points within half its movement (leave-one-out): no region is left undetermined.</p>\n");
+        return Ok(body);
+    }
+    let vertex_sets: Vec<&[u32]> = regions.iter().map(|r| r.vertices.as_slice()).collect();
+    renders::undetermined_regions(
+        &dir.join("undetermined.png"),
+        &rest.positions,
+        &rest.triangles,
+        &vertex_sets,
+        controls,
+    )?;
+    let legend: Vec<String> = regions
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let [red, green, blue] = renders::region_color(k);
+            format!(
+                "<span style=\"color: rgb({red},{green},{blue})\">&#9632;</span> region {}: {} bones, {} vertices around ({:.3}, {:.3}, {:.3}), turned {:.1}&deg; by the examples, predicted {:.1}&deg; off",
+                k + 1,
+                r.bones.len(),
+                r.vertices.len(),
+                r.centroid[0],
+                r.centroid[1],
+                r.centroid[2],
+                r.spread_deg,
+                r.error_deg
+            )
+        })
+        .collect();
+    body.push_str(&html::figure(
+        "undetermined.png",
+        "regions the control points leave undetermined",
+        &format!(
+            "<b>Warning: the control points leave {} region(s) undetermined</b> (coloured; the control points are the black dots): bones the examples turn by at least {}&deg; on average whose leave-one-out rotation error is at least {} of that, so a new pose there is guessed, not followed. A control point in a region would constrain it.<br>{}",
+            regions.len(),
+            crease_train::coverage::MIN_SPREAD_DEG,
+            crease_train::coverage::UNDETERMINED_RATIO,
+            legend.join("<br>")
+        ),
+    ));
+    Ok(body)
 }
 
 /// A pose name without its folders and extension, for axis labels.

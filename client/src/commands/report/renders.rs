@@ -181,6 +181,59 @@ pub(super) fn control_layout(
         .with_context(|| format!("writing the control-point layout {}", path.display()))
 }
 
+/// The regions the control points leave undetermined (issue 42) on the rest mesh, front and
+/// side, written as PNG to `path`: the mesh in grey, each region's vertices in its marker
+/// colour (region `k` in `marker_color(k)`, as the page's legend says), the control points
+/// as black dots.
+pub(super) fn undetermined_regions(
+    path: &Path,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    regions: &[&[u32]],
+    controls: &[u32],
+) -> anyhow::Result<()> {
+    let mut colors = vec![GREY; positions.len()];
+    for (k, vertices) in regions.iter().enumerate() {
+        for &v in *vertices {
+            if let Some(c) = colors.get_mut(v as usize) {
+                *c = marker_color(k);
+            }
+        }
+    }
+    let box_ = bounds(&[positions]);
+    let tile_size = TILE + 60;
+    let mut sheet = Image::new(tile_size * 2, tile_size, BACKGROUND);
+    let mut renderer = Renderer::new();
+    let mut tile = Image::default();
+    for (k, (view, name)) in VIEWS.into_iter().enumerate() {
+        let camera = Camera::fit(view, box_, tile_size, tile_size, MARGIN + 0.03);
+        renderer.render_colored_into(
+            positions,
+            triangles,
+            &colors,
+            &camera,
+            &settings(GREY),
+            &mut tile,
+        );
+        for &v in controls {
+            if let Some(&p) = positions.get(v as usize) {
+                let p = camera.project(p);
+                dot(&mut tile, p.x, p.y, 5.0, INK, false);
+            }
+        }
+        tile.draw_text(6, 6, name, INK, 2);
+        sheet.blit(&tile, k as u32 * tile_size, 0);
+    }
+    sheet
+        .write_png(path)
+        .with_context(|| format!("writing the undetermined regions {}", path.display()))
+}
+
+/// The colour of region or control point `i` in the report's pictures.
+pub(super) fn region_color(i: usize) -> [u8; 3] {
+    marker_color(i)
+}
+
 /// The largest side of a box.
 fn box_size((lo, hi): (Vec3, Vec3)) -> f32 {
     (hi - lo).max_element()
