@@ -85,6 +85,10 @@ impl Image {
     pub fn fill_rect(&mut self, x: u32, y: u32, w: u32, h: u32, color: [u8; 3]) {
         let x_end = x.saturating_add(w).min(self.width);
         let y_end = y.saturating_add(h).min(self.height);
+        if x >= x_end {
+            // Wholly right of the image (a label drawn past its edge): nothing to fill.
+            return;
+        }
         for row in y..y_end {
             let start = row as usize * self.width as usize;
             self.pixels[start + x as usize..start + x_end as usize].fill(color);
@@ -165,4 +169,27 @@ pub fn image_stats(image: &Image) -> (f64, f64) {
         .sum::<f64>()
         / n as f64;
     (mean, variance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fills_and_text_past_the_right_edge_are_clipped_not_a_panic() {
+        // A report's control-point label can start right of its tile (found on the generated
+        // hand's report: a point near the tile's right edge).
+        let (bg, ink) = ([255, 255, 255], [0, 0, 0]);
+        let mut image = Image::new(10, 6, bg);
+        image.fill_rect(12, 1, 3, 2, ink);
+        image.fill_rect(10, 0, 1, 1, ink);
+        image.draw_text(11, 0, "label", ink, 2);
+        assert!(image.pixels().iter().all(|&p| p == bg));
+        // Straddling the edge: only the inside is filled.
+        image.fill_rect(8, 2, 5, 1, ink);
+        for x in 0..10 {
+            assert_eq!(image.pixel(x, 2), if x >= 8 { ink } else { bg }, "x {x}");
+        }
+        assert!((0..10).all(|x| image.pixel(x, 1) == bg && image.pixel(x, 3) == bg));
+    }
 }
