@@ -773,6 +773,9 @@ pub fn write_train(
         items.push(("control-point selection".into(), c.seconds));
     }
     items.push(("control points".into(), report.controls_seconds));
+    if let Some(c) = &report.coverage {
+        items.push(("control-point curve, undetermined bones".into(), c.seconds));
+    }
     items.push(("edge skin".into(), report.edges_seconds));
     match &report.selection {
         Some(s) => {
