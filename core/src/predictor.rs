@@ -127,7 +127,7 @@ pub struct Refinement {
 
 impl Refinement {
     /// The most iterations a room accepts (each costs about one translation solve and a pass
-    /// over the bone pairs: ~40 µs on the 150-bone horse, BENCHMARKS.md).
+    /// over the bone pairs: ~105 µs on the 150-bone horse, BENCHMARKS.md 2026-12-07).
     pub const MAX_ITERATIONS: usize = 32;
 
     /// Checks settings a user sent: `1..=MAX_ITERATIONS` iterations, a finite strength > 0.

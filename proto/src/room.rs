@@ -24,8 +24,8 @@ pub struct RoomOptions {
     /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
     pub filter: Option<OneEuroParams>,
     /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
-    /// (the default: it pays where the control points are dense, the hands, and costs ~40 µs
-    /// per iteration on 150 bones, BENCHMARKS.md). Must [validate](Refinement::validate).
+    /// (the default for now: it costs ~105 µs per iteration on 150 bones, BENCHMARKS.md
+    /// 2026-12-07; issue 42 weighs making it on). Must [validate](Refinement::validate).
     pub refine: Option<Refinement>,
     /// How the room skins (issue 22); the model's default (`TrainedModel::skinning`) when
     /// `None`. A DQS room streams vertices only (the server's `Pipeline::check_encoding`).
