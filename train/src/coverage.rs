@@ -41,31 +41,37 @@ pub const SHARED_WEIGHT: f32 = 0.1;
 /// Regions with fewer vertices than this share of the mesh's are not reported.
 pub const MIN_REGION_SHARE: f64 = 0.01;
 
-/// The control-point curve (module docs): one point per count of `counts`, with the model's
-/// regression `options` and `beta`. `frames` are the training meshes, rest pose first, as
-/// given to [`crate::pipeline::train_base`]. `on_count(i, n)` reports progress.
+/// The control-point curve (module docs): one point per count of `counts`, in order, with the
+/// model's regression `options` and `beta`, up to the first count the automatic choice cannot
+/// give (more points than the examples' components allow), whose reason comes back beside the
+/// points. `frames` are the training meshes, rest pose first, as given to
+/// [`crate::pipeline::train_base`].
 ///
-/// # Errors
-/// A count the automatic choice cannot give (more points than the examples' components
-/// allow), fewer than 3 examples, or a translation solve that fails.
+/// A count whose leave-one-out cannot run (fewer than 3 examples, a translation solve that
+/// cannot be built) also ends the curve, with its reason.
 pub fn control_curve(
     base: &TrainedBase,
     frames: &[&[Vec3]],
     options: &RegressOptions,
     beta: f32,
     counts: &[usize],
-    on_count: &mut dyn FnMut(usize, usize),
-) -> Result<Vec<CurvePoint>, TrainError> {
+) -> (Vec<CurvePoint>, Option<String>) {
     let kappa = match options.method {
         regress::Method::Rbf => options.rbf_ridge,
         _ => options.kcca.kappa,
     };
     let mut curve = Vec::with_capacity(counts.len());
-    for (i, &count) in counts.iter().enumerate() {
-        on_count(i + 1, counts.len());
-        let controls = auto_control_points(&base.rig.rest, frames, count)
-            .map_err(|e| TrainError::Select(format!("{count} automatic control points: {e}")))?;
-        let rms = loo_errors(
+    for &count in counts {
+        let controls = match auto_control_points(&base.rig.rest, frames, count) {
+            Ok(c) => c,
+            Err(e) => {
+                return (
+                    curve,
+                    Some(format!("{count} automatic control points: {e}")),
+                );
+            }
+        };
+        let rms = match loo_errors(
             base,
             &controls,
             frames,
@@ -73,14 +79,17 @@ pub fn control_curve(
             &[(options.kernel, kappa)],
             &[beta],
             &|_, _| {},
-        )?[0];
+        ) {
+            Ok(e) => e[0],
+            Err(e) => return (curve, Some(format!("{count} control points: {e}"))),
+        };
         curve.push(CurvePoint {
             count,
             controls,
             rms,
         });
     }
-    Ok(curve)
+    (curve, None)
 }
 
 /// Per-bone spread and leave-one-out rotation error with `base`'s own control points and

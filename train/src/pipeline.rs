@@ -143,7 +143,7 @@ pub fn train_layers_with(
 }
 
 /// [`coverage`] of `base`'s control points with the chosen regression: the undetermined
-/// bones, and the curve at `counts` up to the first count the automatic choice cannot give.
+/// bones, and the curve at `counts`.
 fn measure_coverage(
     base: &TrainedBase,
     frames: &[&[Vec3]],
@@ -153,17 +153,7 @@ fn measure_coverage(
 ) -> Result<ControlCoverage, TrainError> {
     let t = Instant::now();
     let bones = coverage::undetermined(base, regress)?;
-    let mut curve = Vec::with_capacity(counts.len());
-    let mut curve_stopped = None;
-    for &count in counts {
-        match coverage::control_curve(base, frames, regress, beta, &[count], &mut |_, _| {}) {
-            Ok(mut point) => curve.append(&mut point),
-            Err(e) => {
-                curve_stopped = Some(e.to_string());
-                break;
-            }
-        }
-    }
+    let (curve, curve_stopped) = coverage::control_curve(base, frames, regress, beta, counts);
     Ok(ControlCoverage {
         curve,
         curve_stopped,

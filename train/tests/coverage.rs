@@ -150,15 +150,9 @@ fn control_points_on_both_ends_leave_nothing_undetermined() {
 fn the_control_point_curve_falls_once_the_points_reach_both_ends() {
     let (_, frames, base) = trained(ControlSpec::Auto(2));
     let refs: Vec<&[Vec3]> = frames.iter().map(Vec::as_slice).collect();
-    let curve = coverage::control_curve(
-        &base,
-        &refs,
-        &RegressOptions::default(),
-        1.0,
-        &[1, 2, 4],
-        &mut |_, _| {},
-    )
-    .unwrap();
+    let (curve, stopped) =
+        coverage::control_curve(&base, &refs, &RegressOptions::default(), 1.0, &[1, 2, 4]);
+    assert!(stopped.is_none(), "{stopped:?}");
     assert_eq!(curve.len(), 3);
     eprintln!(
         "curve: {:?}",

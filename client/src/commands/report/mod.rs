@@ -861,7 +861,7 @@ fn coverage_figures(
         .iter()
         .enumerate()
         .map(|(k, r)| {
-            let [red, green, blue] = renders::region_color(k);
+            let [red, green, blue] = renders::marker_color(k);
             format!(
                 "<span style=\"color: rgb({red},{green},{blue})\">&#9632;</span> region {}: {} bones, {} vertices around ({:.3}, {:.3}, {:.3}), turned {:.1}&deg; by the examples, predicted {:.1}&deg; off",
                 k + 1,

@@ -136,13 +136,16 @@ fn color_bar(sheet: &mut Image, y: u32, scale_max: f32) {
     sheet.draw_text(x0 + (width - w) / 2, label_y + 4, mid, INK, 1);
 }
 
-/// The control points on the rest mesh, front and side, written as PNG to `path`: the mesh in
-/// grey, each point a dot with its name beside it (dots the mesh hides drawn hollow).
-pub(super) fn control_layout(
+/// The rest mesh front and side, side by side, written as PNG to `path` (`what` names it in
+/// an error): grey, or in per-vertex `colors`; `mark` draws on each view's tile before its
+/// name (the view's camera and the mesh's box given).
+fn rest_views(
     path: &Path,
+    what: &str,
     positions: &[Vec3],
     triangles: &[[u32; 3]],
-    controls: &[(u32, String)],
+    colors: Option<&[[u8; 3]]>,
+    mark: &mut dyn FnMut(&mut Image, &Camera, (Vec3, Vec3)),
 ) -> anyhow::Result<()> {
     let box_ = bounds(&[positions]);
     let tile_size = TILE + 60;
@@ -151,34 +154,64 @@ pub(super) fn control_layout(
     let mut tile = Image::default();
     for (k, (view, name)) in VIEWS.into_iter().enumerate() {
         let camera = Camera::fit(view, box_, tile_size, tile_size, MARGIN + 0.03);
-        renderer.render_into(positions, triangles, &camera, &settings(GREY), &mut tile);
-        // Visibility: the point is in front when no triangle projects nearer at its pixel,
-        // which the depth of the rendered picture does not expose; use the nearest vertex
-        // depth among the mesh's points projecting within two pixels instead.
-        let projected: Vec<Vec3> = positions.iter().map(|&p| camera.project(p)).collect();
-        for (i, (vertex, label)) in controls.iter().enumerate() {
-            let Some(&p) = projected.get(*vertex as usize) else {
-                continue;
-            };
-            let hidden = projected.iter().any(|q| {
-                (q.x - p.x).abs() < 2.5
-                    && (q.y - p.y).abs() < 2.5
-                    && q.z < p.z - 0.02 * box_size(box_)
-            });
-            let color = marker_color(i);
-            dot(&mut tile, p.x, p.y, 6.0, color, hidden);
-            let (x, y) = (p.x as u32 + 9, (p.y as u32).saturating_sub(7));
-            for (dx, dy) in [(0, 1), (2, 1), (1, 0), (1, 2)] {
-                tile.draw_text(x + dx, y + dy, label, BACKGROUND, 2);
-            }
-            tile.draw_text(x + 1, y + 1, label, INK, 2);
+        match colors {
+            Some(colors) => renderer.render_colored_into(
+                positions,
+                triangles,
+                colors,
+                &camera,
+                &settings(GREY),
+                &mut tile,
+            ),
+            None => renderer.render_into(positions, triangles, &camera, &settings(GREY), &mut tile),
         }
+        mark(&mut tile, &camera, box_);
         tile.draw_text(6, 6, name, INK, 2);
         sheet.blit(&tile, k as u32 * tile_size, 0);
     }
     sheet
         .write_png(path)
-        .with_context(|| format!("writing the control-point layout {}", path.display()))
+        .with_context(|| format!("writing the {what} {}", path.display()))
+}
+
+/// The control points on the rest mesh, front and side, written as PNG to `path`: the mesh in
+/// grey, each point a dot with its name beside it (dots the mesh hides drawn hollow).
+pub(super) fn control_layout(
+    path: &Path,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    controls: &[(u32, String)],
+) -> anyhow::Result<()> {
+    rest_views(
+        path,
+        "control-point layout",
+        positions,
+        triangles,
+        None,
+        &mut |tile, camera, box_| {
+            // Visibility: the point is in front when no triangle projects nearer at its pixel,
+            // which the depth of the rendered picture does not expose; use the nearest vertex
+            // depth among the mesh's points projecting within two pixels instead.
+            let projected: Vec<Vec3> = positions.iter().map(|&p| camera.project(p)).collect();
+            for (i, (vertex, label)) in controls.iter().enumerate() {
+                let Some(&p) = projected.get(*vertex as usize) else {
+                    continue;
+                };
+                let hidden = projected.iter().any(|q| {
+                    (q.x - p.x).abs() < 2.5
+                        && (q.y - p.y).abs() < 2.5
+                        && q.z < p.z - 0.02 * box_size(box_)
+                });
+                let color = marker_color(i);
+                dot(tile, p.x, p.y, 6.0, color, hidden);
+                let (x, y) = (p.x as u32 + 9, (p.y as u32).saturating_sub(7));
+                for (dx, dy) in [(0, 1), (2, 1), (1, 0), (1, 2)] {
+                    tile.draw_text(x + dx, y + dy, label, BACKGROUND, 2);
+                }
+                tile.draw_text(x + 1, y + 1, label, INK, 2);
+            }
+        },
+    )
 }
 
 /// The regions the control points leave undetermined (issue 42) on the rest mesh, front and
@@ -200,38 +233,21 @@ pub(super) fn undetermined_regions(
             }
         }
     }
-    let box_ = bounds(&[positions]);
-    let tile_size = TILE + 60;
-    let mut sheet = Image::new(tile_size * 2, tile_size, BACKGROUND);
-    let mut renderer = Renderer::new();
-    let mut tile = Image::default();
-    for (k, (view, name)) in VIEWS.into_iter().enumerate() {
-        let camera = Camera::fit(view, box_, tile_size, tile_size, MARGIN + 0.03);
-        renderer.render_colored_into(
-            positions,
-            triangles,
-            &colors,
-            &camera,
-            &settings(GREY),
-            &mut tile,
-        );
-        for &v in controls {
-            if let Some(&p) = positions.get(v as usize) {
-                let p = camera.project(p);
-                dot(&mut tile, p.x, p.y, 5.0, INK, false);
+    rest_views(
+        path,
+        "undetermined regions",
+        positions,
+        triangles,
+        Some(&colors),
+        &mut |tile, camera, _| {
+            for &v in controls {
+                if let Some(&p) = positions.get(v as usize) {
+                    let p = camera.project(p);
+                    dot(tile, p.x, p.y, 5.0, INK, false);
+                }
             }
-        }
-        tile.draw_text(6, 6, name, INK, 2);
-        sheet.blit(&tile, k as u32 * tile_size, 0);
-    }
-    sheet
-        .write_png(path)
-        .with_context(|| format!("writing the undetermined regions {}", path.display()))
-}
-
-/// The colour of region or control point `i` in the report's pictures.
-pub(super) fn region_color(i: usize) -> [u8; 3] {
-    marker_color(i)
+        },
+    )
 }
 
 /// The largest side of a box.
@@ -240,7 +256,7 @@ fn box_size((lo, hi): (Vec3, Vec3)) -> f32 {
 }
 
 /// Distinct marker colours, cycling.
-fn marker_color(i: usize) -> [u8; 3] {
+pub(super) fn marker_color(i: usize) -> [u8; 3] {
     const COLORS: [[u8; 3]; 6] = [
         [31, 119, 180],
         [214, 39, 40],
