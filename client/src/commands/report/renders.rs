@@ -136,6 +136,9 @@ fn color_bar(sheet: &mut Image, y: u32, scale_max: f32) {
     sheet.draw_text(x0 + (width - w) / 2, label_y + 4, mid, INK, 1);
 }
 
+/// What [`rest_views`] draws on a view: its tile, camera and the mesh's box.
+type Marks<'a> = dyn FnMut(&mut Image, &Camera, (Vec3, Vec3)) + 'a;
+
 /// The rest mesh front and side, side by side, written as PNG to `path` (`what` names it in
 /// an error): grey, or in per-vertex `colors`; `mark` draws on each view's tile before its
 /// name (the view's camera and the mesh's box given).
@@ -145,7 +148,7 @@ fn rest_views(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
     colors: Option<&[[u8; 3]]>,
-    mark: &mut dyn FnMut(&mut Image, &Camera, (Vec3, Vec3)),
+    mark: &mut Marks<'_>,
 ) -> anyhow::Result<()> {
     let box_ = bounds(&[positions]);
     let tile_size = TILE + 60;
