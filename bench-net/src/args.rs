@@ -112,6 +112,11 @@ pub struct BenchNetArgs {
     /// --max-publish-hz 4 x rate x N (a --server one needs it above rate x N).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub actors: u32,
+    /// The rooms' bone-level refinement, asked for explicitly: `off` (the regression alone,
+    /// as every figure before issue 42) or `ITERATIONS,STRENGTH` (`8,0.01` is what a server
+    /// gives rooms that do not choose).
+    #[arg(long, value_name = "ITERATIONS,STRENGTH|off", default_value = "off", value_parser = crease_proto::room::parse_refine_flag)]
+    pub refine: crease_proto::room::RefineFlag,
     /// The measured window, seconds.
     #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,

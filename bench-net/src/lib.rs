@@ -221,6 +221,7 @@ async fn bench(
         vertices: model.rig.rest.vertex_count(),
         control_points: model.controls.len(),
         controls: source,
+        refine: args.refine.to_string(),
         server: targets
             .iter()
             .map(|t| t.description.as_str())

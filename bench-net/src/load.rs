@@ -300,7 +300,10 @@ pub(super) async fn run_scenario(
             v1::OpenRoomRequest {
                 room: id.clone(),
                 actors: (0..args.actors)
-                    .map(|k| crease_proto::room::actor(&actor_name(k), &target.model, k % 2 == 1))
+                    .map(|k| v1::Actor {
+                        refine: Some(crease_proto::room::refine_wire(args.refine.0)),
+                        ..crease_proto::room::actor(&actor_name(k), &target.model, k % 2 == 1)
+                    })
                     .collect(),
                 ..Default::default()
             }
@@ -310,6 +313,7 @@ pub(super) async fn run_scenario(
                 model: target.model.clone(),
                 beta: 0.0,
                 filter: None,
+                refine: Some(crease_proto::room::refine_wire(args.refine.0)),
                 ..Default::default()
             }
         };

@@ -226,6 +226,8 @@ pub struct BenchReport {
     pub control_points: usize,
     /// Where the control frames come from, and how many (looped).
     pub controls: String,
+    /// The rooms' refinement as asked (`off` or `ITERATIONS,STRENGTH`).
+    pub refine: String,
     /// The server under test.
     pub server: String,
     /// Logical CPUs of this machine (client and server share them).
@@ -237,8 +239,8 @@ pub struct BenchReport {
 /// A readable table on stdout: one column per scenario.
 pub(super) fn print_table(report: &BenchReport) {
     println!(
-        "model {} ({} vertices, {} control points), control frames {}",
-        report.model, report.vertices, report.control_points, report.controls
+        "model {} ({} vertices, {} control points), control frames {}, refinement {}",
+        report.model, report.vertices, report.control_points, report.controls, report.refine
     );
     println!(
         "server {}; {} CPUs shared by the server and the clients (this process)",

@@ -1,16 +1,17 @@
-//! `crease synth --server URL --model NAME` against a real server (in this process, port 0):
-//! the meshes the server synthesises, decoded and put back in model vertex order, match the
-//! local `crease synth --model FILE` output file for file and vertex for vertex, within the
+//! `crease synth --server URL --model NAME` against a real server (in this process, port 0,
+//! the server's default configuration): the meshes the server synthesises, decoded and put
+//! back in model vertex order, match the local `crease synth --model FILE` output file for file and vertex for vertex, within the
 //! 16-bit quantisation bound of the server's batches (computed here from the `Topology` the
 //! server sends to a plain gRPC client), also when the frames are split over several requests
-//! and an occluded point starts a request. Errors name the model, the CSV line and the URL.
+//! and an occluded point starts a request. Both sides refine by default (issue 42) and
+//! `--refine off` turns it off on both. Errors name the model, the CSV line and the URL.
 
 use crate::common;
 
 use std::path::Path;
 use std::process::Output;
 
-use common::{CONTROLS, bent, crease, serve_tube, train_model, tube};
+use common::{CONTROLS, bent, crease, serve_tube_defaults, train_model, tube};
 use crease_core::glam::Vec3;
 use crease_core::mesh::Mesh;
 use crease_core::model::TrainedModel;
@@ -153,7 +154,7 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let model = TrainedModel::load(&model_path).unwrap();
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let (addr, qbox, _served) = runtime.block_on(async {
-        let served = serve_tube(model, None).await;
+        let served = serve_tube_defaults(model).await;
         let addr = served.grpc;
         // The quantisation box of the server's batches, as any client sees it.
         let mut client = CreaseClient::connect(format!("http://{addr}"))
@@ -243,6 +244,33 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
         let got = Mesh::read(remote.join(format!("frame_{i:05}.obj"))).unwrap();
         assert_close(&format!("frame {i}"), &got, want, bound);
     }
+    // `--refine off` on both sides: the same meshes again, and not the default's (the default
+    // refines these bends: some vertex moves by far more than the bound).
+    let (local_off, remote_off) = (dir.join("local-off"), dir.join("remote-off"));
+    for (model, server, out_dir) in [
+        (model_arg, None, &local_off),
+        ("tube", Some(url.as_str()), &remote_off),
+    ] {
+        let out = synth(model, server)
+            .args(["--refine", "off", "--out"])
+            .arg(out_dir)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "synth --refine off: {}", stderr(&out));
+    }
+    let mut refined_by = 0.0f32;
+    for (i, refined) in local_meshes.iter().enumerate() {
+        let plain = Mesh::read(local_off.join(format!("frame_{i:05}.obj"))).unwrap();
+        let got = Mesh::read(remote_off.join(format!("frame_{i:05}.obj"))).unwrap();
+        assert_close(&format!("unrefined frame {i}"), &got, &plain, bound);
+        for (a, b) in plain.positions.iter().zip(&refined.positions) {
+            refined_by = refined_by.max(a.distance(*b));
+        }
+    }
+    assert!(
+        refined_by > 100.0 * bound.max_element(),
+        "the default refinement moved no vertex beyond the bound: {refined_by}"
+    );
 
     // Remote, two frames per request, PLY, and a glTF: continuous numbering, the held points
     // carried over request boundaries.
@@ -306,7 +334,7 @@ fn remote_synth_matches_local_synth_within_the_quantisation_bound() {
     let blended_path = dir.join("blended.crease");
     blended.save(&blended_path).unwrap();
     let (blended_url, blended_bound, _blended_served) = runtime.block_on(async {
-        let served = serve_tube(blended, None).await;
+        let served = serve_tube_defaults(blended).await;
         let addr = served.grpc;
         (format!("http://{addr}"), batch_bound(addr).await, served)
     });

@@ -126,6 +126,18 @@ pub struct Refinement {
 }
 
 impl Refinement {
+    /// What rooms and `crease synth` refine with unless told otherwise (issue 42): 8 rounds
+    /// with the regression prior at 1/100 of each bone's data term at confidence 1. On the
+    /// horse-poses protocol (BENCHMARKS.md "Poses far from few examples") 8 rounds keep most of
+    /// 20 rounds' gain at 2/5 of the cost: ~0.86 ms a frame on the 150-bone horse, 5% of a core
+    /// per room at 60 Hz (a frame at an example, confidence 0, is left as the regression
+    /// predicts it and costs nothing extra).
+    pub const ROOM_DEFAULT: Refinement = Refinement {
+        iterations: 8,
+        strength: 0.01,
+        from_rest: false,
+    };
+
     /// The most iterations a room accepts (each costs about one translation solve and a pass
     /// over the bone pairs: ~105 µs on the 150-bone horse, BENCHMARKS.md 2026-12-07).
     pub const MAX_ITERATIONS: usize = 32;

@@ -14,7 +14,9 @@ use clap::Parser;
 #[cfg(feature = "mimalloc")]
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+use crease_core::predictor::Refinement;
 use crease_demo::launch::{self, Config};
+use crease_proto::room::{RefineFlag, parse_refine_flag};
 use crease_server::admission::Caps;
 use crease_server::{DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
 
@@ -61,6 +63,12 @@ struct Args {
     /// tree this binary was built from, if it exists.
     #[arg(long, value_name = "DIR")]
     web: Option<PathBuf>,
+    /// The bone-level refinement of rooms and batches that do not choose one (issue 42):
+    /// `ITERATIONS,STRENGTH` or `off` (the regression alone). A request chooses with
+    /// `Refine` (`crease room open --refine`); the demo's own rooms keep theirs. Each iteration
+    /// costs ~105 µs a frame on a 150-bone model (BENCHMARKS.md).
+    #[arg(long, value_name = "ITERATIONS,STRENGTH|off", default_value_t = RefineFlag(Some(Refinement::ROOM_DEFAULT)), value_parser = parse_refine_flag)]
+    refine: RefineFlag,
     /// Token that opens and closes rooms (`authorization: Bearer <token>`); without it rooms
     /// cannot be opened remotely. Also read from CREASE_ADMIN_TOKEN.
     #[arg(long, env = "CREASE_ADMIN_TOKEN", hide_env_values = true)]
@@ -215,6 +223,7 @@ impl From<Args> for Config {
                 takes: args.takes,
                 // launch::start sets it from `models` below.
                 models_dir: None,
+                refine: args.refine.0,
                 tls: args
                     .tls_cert
                     .zip(args.tls_key)

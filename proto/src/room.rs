@@ -23,9 +23,10 @@ pub struct RoomOptions {
     /// Smooth the control points with a One Euro filter (mocap rooms); `None` passes them
     /// through, as UI rooms need. Must be [valid](OneEuroParams::is_valid).
     pub filter: Option<OneEuroParams>,
-    /// Issue 20's bone-level refinement after the regression; `None` = the regression alone
-    /// (the default for now: it costs ~105 µs per iteration on 150 bones, BENCHMARKS.md
-    /// 2026-12-07; issue 42 weighs making it on). Must [validate](Refinement::validate).
+    /// Issue 20's bone-level refinement after the regression, resolved: `None` = the
+    /// regression alone. A request that leaves it unset gets the server's default
+    /// ([`Refinement::ROOM_DEFAULT`] unless `crease-server --refine` says otherwise, issue 42);
+    /// `Refine.iterations = 0` turns it off. Must [validate](Refinement::validate).
     pub refine: Option<Refinement>,
     /// How the room skins (issue 22); the model's default (`TrainedModel::skinning`) when
     /// `None`. A DQS room streams vertices only (the server's `Pipeline::check_encoding`).
@@ -230,8 +231,13 @@ impl ActorSpec {
 pub const ACTOR_NAME_MAX: usize = 32;
 
 impl ActorSpec {
-    /// Actor `index` of a request, checked; errors name it and the field.
-    fn from_wire(index: usize, a: &v1::Actor) -> Result<ActorSpec, SpecError> {
+    /// Actor `index` of a request, checked, an unset refinement taking `refine_default`;
+    /// errors name the actor and the field.
+    fn from_wire(
+        index: usize,
+        a: &v1::Actor,
+        refine_default: Option<Refinement>,
+    ) -> Result<ActorSpec, SpecError> {
         let label = if a.name.is_empty() {
             format!("#{index}")
         } else {
@@ -273,6 +279,7 @@ impl ActorSpec {
             a.filter,
             a.refine,
             a.skinning,
+            refine_default,
         )
         .map_err(|e| bad("options", e.to_string()))?;
         Ok(ActorSpec {
@@ -318,7 +325,10 @@ pub fn check_identifier(name: &str, max: usize) -> Result<(), String> {
 
 /// A request's actors, checked: each one, names unique, and the request's own model and
 /// options unset beside them.
-fn actors(r: &v1::OpenRoomRequest) -> Result<Vec<ActorSpec>, SpecError> {
+fn actors(
+    r: &v1::OpenRoomRequest,
+    refine_default: Option<Refinement>,
+) -> Result<Vec<ActorSpec>, SpecError> {
     if r.actors.is_empty() {
         return Ok(Vec::new());
     }
@@ -335,7 +345,7 @@ fn actors(r: &v1::OpenRoomRequest) -> Result<Vec<ActorSpec>, SpecError> {
     }
     let mut out: Vec<ActorSpec> = Vec::with_capacity(r.actors.len());
     for (i, a) in r.actors.iter().enumerate() {
-        let actor = ActorSpec::from_wire(i, a)?;
+        let actor = ActorSpec::from_wire(i, a, refine_default)?;
         if let Some(j) = out.iter().position(|b| b.name == actor.name) {
             return Err(SpecError::Actor {
                 actor: format!("{:?}", actor.name),
@@ -381,13 +391,15 @@ pub enum SpecError {
     ActorsAndRoomField(&'static str),
 }
 
-/// The wire's filter, refinement and skinning of a room in `message_type`, checked.
+/// The wire's filter, refinement and skinning of a room in `message_type`, checked; an
+/// unset refinement takes `refine_default` (see [`refinement`]).
 fn options(
     message_type: &'static str,
     beta: Option<f32>,
     filter: Option<v1::MarkerFilter>,
     refine: Option<v1::Refine>,
     skinning: i32,
+    refine_default: Option<Refinement>,
 ) -> Result<RoomOptions, SpecError> {
     let filter = filter.map(OneEuroParams::from);
     if let Some(f) = filter
@@ -398,30 +410,99 @@ fn options(
     Ok(RoomOptions {
         beta,
         filter,
-        refine: refinement(refine)?,
+        refine: refinement(refine, refine_default)?,
         skinning: skinning_from_wire(message_type, skinning)?,
     })
 }
 
-/// A request's refinement, checked (`refine: ...` names the field in the error).
+/// A request's refinement, checked and resolved (issue 42): unset takes `default` (the
+/// server's, for a request; `None` for what a room recorded: a take's header, a registry
+/// entry, where unset has always meant off); `iterations = 0` is off; anything else must
+/// [validate](Refinement::validate) (`refine: ...` names the field in the error).
 ///
 /// # Errors
 /// [`SpecError::Refine`].
-pub fn refinement(wire: Option<v1::Refine>) -> Result<Option<Refinement>, SpecError> {
-    let refine = wire.map(Refinement::from);
-    match refine.map(|r| r.validate()) {
-        Some(Err(e)) => Err(SpecError::Refine(e.to_string())),
-        _ => Ok(refine),
+pub fn refinement(
+    wire: Option<v1::Refine>,
+    default: Option<Refinement>,
+) -> Result<Option<Refinement>, SpecError> {
+    match wire {
+        None => Ok(default),
+        Some(v1::Refine { iterations: 0, .. }) => Ok(None),
+        Some(w) => {
+            let refine = Refinement::from(w);
+            refine.validate().map_err(SpecError::Refine)?;
+            Ok(Some(refine))
+        }
+    }
+}
+
+/// The wire form of a resolved refinement a client asks for explicitly: `None` (off) is
+/// `iterations = 0`, which [`refinement`] reads back as off whatever the server's default.
+pub fn refine_wire(refine: Option<Refinement>) -> v1::Refine {
+    refine.map_or(
+        v1::Refine {
+            iterations: 0,
+            strength: 0.0,
+        },
+        v1::Refine::from,
+    )
+}
+
+/// A `--refine` flag's value (`crease-server`, `crease synth`, `crease room open`): `off`, or
+/// `ITERATIONS,STRENGTH` (e.g. `8,0.01`) that [validates](Refinement::validate).
+///
+/// # Errors
+/// What is wrong, naming the part, for clap to print.
+pub fn parse_refine_flag(text: &str) -> Result<RefineFlag, String> {
+    if text.trim().eq_ignore_ascii_case("off") {
+        return Ok(RefineFlag(None));
+    }
+    let (it, strength) = text
+        .split_once(',')
+        .ok_or_else(|| format!("{text:?}: expected `off` or ITERATIONS,STRENGTH (e.g. 8,0.01)"))?;
+    let iterations: usize = it
+        .trim()
+        .parse()
+        .map_err(|e| format!("iterations {it:?}: {e}"))?;
+    let strength: f32 = strength
+        .trim()
+        .parse()
+        .map_err(|e| format!("strength {strength:?}: {e}"))?;
+    let refine = Refinement {
+        iterations,
+        strength,
+        from_rest: false,
+    };
+    refine.validate()?;
+    Ok(RefineFlag(Some(refine)))
+}
+
+/// A parsed `--refine` flag ([`parse_refine_flag`]): `None` is `off`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefineFlag(pub Option<Refinement>);
+
+impl std::fmt::Display for RefineFlag {
+    /// As the flag is written: `off` or `ITERATIONS,STRENGTH`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            None => f.write_str("off"),
+            Some(r) => write!(f, "{},{}", r.iterations, r.strength),
+        }
     }
 }
 
 impl RoomSpec {
     /// The room an `OpenRoomRequest` asks for (a fresh token, the server's stream settings,
-    /// shared in a cluster).
+    /// shared in a cluster), the room or each actor taking `refine_default` when the request
+    /// leaves its refinement unset (the server's `Config::refine`).
     ///
     /// # Errors
     /// [`SpecError`] naming the field (filter, refine, `OpenRoomRequest.skinning`).
-    pub fn from_request(r: &v1::OpenRoomRequest) -> Result<RoomSpec, SpecError> {
+    pub fn from_request(
+        r: &v1::OpenRoomRequest,
+        refine_default: Option<Refinement>,
+    ) -> Result<RoomSpec, SpecError> {
         Ok(RoomSpec {
             id: r.room.clone(),
             model: r.model.clone(),
@@ -431,15 +512,17 @@ impl RoomSpec {
                 r.filter,
                 r.refine,
                 r.skinning,
+                refine_default,
             )?,
             retarget: r.retarget.clone(),
-            actors: actors(r)?,
+            actors: actors(r, refine_default)?,
             ..RoomSpec::default()
         })
     }
 
     /// A private replay room `id` of a take recorded with `header`'s room settings: this
-    /// server's alone.
+    /// server's alone, refined as recorded (an unset refinement was off, whatever the server's
+    /// default now).
     ///
     /// # Errors
     /// [`SpecError`], as [`RoomSpec::from_request`].
@@ -449,7 +532,7 @@ impl RoomSpec {
             id: id.to_owned(),
             private: true,
             placement: Placement::Local,
-            ..RoomSpec::from_request(&settings)?
+            ..RoomSpec::from_request(&settings, None)?
         })
     }
 
@@ -472,6 +555,7 @@ impl RoomSpec {
             entry.filter,
             entry.refine,
             entry.skinning,
+            None,
         )?;
         let digest = <[u8; 32]>::try_from(entry.token_sha256.as_slice())
             .map_err(|_| SpecError::TokenDigest(entry.token_sha256.len()))?;
@@ -500,7 +584,7 @@ impl RoomSpec {
                     })?;
                     Ok(ActorSpec {
                         model_sha256: Some(e.model_sha256.clone()),
-                        ..ActorSpec::from_wire(i, a)?
+                        ..ActorSpec::from_wire(i, a, None)?
                     })
                 })
                 .collect::<Result<_, SpecError>>()?,
@@ -600,7 +684,7 @@ mod tests {
             beta: 2.0,
             ..Default::default()
         };
-        let spec = RoomSpec::from_request(&ok).unwrap();
+        let spec = RoomSpec::from_request(&ok, None).unwrap();
         assert_eq!((spec.id.as_str(), spec.options.beta), ("r", Some(2.0)));
         assert_eq!(spec.placement, Placement::Shared);
         let bad_filter = v1::OpenRoomRequest {
@@ -611,28 +695,94 @@ mod tests {
             }),
             ..ok.clone()
         };
-        let e = RoomSpec::from_request(&bad_filter).unwrap_err();
+        let e = RoomSpec::from_request(&bad_filter, None).unwrap_err();
         assert!(e.to_string().starts_with("filter: "), "{e}");
         let bad_skinning = v1::OpenRoomRequest {
             skinning: 7,
             ..ok.clone()
         };
         assert_eq!(
-            RoomSpec::from_request(&bad_skinning)
+            RoomSpec::from_request(&bad_skinning, None)
                 .unwrap_err()
                 .to_string(),
             "OpenRoomRequest.skinning: 7 is not a Skinning (0 unspecified, 1 lbs, 2 dqs)"
         );
         let bad_refine = v1::OpenRoomRequest {
             refine: Some(v1::Refine {
-                iterations: 0,
+                iterations: 33,
                 strength: 0.01,
             }),
             ..ok
         };
         assert_eq!(
-            RoomSpec::from_request(&bad_refine).unwrap_err().to_string(),
-            "refine: iterations must be 1 to 32, got 0"
+            RoomSpec::from_request(&bad_refine, None)
+                .unwrap_err()
+                .to_string(),
+            "refine: iterations must be 1 to 32, got 33"
+        );
+    }
+
+    #[test]
+    fn an_unset_refinement_takes_the_servers_default_and_zero_iterations_turn_it_off() {
+        let default = Some(Refinement::ROOM_DEFAULT);
+        let asked = Refinement {
+            iterations: 3,
+            strength: 0.5,
+            from_rest: false,
+        };
+        let room = |refine: Option<v1::Refine>| v1::OpenRoomRequest {
+            room: "r".into(),
+            model: "m".into(),
+            refine,
+            ..Default::default()
+        };
+        let spec = |r: &v1::OpenRoomRequest, d| RoomSpec::from_request(r, d).unwrap();
+        assert_eq!(spec(&room(None), default).options.refine, default);
+        assert_eq!(spec(&room(None), None).options.refine, None);
+        let off = Some(refine_wire(None));
+        assert_eq!(spec(&room(off), default).options.refine, None);
+        let on = Some(refine_wire(Some(asked)));
+        assert_eq!(spec(&room(on), default).options.refine, Some(asked));
+        // Each actor resolves its own.
+        let actors = v1::OpenRoomRequest {
+            room: "r".into(),
+            actors: vec![
+                actor("a", "m"),
+                v1::Actor {
+                    refine: off,
+                    ..actor("b", "m")
+                },
+            ],
+            ..Default::default()
+        };
+        let a = spec(&actors, default).actors;
+        assert_eq!((a[0].options.refine, a[1].options.refine), (default, None));
+        // What a room recorded (a take's header) reads unset as off, whatever the default.
+        let header = v1::TakeHeader {
+            room: Some(room(None)),
+            ..Default::default()
+        };
+        assert_eq!(
+            RoomSpec::from_take("replay", &header)
+                .unwrap()
+                .options
+                .refine,
+            None
+        );
+        // The flag's forms.
+        let flag = |t: &str| parse_refine_flag(t).map(|f| f.0);
+        assert_eq!(flag("off"), Ok(None));
+        assert_eq!(flag("3, 0.5"), Ok(Some(asked)));
+        assert_eq!(parse_refine_flag("3,0.5").unwrap().to_string(), "3,0.5");
+        assert_eq!(RefineFlag(None).to_string(), "off");
+        assert_eq!(
+            flag("0,0.01"),
+            Err("iterations must be 1 to 32, got 0".to_owned())
+        );
+        assert!(
+            flag("8")
+                .unwrap_err()
+                .contains("expected `off` or ITERATIONS,STRENGTH")
         );
     }
 
@@ -664,7 +814,7 @@ mod tests {
             ],
             ..Default::default()
         };
-        let spec = RoomSpec::from_request(&two).unwrap();
+        let spec = RoomSpec::from_request(&two, None).unwrap();
         assert_eq!(spec.actors.len(), 2);
         let (r, l) = (&spec.actors[0], &spec.actors[1]);
         assert_eq!(
@@ -678,7 +828,7 @@ mod tests {
         assert_eq!((r.performer.as_str(), l.performer.as_str()), ("ana", "ana"));
         // A one-actor room of today has no actors; an actor without a performer is its own.
         assert!(
-            RoomSpec::from_request(&v1::OpenRoomRequest::default())
+            RoomSpec::from_request(&v1::OpenRoomRequest::default(), None)
                 .unwrap()
                 .actors
                 .is_empty()
@@ -688,14 +838,14 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(
-            RoomSpec::from_request(&alone).unwrap().actors[0].performer,
+            RoomSpec::from_request(&alone, None).unwrap().actors[0].performer,
             "prop"
         );
 
         let with = |f: &dyn Fn(&mut v1::OpenRoomRequest)| {
             let mut r = two.clone();
             f(&mut r);
-            RoomSpec::from_request(&r).unwrap_err().to_string()
+            RoomSpec::from_request(&r, None).unwrap_err().to_string()
         };
         assert_eq!(
             with(&|r| r.actors[1].side = "middle".into()),

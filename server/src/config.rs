@@ -79,6 +79,11 @@ pub struct Config {
     /// The models folder the server loaded at start, where `UploadModel` writes and
     /// `DeleteModel` removes (issue 39); `None`: models come only from the start.
     pub models_dir: Option<std::path::PathBuf>,
+    /// The bone-level refinement of rooms, actors and batches whose request leaves it unset
+    /// (issue 42; `crease-server --refine`): by default
+    /// [`Refinement::ROOM_DEFAULT`](crease_core::predictor::Refinement::ROOM_DEFAULT), `None`:
+    /// the regression alone. A request's `Refine.iterations = 0` turns it off for its room.
+    pub refine: Option<crease_core::predictor::Refinement>,
 }
 
 /// A TLS certificate chain and its private key, PEM files.
@@ -141,6 +146,7 @@ impl Default for Config {
             maps: None,
             takes: None,
             models_dir: None,
+            refine: Some(crease_core::predictor::Refinement::ROOM_DEFAULT),
         }
     }
 }

@@ -199,7 +199,7 @@ impl Crease for CreaseService {
         req: Request<v1::OpenRoomRequest>,
     ) -> Result<Response<v1::OpenRoomResponse>, Status> {
         self.require_admin(&req)?;
-        let spec = RoomSpec::from_request(req.get_ref())
+        let spec = RoomSpec::from_request(req.get_ref(), self.state.config().refine)
             .map_err(|e| status::open(&OpenRoomError::from(e)))?;
         let room = self
             .state
@@ -325,7 +325,7 @@ impl Crease for CreaseService {
         let options = RoomOptions {
             beta: (r.beta != 0.0).then_some(r.beta),
             filter: None,
-            refine: refinement(r.refine).map_err(spec_error)?,
+            refine: refinement(r.refine, self.state.config().refine).map_err(spec_error)?,
             skinning: crease_proto::convert::skinning_from_wire("SynthesizeRequest", r.skinning)?,
         };
         let room = self

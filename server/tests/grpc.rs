@@ -581,13 +581,6 @@ async fn refined_rooms_hold_the_control_points_beyond_the_examples() {
     for (bad, what) in [
         (
             v1::Refine {
-                iterations: 0,
-                ..refine
-            },
-            "refine: iterations must be 1 to 32, got 0",
-        ),
-        (
-            v1::Refine {
                 iterations: 33,
                 ..refine
             },
@@ -611,7 +604,7 @@ async fn refined_rooms_hold_the_control_points_beyond_the_examples() {
             model: "tube".into(),
             frames: vec![control_frame(&model, "", 0, 0.1)],
             refine: Some(v1::Refine {
-                iterations: 0,
+                iterations: 40,
                 ..refine
             }),
             ..Default::default()
@@ -678,6 +671,151 @@ async fn refined_rooms_hold_the_control_points_beyond_the_examples() {
             "{room}: {} vs {want}",
             ack.control_residual
         );
+    }
+    running
+        .shutdown(std::time::Duration::from_secs(2))
+        .await
+        .unwrap();
+}
+
+/// The server's default refinement (issue 42): a room, an actor and a batch that leave
+/// `refine` unset run with `Config.refine` (by default `Refinement::ROOM_DEFAULT`, which
+/// `crease-server --refine` sets), GetRoom reports it, and `iterations = 0` turns it off; the
+/// ack's residual and the batch's mesh are a local predictor's with the same setting.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rooms_and_batches_that_do_not_choose_get_the_servers_refinement() {
+    use crease_core::predictor::Refinement;
+    let model = model();
+    let default = crease_server::Config::default().refine;
+    assert_eq!(default, Some(Refinement::ROOM_DEFAULT));
+    let running = serve_config(
+        [("tube", model.clone())],
+        crease_server::Config {
+            admin_token: Some(ADMIN.into()),
+            ..crease_server::Config::default()
+        },
+    )
+    .await;
+    let mut client = CreaseClient::connect(format!("http://{}", running.grpc))
+        .await
+        .unwrap();
+    let off = Some(v1::Refine {
+        iterations: 0,
+        strength: 0.0,
+    });
+    let mut tokens = Vec::new();
+    for (room, refine, want) in [("unset", None, default), ("off", off, None)] {
+        let opened = client
+            .open_room(authed(
+                v1::OpenRoomRequest {
+                    room: room.into(),
+                    model: "tube".into(),
+                    refine,
+                    ..Default::default()
+                },
+                ADMIN,
+            ))
+            .await
+            .unwrap()
+            .into_inner();
+        tokens.push(opened.publish_token);
+        let info = client
+            .get_room(v1::GetRoomRequest { room: room.into() })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(info.refine, want.map(v1::Refine::from), "{room}");
+    }
+    // Actors resolve theirs one by one.
+    client
+        .open_room(authed(
+            v1::OpenRoomRequest {
+                room: "duo".into(),
+                actors: vec![
+                    crease_proto::room::actor("a", "tube", false),
+                    v1::Actor {
+                        refine: off,
+                        ..crease_proto::room::actor("b", "tube", false)
+                    },
+                ],
+                ..Default::default()
+            },
+            ADMIN,
+        ))
+        .await
+        .unwrap();
+    let duo = client
+        .get_room(v1::GetRoomRequest { room: "duo".into() })
+        .await
+        .unwrap()
+        .into_inner();
+    let refines: Vec<_> = duo
+        .actors
+        .iter()
+        .map(|a| a.actor.as_ref().unwrap().refine)
+        .collect();
+    assert_eq!(refines, vec![default.map(v1::Refine::from), None]);
+    // Beyond the training bends, so the refinement moves the mesh.
+    let frame = |room: &str| control_frame(&model, room, 0, 1.8);
+    let targets: Vec<Vec3> = frame("")
+        .positions
+        .chunks(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect();
+    let local = |refine: Option<Refinement>| {
+        let mut predictor = Predictor::new(Arc::new(model.clone()), None).unwrap();
+        predictor.set_refinement(refine);
+        let mut ctx = predictor.new_context();
+        predictor
+            .predict(&mut ctx, &targets, None)
+            .unwrap()
+            .to_vec()
+    };
+    let (refined, plain) = (local(default), local(None));
+    let (r_refined, r_plain) = (
+        residual(&model, &refined, &targets),
+        residual(&model, &plain, &targets),
+    );
+    assert!(r_refined < 0.99 * r_plain, "{r_refined} vs {r_plain}");
+    for ((room, token), want) in ["unset", "off"]
+        .into_iter()
+        .zip(&tokens)
+        .zip([r_refined, r_plain])
+    {
+        let req = authed(tokio_stream::iter(vec![frame(room)]), token);
+        let mut stream = client.publish(req).await.unwrap().into_inner();
+        let ack = stream.message().await.unwrap().unwrap();
+        assert!(ack.error.is_none(), "{ack:?}");
+        assert!(
+            (ack.control_residual - want).abs() <= 1e-5 * want.max(1e-3),
+            "{room}: {} vs {want}",
+            ack.control_residual
+        );
+    }
+    // A batch: unset refines as the server's default, iterations 0 does not (within the
+    // quantisation bound).
+    for (refine, want) in [(None, &refined), (off, &plain)] {
+        let mut s = client
+            .synthesize(v1::SynthesizeRequest {
+                model: "tube".into(),
+                frames: vec![frame("")],
+                refine,
+                ..Default::default()
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let first = s.message().await.unwrap().unwrap();
+        let Some(v1::mesh_frame::Body::Topology(topo)) = first.body else {
+            panic!("a batch starts with the topology: {first:?}");
+        };
+        let topology = crease_proto::read_topology(&topo).unwrap();
+        let mut decoder = FrameDecoder::new(topology.vertex_count);
+        let m = s.message().await.unwrap().unwrap();
+        let Some(v1::mesh_frame::Body::Frame(f)) = m.body else {
+            panic!("a frame after the topology: {m:?}");
+        };
+        check_decoded(&mut decoder, &topology, &f.data, want);
     }
     running
         .shutdown(std::time::Duration::from_secs(2))

@@ -1,5 +1,5 @@
-//! A crease server in this process, on free loopback ports: [`serve_model`] (one model) and
-//! [`serve_models`] (several) return a [`Served`] guard that stops the server when dropped, so a
+//! A crease server in this process, on free loopback ports: [`serve_model`] (one model),
+//! [`serve_models`] (several) and [`serve_config`] (any configuration) return a [`Served`] guard that stops the server when dropped, so a
 //! test holds it for as long as it talks to the server.
 //!
 //! This file names only `crease_core`, `crease_server` and `tonic`, never `crate::`:
@@ -65,8 +65,10 @@ pub async fn serve_model(
 }
 
 /// A server on free loopback ports (gRPC and HTTP) hosting each `(name, model)`, with `admin`
-/// as its admin token (none: no admin calls) and `limits`; the rest of [`Config`] is its
-/// default. Call it inside a tokio runtime: the server runs on it.
+/// as its admin token (none: no admin calls) and `limits`, its rooms predicting by the
+/// regression alone unless a request asks for the refinement (`Config.refine = None`: the
+/// tests compare rooms with a plain predictor); the rest of [`Config`] is its default. Call it
+/// inside a tokio runtime: the server runs on it.
 ///
 /// # Panics
 /// If the loopback ports cannot be bound.
@@ -74,6 +76,27 @@ pub async fn serve_models<'a>(
     models: impl IntoIterator<Item = (&'a str, TrainedModel)>,
     admin: Option<&str>,
     limits: Limits,
+) -> Served {
+    serve_config(
+        models,
+        Config {
+            admin_token: admin.map(str::to_owned),
+            limits,
+            refine: None,
+            ..Config::default()
+        },
+    )
+    .await
+}
+
+/// A server hosting each `(name, model)` with `config`, on free loopback ports whatever its
+/// addresses say. Call it inside a tokio runtime.
+///
+/// # Panics
+/// If the loopback ports cannot be bound.
+pub async fn serve_config<'a>(
+    models: impl IntoIterator<Item = (&'a str, TrainedModel)>,
+    config: Config,
 ) -> Served {
     let registry = ModelRegistry::default();
     for (name, model) in models {
@@ -85,9 +108,7 @@ pub async fn serve_models<'a>(
         Config {
             grpc: loopback,
             http: loopback,
-            admin_token: admin.map(str::to_owned),
-            limits,
-            ..Config::default()
+            ..config
         },
     );
     let running = crease_server::serve(state)

@@ -94,7 +94,7 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
         model: name.to_owned(),
         level: level as i32,
         beta: args.beta.unwrap_or(0.0),
-        refine: args.refine.map(v1::Refine::from),
+        refine: args.refine.map(|f| crease_proto::room::refine_wire(f.0)),
         skinning: super::common::skinning_wire(args.skinning),
         frames,
     };

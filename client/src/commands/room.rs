@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use crease_core::runtime::filter::OneEuroParams;
+use crease_proto::room::refine_wire;
 use crease_proto::v1;
 
 use super::common::{ServerArgs, authorized, get_room, print_refinement, print_skinning};
@@ -98,10 +99,11 @@ pub struct OpenArgs {
     #[arg(long, conflicts_with = "markers")]
     pub webxr: bool,
     /// Refine every frame's bone rotations against the control points, `ITERATIONS,STRENGTH`
-    /// (issue 20; e.g. `4,0.01`): pays where the control points are dense (hands) and the
-    /// performer leaves the training poses; each iteration costs about one translation solve.
-    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
-    pub refine: Option<crease_core::predictor::Refinement>,
+    /// (issue 20; e.g. `4,0.01`), or `off` for the regression alone. Default: the server's
+    /// (`crease-server --refine`, 8,0.01 unless set: issue 42). It pays where the performer
+    /// leaves the training poses; each iteration costs about one translation solve.
+    #[arg(long, value_name = "ITERATIONS,STRENGTH|off", value_parser = crease_proto::room::parse_refine_flag)]
+    pub refine: Option<crease_proto::room::RefineFlag>,
     /// How the room skins: `lbs` or `dqs` (issue 22; dual quaternions, Kavan et al. 2007:
     /// no volume loss at twisting joints). Default: the model's (`crease train --skinning`).
     /// A DQS room streams vertices only: it refuses palette subscriptions, which the client
@@ -217,7 +219,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
     for a in &mut actors_wire {
         a.beta = beta.unwrap_or(0.0);
         a.filter = filter.map(v1::MarkerFilter::from);
-        a.refine = args.refine.map(v1::Refine::from);
+        a.refine = args.refine.map(|f| refine_wire(f.0));
         a.skinning = super::common::skinning_wire(args.skinning);
     }
     let with_actors = !actors_wire.is_empty();
@@ -236,7 +238,7 @@ async fn open(args: &OpenArgs) -> anyhow::Result<()> {
             beta: beta.unwrap_or(0.0),
             filter: filter.map(v1::MarkerFilter::from),
             retarget,
-            refine: args.refine.map(v1::Refine::from),
+            refine: args.refine.map(|f| refine_wire(f.0)),
             skinning: super::common::skinning_wire(args.skinning),
             actors: Vec::new(),
         }

@@ -69,9 +69,10 @@ pub struct SynthArgs {
     #[arg(long)]
     pub detail: bool,
     /// Refine every frame's bone rotations against the control points, `ITERATIONS,STRENGTH`
-    /// (issue 20; e.g. `4,0.01`), locally or on the server.
-    #[arg(long, value_name = "ITERATIONS,STRENGTH", value_parser = super::common::parse_refinement)]
-    pub refine: Option<Refinement>,
+    /// (issue 20; e.g. `4,0.01`), or `off` for the regression alone. Default: 8,0.01 here (as
+    /// rooms, issue 42), the server's with `--server`.
+    #[arg(long, value_name = "ITERATIONS,STRENGTH|off", value_parser = crease_proto::room::parse_refine_flag)]
+    pub refine: Option<crease_proto::room::RefineFlag>,
     /// How to skin: `lbs` or `dqs` (issue 22; default: the model's, `crease train
     /// --skinning`), locally or on the server.
     #[arg(long, value_name = "lbs|dqs")]
@@ -86,9 +87,6 @@ impl SynthArgs {
         }
         if self.gltf.is_some() && !(self.fps.is_finite() && self.fps > 0.0) {
             bail!("--fps must be > 0, got {}", self.fps);
-        }
-        if let Some(e) = self.refine.and_then(|r| r.validate().err()) {
-            bail!("--refine: {e}");
         }
         Ok(())
     }
@@ -111,7 +109,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<()> {
     }
     let mut predictor =
         Predictor::new(Arc::new(model), args.beta).context("preparing the predictor")?;
-    predictor.set_refinement(args.refine);
+    predictor.set_refinement(args.refine.map_or(Some(Refinement::ROOM_DEFAULT), |f| f.0));
     if let Some(skinning) = args.skinning {
         predictor.set_skinning(skinning);
     }

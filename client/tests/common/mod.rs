@@ -24,7 +24,7 @@ pub(crate) fn run_ok(cmd: &mut Command) -> String {
 #[allow(unused_imports)] // each test binary uses some of these
 pub(crate) use crease_testkit::model::{AROUND, RINGS, bent_mesh as bent, tube};
 #[allow(unused_imports)] // each test binary uses some of these
-pub(crate) use crease_testkit::server::{Served, serve_model};
+pub(crate) use crease_testkit::server::{Served, serve_config, serve_model};
 
 /// Control points: a base vertex, two at mid height, two at the tip.
 pub(crate) const CONTROLS: [usize; 5] = [0, 4 * AROUND, 4 * AROUND + 3, 7 * AROUND, 7 * AROUND + 3];
@@ -75,6 +75,12 @@ pub(crate) async fn serve_tube(
     admin: Option<&str>,
 ) -> Served {
     serve_model("tube", &model, admin, crease_server::Limits::default()).await
+}
+
+/// As [`serve_tube`], with everything else the server's default configuration (rooms and
+/// batches that do not choose get its refinement, as `crease-server` without flags).
+pub(crate) async fn serve_tube_defaults(model: crease_core::model::TrainedModel) -> Served {
+    serve_config([("tube", model)], crease_server::Config::default()).await
 }
 
 /// `rel` below the shared data folder (`../shared/data` beside the checkout), or `None` with a

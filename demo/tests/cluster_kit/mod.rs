@@ -144,6 +144,9 @@ impl Replica {
             .args(["--nats", nats, "--replica-id", id])
             .args(["--grpc", &format!("127.0.0.1:{grpc}")])
             .args(["--http", &format!("127.0.0.1:{http}")])
+            // Rooms predict by the regression alone, as `common::predicted` does, unless a
+            // test's request asks for the refinement (the registry carries what a room runs).
+            .args(["--refine", "off"])
             .args(extra)
             .env("CREASE_ADMIN_TOKEN", ADMIN)
             .env("RUST_LOG", "info")

@@ -18,7 +18,7 @@ mod kit_server;
 #[allow(unused_imports)] // each test binary uses some of these
 pub(crate) use kit_model::{AROUND, RINGS, bent, curled, model, model_of, model_with_detail, tube};
 #[allow(unused_imports)] // each test binary uses some of these
-pub(crate) use kit_server::{Served, serve_model, serve_models, unthrottled};
+pub(crate) use kit_server::{Served, serve_config, serve_model, serve_models, unthrottled};
 
 use std::sync::Arc;
 

@@ -346,7 +346,9 @@ class Client:
         ``filter`` (``min_cutoff_hz``, ``beta``, ``d_cutoff_hz``), ``refine`` (``iterations``,
         ``strength``) and ``retarget`` (``map_toml`` or ``map_name``, ``markers``, ``units``) are
         the fields of the proto messages of the same names; ``actors`` a list of ``Actor`` fields
-        (``name``, ``model``, ``side``, ``mirror``, ...) for a room of several actors.
+        (``name``, ``model``, ``side``, ``mirror``, ...) for a room of several actors. Without
+        ``refine`` the room gets the server's refinement (``crease-server --refine``, 8 rounds
+        at strength 0.01 unless set); ``refine={"iterations": 0}`` turns it off.
         """
         request = pb.OpenRoomRequest(room=room, model=model, beta=beta, skinning=_SKINNING[skinning])
         if filter is not None:
@@ -471,7 +473,8 @@ class Client:
         NaN rows are occluded points, held at their last valid position across the whole batch
         (requests of at most ``chunk_frames`` frames and 3 MiB carry the held points over, as
         ``crease synth --server`` does). A refused frame raises ``CreaseError`` whose ``frame``
-        is its index in ``controls``.
+        is its index in ``controls``. ``refine`` as ``open_room``'s: the server's default
+        when absent.
         """
         controls = np.asarray(controls, dtype=np.float32)
         if controls.ndim != 3 or controls.shape[2] != 3:
