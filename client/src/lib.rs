@@ -12,6 +12,8 @@
 //! - [`commands::handgen`]: `crease handgen` — a generated hand data set; `crease pose`.
 //! - [`commands::watch`], [`commands::stream`], [`commands::room`], [`commands::retarget`]:
 //!   watching and publishing into rooms, managing them, marker recordings to control frames.
+//! - [`commands::job`]: `crease job` — batch synthesis as jobs on a server (issue 45):
+//!   submit, watch, get, list, cancel.
 //! - [`commands::take`]: `crease take` — a room's recordings: start, stop, list, download,
 //!   replay, export as glTF; [`commands::take_export`]: the export's work (the skinned
 //!   recording, the detail layer re-predicted and baked into morph targets).
@@ -84,6 +86,9 @@ pub enum Command {
     Room(commands::room::RoomArgs),
     /// Record a room's takes on a server; list, download, replay and export them (glTF).
     Take(commands::take::TakeArgs),
+    /// Batch synthesis as jobs on a server (issue 45): submit a file of control frames, watch
+    /// the progress from anywhere, fetch the frames later; list and cancel.
+    Job(commands::job::JobArgs),
     /// Publish a live capture source (VMC over OSC, OptiTrack NatNet) into a retargeting room.
     Bridge(commands::bridge::BridgeArgs),
     /// Decode a recorded mesh stream (`watch --record`; vertex or palette) with the Rust core
@@ -113,6 +118,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Stream(args) => commands::stream::run(&args),
         Command::Room(args) => commands::room::run(&args),
         Command::Take(args) => commands::take::run(&args),
+        Command::Job(args) => commands::job::run(&args),
         Command::Bridge(args) => commands::bridge::run(&args),
         Command::DecodeStream(args) => commands::decode_stream::run(&args),
         Command::Retarget(args) => commands::retarget::run(&args),

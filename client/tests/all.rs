@@ -14,6 +14,7 @@ mod cli_coverage;
 mod cli_detail;
 mod cli_fit;
 mod cli_handgen;
+mod cli_job;
 mod cli_mocap;
 mod cli_model;
 mod cli_report;

@@ -20,19 +20,19 @@ use crease_proto::v1::crease_client::CreaseClient;
 
 /// Slack on top of the quantisation bound: the bound is half a grid step exactly, and a decoded
 /// coordinate is rounded once more to f32 (half an ulp of coordinates below 10).
-const EPSILON: f32 = 1e-5;
+pub(crate) const EPSILON: f32 = 1e-5;
 
 /// Bends between and beyond the training poses (0.15..0.9). Frames 2 and 3 occlude the second
 /// tip point and frame 4 the first mid point: with two frames per request, frames 2 and 4 start
 /// a request with a point the server has to hold from an earlier request.
-const ANGLES: [f32; 7] = [0.05, 0.3, 0.55, 0.8, 1.0, 0.45, 0.2];
+pub(crate) const ANGLES: [f32; 7] = [0.05, 0.3, 0.55, 0.8, 1.0, 0.45, 0.2];
 
-fn occluded(frame: usize, point: usize) -> bool {
+pub(crate) fn occluded(frame: usize, point: usize) -> bool {
     matches!((frame, point), (2 | 3, 4) | (4, 1))
 }
 
 /// The control CSV: a header, a comment, then one line per frame (empty fields where occluded).
-fn controls_csv() -> String {
+pub(crate) fn controls_csv() -> String {
     let rest = tube();
     let mut csv = String::from("# the tube bending\n");
     let header: Vec<String> = (0..CONTROLS.len())
@@ -59,12 +59,12 @@ fn controls_csv() -> String {
     csv
 }
 
-fn stderr(out: &Output) -> String {
+pub(crate) fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 /// The sorted file names in `dir`.
-fn names(dir: &Path) -> Vec<String> {
+pub(crate) fn names(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -80,7 +80,7 @@ fn canonical(t: &[u32; 3]) -> [u32; 3] {
 }
 
 /// Every vertex of `got` within `bound` (per axis) of `want`; the same triangles.
-fn assert_close(what: &str, got: &Mesh, want: &Mesh, bound: Vec3) {
+pub(crate) fn assert_close(what: &str, got: &Mesh, want: &Mesh, bound: Vec3) {
     assert_eq!(
         got.vertex_count(),
         want.vertex_count(),
@@ -124,7 +124,7 @@ fn blended_weights(path: &Path) -> TrainedModel {
 
 /// Half a grid step (plus [`EPSILON`]) of the batches of the server at `addr`, from the
 /// `Topology` it sends a plain gRPC client.
-async fn batch_bound(addr: std::net::SocketAddr) -> Vec3 {
+pub(crate) async fn batch_bound(addr: std::net::SocketAddr) -> Vec3 {
     let mut client = CreaseClient::connect(format!("http://{addr}"))
         .await
         .unwrap();

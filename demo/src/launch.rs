@@ -264,6 +264,16 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
                 .join("takes"),
         );
     }
+    // Job results likewise, in `jobs/` (issue 45).
+    if server.jobs.dir.is_none() {
+        server.jobs.dir = Some(
+            config
+                .cache
+                .clone()
+                .unwrap_or_else(default_cache_dir)
+                .join("jobs"),
+        );
+    }
     let state = AppState::new(models, server);
     if let Some(options) = config.cluster {
         crease_server::join_cluster(&state, options).await?;

@@ -18,6 +18,7 @@ use crease_core::predictor::Refinement;
 use crease_demo::launch::{self, Config};
 use crease_proto::room::{RefineFlag, parse_refine_flag};
 use crease_server::admission::Caps;
+use crease_server::jobs::JobSettings;
 use crease_server::{DEFAULT_GRPC, DEFAULT_HTTP, Limits, TlsFiles};
 
 /// Hosts live rooms on trained crease models and streams predicted meshes over gRPC and
@@ -41,6 +42,22 @@ struct Args {
     /// the cache folder (--cache).
     #[arg(long, value_name = "DIR")]
     takes: Option<PathBuf>,
+    /// Folder batch jobs keep their results in (`crease job`, issue 45). Default: `jobs/` in
+    /// the cache folder (--cache).
+    #[arg(long, value_name = "DIR")]
+    jobs: Option<PathBuf>,
+    /// Seconds an ended job's result is kept.
+    #[arg(long, value_name = "SECONDS", default_value_t = JobSettings::default().ttl.as_secs())]
+    job_ttl: u64,
+    /// Control frames per chunk of a job: the unit of progress, of cancelling and of storage.
+    #[arg(long, value_name = "N", default_value_t = JobSettings::default().chunk_frames as u64, value_parser = clap::value_parser!(u64).range(1..))]
+    job_chunk_frames: u64,
+    /// Most control frames in one job.
+    #[arg(long, value_name = "N", default_value_t = JobSettings::default().max_frames)]
+    max_job_frames: usize,
+    /// Most jobs queued or running at once; a submit over it is refused.
+    #[arg(long, value_name = "N", default_value_t = JobSettings::default().max_queued)]
+    max_queued_jobs: usize,
     /// Where the demo model is cached. Default: $CREASE_CACHE_DIR, else $XDG_CACHE_HOME/crease,
     /// else ~/.cache/crease.
     #[arg(long, value_name = "DIR")]
@@ -224,6 +241,13 @@ impl From<Args> for Config {
                 // launch::start sets it from `models` below.
                 models_dir: None,
                 refine: args.refine.0,
+                jobs: JobSettings {
+                    dir: args.jobs,
+                    ttl: std::time::Duration::from_secs(args.job_ttl),
+                    chunk_frames: usize::try_from(args.job_chunk_frames).unwrap_or(usize::MAX),
+                    max_frames: args.max_job_frames,
+                    max_queued: args.max_queued_jobs,
+                },
                 tls: args
                     .tls_cert
                     .zip(args.tls_key)

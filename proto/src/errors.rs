@@ -169,15 +169,36 @@ pub fn batch_error_status(
     field: Option<&str>,
     message: &str,
 ) -> tonic::Status {
+    frame_error_status("SynthesizeRequest.frames", index, code, field, message)
+}
+
+/// The status that refuses a batch job (issue 45) whose frame `index` (counted over the whole
+/// job, whichever `JobFrames` message carried it) does not fit the model, as
+/// [`batch_error_status`] with `SubmitJob.frames[index]` in the message.
+pub fn job_frame_status(index: usize, e: &WireError) -> tonic::Status {
+    frame_error_status(
+        "SubmitJob.frames",
+        index,
+        ErrorCode::InvalidArgument,
+        Some(&e.field),
+        &e.message,
+    )
+}
+
+/// [`batch_error_status`]'s status, the frames named `what`.
+fn frame_error_status(
+    what: &str,
+    index: usize,
+    code: ErrorCode,
+    field: Option<&str>,
+    message: &str,
+) -> tonic::Status {
     let (relative, shown) = match field {
         Some(field) => (
             format!("{field}: {message}"),
-            format!("SynthesizeRequest.frames[{index}].{field}: {message}"),
+            format!("{what}[{index}].{field}: {message}"),
         ),
-        None => (
-            message.to_owned(),
-            format!("SynthesizeRequest.frames[{index}]: {message}"),
-        ),
+        None => (message.to_owned(), format!("{what}[{index}]: {message}")),
     };
     let error = v1::FrameError {
         code: code.wire(),

@@ -26,6 +26,8 @@
 //! - [`take`]: take files (issue 22; `take.proto`): writing a room's recorded frames, reading
 //!   them back up to the last whole frame, and unpacking their frames into core types.
 //! - [`take_info`]: a take's header and summary as the server builds them.
+//! - [`job`]: batch jobs (issue 45): a job's frames checked and cut into chunks that carry the
+//!   held state at their start, its id, and its status as `JobInfo`.
 //! - [`errors`]: [`WireError`] (message, field, expected vs got), [`errors::ErrorCode`], the named codes of `FrameError` (google.rpc.Code
 //!   integers), error acks, and the batch error status that names its frame in a field.
 
@@ -33,6 +35,7 @@ pub mod cluster;
 pub mod control;
 pub mod convert;
 pub mod errors;
+pub mod job;
 pub mod json;
 pub mod mesh;
 pub mod palette;

@@ -186,3 +186,166 @@ pub fn unix_us() -> i64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as i64)
 }
+
+/// One model the server hosts (`GetModel`).
+///
+/// # Errors
+/// No such model (named), or an unreachable server.
+pub async fn get_model(
+    client: &mut CreaseClient<Channel>,
+    model: &str,
+) -> anyhow::Result<v1::ModelInfo> {
+    client
+        .get_model(v1::GetModelRequest {
+            model: model.to_owned(),
+        })
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))
+}
+
+/// What a batch job synthesises (issue 45), as `crease job submit` takes it.
+#[derive(Clone, Debug, Default)]
+pub struct JobRequest {
+    /// The model's name on the server.
+    pub model: String,
+    /// The detail level instead of the base mesh.
+    pub detail: bool,
+    /// Translation-solve beta; `None`: the model's default.
+    pub beta: Option<f32>,
+    /// The refinement asked for; `None`: the server's default (`Some(RefineFlag(None))` is
+    /// off).
+    pub refine: Option<crease_proto::room::RefineFlag>,
+    /// The skinning; `None`: the model's default.
+    pub skinning: Option<crease_core::runtime::skin::Skinning>,
+    /// A label for `crease job list`.
+    pub name: String,
+}
+
+/// Most bytes of control frames per `SubmitJob` message: 1 MiB below the server's default
+/// 4 MiB message limit.
+pub const JOB_MESSAGE_BYTES: usize = 3 << 20;
+
+/// Submits a batch job (admin token): the spec, then `frames` (one per control frame, the
+/// points and validity as read from a file) in messages of at most [`JOB_MESSAGE_BYTES`].
+/// Returns the job as the server accepted it.
+///
+/// # Errors
+/// The server's refusal (it names a refused frame by its index in the job), or a bad token.
+pub async fn submit_job(
+    client: &mut CreaseClient<Channel>,
+    admin_token: &str,
+    job: &JobRequest,
+    frames: &[crate::control_file::ControlFrame],
+) -> anyhow::Result<v1::JobInfo> {
+    use v1::submit_job_request::Part;
+    let spec = v1::JobSpec {
+        model: job.model.clone(),
+        level: if job.detail {
+            v1::Level::Detail
+        } else {
+            v1::Level::Base
+        } as i32,
+        beta: job.beta.unwrap_or(0.0),
+        refine: job.refine.map(|f| crease_proto::room::refine_wire(f.0)),
+        skinning: job.skinning.map_or(0, |s| v1::Skinning::from(s) as i32),
+        take: String::new(),
+        name: job.name.clone(),
+    };
+    let points = frames.first().map_or(0, |f| f.positions.len());
+    let per_message = (JOB_MESSAGE_BYTES / (12 * points + points.div_ceil(8) + 32)).max(1);
+    let mut messages = vec![v1::SubmitJobRequest {
+        part: Some(Part::Spec(spec)),
+    }];
+    for chunk in frames.chunks(per_message) {
+        messages.push(v1::SubmitJobRequest {
+            part: Some(Part::Frames(v1::JobFrames {
+                frames: chunk
+                    .iter()
+                    .enumerate()
+                    .map(|(k, f)| {
+                        crease_proto::control::control_frame(
+                            "",
+                            k as u64,
+                            0,
+                            &f.positions,
+                            &f.valid,
+                        )
+                    })
+                    .collect(),
+            })),
+        });
+    }
+    client
+        .submit_job(authorized(tokio_stream::iter(messages), admin_token)?)
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+}
+
+/// A job's progress: its status now, then each change until it ends.
+///
+/// # Errors
+/// No such job, or an unreachable server.
+pub async fn watch_job(
+    client: &mut CreaseClient<Channel>,
+    job: &str,
+) -> anyhow::Result<tonic::Streaming<v1::JobInfo>> {
+    client
+        .watch_job(v1::WatchJobRequest {
+            job: job.to_owned(),
+        })
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+}
+
+/// A done job's meshes: a topology message, then one frame per control frame in order.
+///
+/// # Errors
+/// No such job, one not done (running, failed, cancelled), or one whose result expired.
+pub async fn job_result(
+    client: &mut CreaseClient<Channel>,
+    job: &str,
+) -> anyhow::Result<tonic::Streaming<v1::MeshFrame>> {
+    client
+        .get_job_result(v1::GetJobResultRequest {
+            job: job.to_owned(),
+        })
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+}
+
+/// The server's jobs, newest first.
+///
+/// # Errors
+/// An unreachable server.
+pub async fn list_jobs(client: &mut CreaseClient<Channel>) -> anyhow::Result<Vec<v1::JobInfo>> {
+    client
+        .list_jobs(v1::ListJobsRequest {})
+        .await
+        .map(|r| r.into_inner().jobs)
+        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+}
+
+/// Cancels a queued or running job (admin token).
+///
+/// # Errors
+/// No such job, one already ended (the server says how), or a bad token.
+pub async fn cancel_job(
+    client: &mut CreaseClient<Channel>,
+    admin_token: &str,
+    job: &str,
+) -> anyhow::Result<v1::JobInfo> {
+    client
+        .cancel_job(authorized(
+            v1::CancelJobRequest {
+                job: job.to_owned(),
+            },
+            admin_token,
+        )?)
+        .await
+        .map(tonic::Response::into_inner)
+        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+}

@@ -55,6 +55,38 @@ impl Default for Limits {
     }
 }
 
+/// How jobs are run and kept (`crease-server --jobs`, `--job-ttl`, `--job-chunk-frames`,
+/// `--max-job-frames`, `--max-queued-jobs`).
+#[derive(Clone, Debug)]
+pub struct JobSettings {
+    /// Where results are stored; `None`: a temporary folder removed with the server.
+    pub dir: Option<std::path::PathBuf>,
+    /// How long an ended job's result is kept.
+    pub ttl: std::time::Duration,
+    /// Control frames per chunk.
+    pub chunk_frames: usize,
+    /// Most control frames in one job.
+    pub max_frames: usize,
+    /// Most jobs queued or running at once.
+    pub max_queued: usize,
+}
+
+impl Default for JobSettings {
+    fn default() -> Self {
+        Self {
+            dir: None,
+            ttl: std::time::Duration::from_secs(24 * 3600),
+            // A few seconds of work at the detail level: progress moves, a cancel lands soon,
+            // and a chunk's file stays a few MB.
+            chunk_frames: 500,
+            // An hour of capture at 120 Hz (432,000 frames) fits; the frames are held in memory
+            // until the job ends (~0.3 KB each for 15 control points).
+            max_frames: 500_000,
+            max_queued: 16,
+        }
+    }
+}
+
 /// Server configuration.
 #[derive(Clone, Debug)]
 pub struct Config {
@@ -84,6 +116,8 @@ pub struct Config {
     /// [`Refinement::ROOM_DEFAULT`](crease_core::predictor::Refinement::ROOM_DEFAULT), `None`:
     /// the regression alone. A request's `Refine.iterations = 0` turns it off for its room.
     pub refine: Option<crease_core::predictor::Refinement>,
+    /// Batch jobs (issue 45): where results are kept, for how long, chunk size and caps.
+    pub jobs: JobSettings,
 }
 
 /// A TLS certificate chain and its private key, PEM files.
@@ -147,6 +181,7 @@ impl Default for Config {
             takes: None,
             models_dir: None,
             refine: Some(crease_core::predictor::Refinement::ROOM_DEFAULT),
+            jobs: JobSettings::default(),
         }
     }
 }

@@ -112,6 +112,16 @@ impl CreaseService {
         self.require_admin(req)
     }
 
+    /// As [`Self::require_admin`], for batch jobs (issue 45).
+    fn require_jobs_admin<T>(&self, req: &Request<T>) -> Result<(), Status> {
+        if self.state.config().admin_token.is_none() {
+            return Err(Status::permission_denied(
+                "this server has no admin token: it takes no batch jobs (start it with --admin-token)",
+            ));
+        }
+        self.require_admin(req)
+    }
+
     /// A stream slot for the request's client address (`Limits::streams`), or
     /// RESOURCE_EXHAUSTED naming the address and the cap.
     fn admit<T>(&self, req: &Request<T>) -> Result<Permit, Status> {
@@ -321,13 +331,7 @@ impl Crease for CreaseService {
         let permit = self.admit(&req)?;
         let r = req.into_inner();
         let level = Level::from_wire("SynthesizeRequest", r.level)?;
-        let spec_error = |e| status::open(&OpenRoomError::Spec(e));
-        let options = RoomOptions {
-            beta: (r.beta != 0.0).then_some(r.beta),
-            filter: None,
-            refine: refinement(r.refine, self.state.config().refine).map_err(spec_error)?,
-            skinning: crease_proto::convert::skinning_from_wire("SynthesizeRequest", r.skinning)?,
-        };
+        let options = self.batch_options("SynthesizeRequest", &r)?;
         let room = self
             .state
             .batch_room(&r.model, options)
@@ -338,6 +342,88 @@ impl Crease for CreaseService {
             permit,
             crate::stream::batch(Arc::clone(&self.state), room, level, r.frames),
         )))
+    }
+
+    async fn submit_job(
+        &self,
+        req: Request<Streaming<v1::SubmitJobRequest>>,
+    ) -> Result<Response<v1::JobInfo>, Status> {
+        self.require_jobs_admin(&req)?;
+        self.submit(req.into_inner()).await.map(Response::new)
+    }
+
+    type WatchJobStream = BoxStream<v1::JobInfo>;
+
+    async fn watch_job(
+        &self,
+        req: Request<v1::WatchJobRequest>,
+    ) -> Result<Response<Self::WatchJobStream>, Status> {
+        let permit = self.admit(&req)?;
+        let rx = self
+            .state
+            .jobs()
+            .watch(&req.get_ref().job)
+            .map_err(|e| status::job(&e))?;
+        // The status now, then each change, ending after the job's last.
+        let updates =
+            futures_util::stream::unfold((rx, true, false), |(mut rx, first, ended)| async move {
+                if ended || (!first && rx.changed().await.is_err()) {
+                    return None;
+                }
+                let status = rx.borrow_and_update().clone();
+                let info = v1::JobInfo::from(&status);
+                Some((Ok(info), (rx, false, status.state.ended())))
+            });
+        Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
+            updates,
+            move |item: Result<v1::JobInfo, Status>| {
+                let _held = &permit;
+                item
+            },
+        ))))
+    }
+
+    type GetJobResultStream = BoxStream<v1::MeshFrame>;
+
+    async fn get_job_result(
+        &self,
+        req: Request<v1::GetJobResultRequest>,
+    ) -> Result<Response<Self::GetJobResultStream>, Status> {
+        let permit = self.admit(&req)?;
+        let result = self
+            .state
+            .jobs()
+            .result(&req.get_ref().job)
+            .map_err(|e| status::job(&e))?;
+        Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
+            result.messages(),
+            move |item| {
+                let _held = &permit;
+                item.map_err(|e| status::job(&e))
+            },
+        ))))
+    }
+
+    async fn list_jobs(
+        &self,
+        _req: Request<v1::ListJobsRequest>,
+    ) -> Result<Response<v1::ListJobsResponse>, Status> {
+        let jobs = self.state.jobs().list();
+        Ok(Response::new(v1::ListJobsResponse {
+            jobs: jobs.iter().map(v1::JobInfo::from).collect(),
+        }))
+    }
+
+    async fn cancel_job(
+        &self,
+        req: Request<v1::CancelJobRequest>,
+    ) -> Result<Response<v1::JobInfo>, Status> {
+        self.require_jobs_admin(&req)?;
+        self.state
+            .jobs()
+            .cancel(&req.get_ref().job)
+            .map(|s| Response::new(v1::JobInfo::from(&s)))
+            .map_err(|e| status::job(&e))
     }
 
     async fn start_take(
@@ -394,6 +480,108 @@ impl Crease for CreaseService {
             })
             .collect();
         Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
+}
+
+impl CreaseService {
+    /// A batch's options (`Synthesize`, a job's spec), checked: the refinement resolved with
+    /// the server's default, the skinning named in `message_type`.
+    fn batch_options(
+        &self,
+        message_type: &'static str,
+        r: &v1::SynthesizeRequest,
+    ) -> Result<RoomOptions, Status> {
+        let spec_error = |e| status::open(&OpenRoomError::Spec(e));
+        Ok(RoomOptions {
+            beta: (r.beta != 0.0).then_some(r.beta),
+            filter: None,
+            refine: refinement(r.refine, self.state.config().refine).map_err(spec_error)?,
+            skinning: crease_proto::convert::skinning_from_wire(message_type, r.skinning)?,
+        })
+    }
+
+    /// `SubmitJob`'s stream read and checked (issue 45): the spec, then the frames (at most
+    /// the job cap), every frame against the model (a refused one names its index in the
+    /// job), cut into chunks off the executor, and queued.
+    async fn submit(
+        &self,
+        mut stream: Streaming<v1::SubmitJobRequest>,
+    ) -> Result<v1::JobInfo, Status> {
+        use crease_proto::job::{chunk_frames, spec_as_batch};
+        use v1::submit_job_request::Part;
+        let spec = match stream.message().await?.and_then(|m| m.part) {
+            Some(Part::Spec(spec)) => spec,
+            Some(Part::Frames(_)) => {
+                return Err(Status::invalid_argument(
+                    "SubmitJob: the first message must be a JobSpec, got frames",
+                ));
+            }
+            None => {
+                return Err(Status::invalid_argument(
+                    "SubmitJob: the stream ended before its JobSpec",
+                ));
+            }
+        };
+        if !spec.take.is_empty() {
+            return Err(Status::unimplemented(format!(
+                "JobSpec.take {:?}: jobs from a take are not built yet; send its frames (crease take get, crease job submit --controls)",
+                spec.take
+            )));
+        }
+        let model = self.state.models().get(&spec.model).ok_or_else(|| {
+            Status::not_found(format!("JobSpec.model: no model {:?}", spec.model))
+        })?;
+        let level = Level::from_wire("JobSpec", spec.level)?;
+        if level == Level::Detail && model.info.detail_vertices == 0 {
+            return Err(Status::failed_precondition(format!(
+                "JobSpec.level: model {:?} has no detail layer",
+                spec.model
+            )));
+        }
+        let options = self.batch_options("JobSpec", &spec_as_batch(&spec))?;
+        let settings = self.state.jobs().settings().clone();
+        let mut frames: Vec<v1::ControlFrame> = Vec::new();
+        while let Some(message) = stream.message().await? {
+            match message.part {
+                Some(Part::Frames(f)) => {
+                    if frames.len() + f.frames.len() > settings.max_frames {
+                        return Err(Status::resource_exhausted(format!(
+                            "SubmitJob.frames: more than {} frames, the most a job may hold (--max-job-frames)",
+                            settings.max_frames
+                        )));
+                    }
+                    frames.extend(f.frames);
+                }
+                Some(Part::Spec(_)) => {
+                    return Err(Status::invalid_argument(
+                        "SubmitJob: a second JobSpec; a job has one, first",
+                    ));
+                }
+                None => {}
+            }
+        }
+        if frames.is_empty() {
+            return Err(Status::invalid_argument(
+                "SubmitJob: no frames after the JobSpec",
+            ));
+        }
+        let count = model.info.control_points.len();
+        let chunks = tokio::task::spawn_blocking(move || {
+            chunk_frames(&frames, count, settings.chunk_frames)
+        })
+        .await
+        .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
+        .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
+        let plan = crate::jobs::JobPlan {
+            model: spec.model.clone(),
+            level,
+            options,
+            name: spec.name.clone(),
+        };
+        let status =
+            crate::job_service::submit(&self.state, plan, chunks).map_err(|e| status::job(&e))?;
+        tracing::info!(job = %status.job, model = %status.model, frames = status.frames_total, chunks = status.chunks_total, "job queued");
+        Ok(v1::JobInfo::from(&status))
     }
 }
 

@@ -32,6 +32,9 @@
 //! - [`takes`]: a room's recordings (issue 22) in the takes folder: the recorder in the
 //!   pipeline, its writer thread, listing and reading takes; [`take_service`]: the take
 //!   operations both transports call (start, stop, list, export, replay rooms).
+//! - [`jobs`]: batch jobs (issue 45) in this process, the store: a bounded queue of chunked
+//!   jobs, their status, results in the jobs folder until they expire; [`job_service`]: the
+//!   worker that runs each chunk as a `Synthesize` batch and stores it.
 //! - [`model_api`]: models through the API (issue 39): uploads checked and written
 //!   atomically into the models folder, deletes, the cluster's models.
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the
@@ -53,6 +56,8 @@ pub mod frames;
 pub mod grpc;
 pub mod http;
 pub mod ingest;
+pub mod job_service;
+pub mod jobs;
 pub mod listen;
 pub mod mailbox;
 pub mod metrics;

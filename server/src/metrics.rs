@@ -35,6 +35,16 @@ pub struct Metrics {
     /// Tasks alive on the server's runtime, read when `/metrics` is rendered (a soak watches
     /// it for leaks).
     pub tasks: Gauge,
+    /// Batch jobs accepted (issue 45).
+    pub jobs_submitted: Counter,
+    /// Batch jobs done, every chunk stored.
+    pub jobs_done: Counter,
+    /// Batch jobs failed.
+    pub jobs_failed: Counter,
+    /// Batch jobs cancelled.
+    pub jobs_cancelled: Counter,
+    /// Seconds from a job chunk's start to its result stored.
+    pub job_chunk_seconds: Histogram,
     /// The cluster's (zero on a single server).
     pub cluster: crate::cluster::metrics::ClusterMetrics,
 }
@@ -55,6 +65,12 @@ impl Default for Metrics {
             rooms: Gauge::default(),
             subscribers: Gauge::default(),
             tasks: Gauge::default(),
+            jobs_submitted: Counter::default(),
+            jobs_done: Counter::default(),
+            jobs_failed: Counter::default(),
+            jobs_cancelled: Counter::default(),
+            // 10 ms to ~41 s.
+            job_chunk_seconds: Histogram::new(exponential_buckets(0.01, 2.0, 13)),
             cluster: crate::cluster::metrics::ClusterMetrics::default(),
             registry: Registry::default(),
         };
@@ -101,6 +117,23 @@ impl Default for Metrics {
             "tasks",
             "Tasks alive on the server's async runtime",
             m.tasks.clone(),
+        );
+        registry.register(
+            "jobs_submitted",
+            "Batch jobs accepted",
+            m.jobs_submitted.clone(),
+        );
+        registry.register("jobs_done", "Batch jobs done", m.jobs_done.clone());
+        registry.register("jobs_failed", "Batch jobs failed", m.jobs_failed.clone());
+        registry.register(
+            "jobs_cancelled",
+            "Batch jobs cancelled",
+            m.jobs_cancelled.clone(),
+        );
+        registry.register(
+            "job_chunk_seconds",
+            "From a job chunk's start to its result stored",
+            m.job_chunk_seconds.clone(),
         );
         Metrics { registry, ..m }
     }

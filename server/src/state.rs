@@ -46,6 +46,8 @@ pub struct AppState {
     streams: Arc<Admission>,
     /// The takes folder (`Config::takes`), or why it cannot be used.
     takes: Option<Result<Takes, String>>,
+    /// Batch jobs (issue 45).
+    jobs: crate::jobs::Jobs,
 }
 
 /// Why a room could not be opened or closed; each transport maps it once (`crate::status`).
@@ -143,6 +145,7 @@ impl AppState {
         });
         Arc::new(Self {
             takes,
+            jobs: crate::jobs::Jobs::new(config.jobs.clone()),
             models,
             rooms: RwLock::new(HashMap::new()),
             config,
@@ -157,6 +160,11 @@ impl AppState {
     /// The configuration.
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// Batch jobs (issue 45).
+    pub fn jobs(&self) -> &crate::jobs::Jobs {
+        &self.jobs
     }
 
     /// The hosted models.

@@ -9,6 +9,7 @@ use axum::http::StatusCode;
 use tonic::Status;
 
 use crate::ingest::PublishError;
+use crate::jobs::JobError;
 use crate::model_api::ModelOpError;
 use crate::pipeline::BuildError;
 use crate::room::{ChannelRefused, RoomError};
@@ -134,6 +135,18 @@ pub fn take_http(e: &TakeOpError) -> StatusCode {
         TakeOpError::Open(_) => StatusCode::BAD_REQUEST,
         TakeOpError::Replays(_) => StatusCode::TOO_MANY_REQUESTS,
         TakeOpError::Panicked(_) => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
+/// gRPC: a job call's error (issue 45).
+pub fn job(e: &JobError) -> Status {
+    match e {
+        JobError::NoJob(_) => Status::not_found(e.to_string()),
+        JobError::NotDone { .. } | JobError::Expired(_) | JobError::Ended { .. } => {
+            Status::failed_precondition(e.to_string())
+        }
+        JobError::Full(_) => Status::resource_exhausted(e.to_string()),
+        JobError::Io { .. } => Status::internal(e.to_string()),
     }
 }
 

@@ -7,6 +7,7 @@ pub mod decode_stream;
 pub mod eval;
 pub mod fit;
 pub mod handgen;
+pub mod job;
 pub mod layers;
 pub mod model;
 pub mod remote_synth;

@@ -184,6 +184,32 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
     Ok(())
 }
 
+/// Writes a whole mesh stream of `total` frames (a `GetJobResult`: the topology, then frames
+/// numbered from 0) into `out` as `crease synth` names and formats them; returns a summary
+/// (bytes received, the quantisation bound).
+///
+/// # Errors
+/// A refused or broken stream, a frame out of order, a file that cannot be written.
+pub(crate) async fn write_frames<S>(
+    stream: S,
+    out: &Path,
+    format: &str,
+    vertices: usize,
+    total: usize,
+) -> anyhow::Result<String>
+where
+    S: Stream<Item = Result<v1::MeshFrame, tonic::Status>> + Unpin,
+{
+    let mut sink = Sink::new(Some(out), format, vertices, false, true);
+    sink.receive(stream, total, total).await?;
+    Ok(format!(
+        "{} bytes received, {:.2} bytes/vertex/frame; error ≤ {:.2e} per coordinate",
+        sink.bytes,
+        sink.bytes as f64 / (sink.frames.max(1) * vertices.max(1)) as f64,
+        sink.error_bound.max_element()
+    ))
+}
+
 /// A status from the server as an error: its message (which names the field) and code, with a
 /// batch's refused frame (counted within its request) renumbered to the control file's frame.
 fn status_error(status: &tonic::Status, first: usize) -> anyhow::Error {

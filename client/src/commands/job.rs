@@ -1,0 +1,291 @@
+//! `crease job submit|watch|get|list|cancel` (issue 45): batch synthesis handed to a server,
+//! which runs it whether or not the client stays. `submit` and `cancel` need the admin token;
+//! watching, listing and fetching are open. `get` writes the frames as `crease synth` does.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use crease_proto::job::JobState;
+use crease_proto::v1;
+use crease_remote::client::{
+    JobRequest, cancel_job, get_model, job_result, list_jobs, submit_job, watch_job,
+};
+use crease_remote::control_file::read_control_frames;
+use indicatif::{ProgressBar, ProgressStyle};
+use tokio_stream::StreamExt as _;
+
+use super::common::ServerArgs;
+use super::room::AdminArgs;
+
+/// Options of `crease job`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct JobArgs {
+    /// What to do.
+    #[command(subcommand)]
+    pub action: JobAction,
+}
+
+/// What to do with jobs.
+#[derive(Clone, Debug, clap::Subcommand)]
+pub enum JobAction {
+    /// Hand a file of control frames to the server as a job (admin token); prints its id.
+    Submit(SubmitArgs),
+    /// Show a job's progress (frames, rate, ETA) until it ends.
+    Watch(IdArgs),
+    /// Write a done job's frames, as `crease synth --out` does.
+    Get(GetArgs),
+    /// List the server's jobs, newest first.
+    List(ListArgs),
+    /// Cancel a queued or running job (admin token).
+    Cancel(CancelArgs),
+}
+
+/// Options of `crease job submit`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct SubmitArgs {
+    /// The server to talk to.
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The admin token.
+    #[command(flatten)]
+    pub admin: AdminArgs,
+    /// The model's name on the server.
+    #[arg(long)]
+    pub model: String,
+    /// Control frames: CSV or JSON, as `crease synth --controls` reads them.
+    #[arg(long, value_name = "FILE")]
+    pub controls: PathBuf,
+    /// Synthesise the detailed meshes (the model must have a detail layer).
+    #[arg(long)]
+    pub detail: bool,
+    /// Control-point weight of the translation solve (default: the model's).
+    #[arg(long)]
+    pub beta: Option<f32>,
+    /// The refinement, `ITERATIONS,STRENGTH` or `off` (default: the server's).
+    #[arg(long, value_name = "ITERATIONS,STRENGTH|off", value_parser = crease_proto::room::parse_refine_flag)]
+    pub refine: Option<crease_proto::room::RefineFlag>,
+    /// How to skin: `lbs` or `dqs` (default: the model's).
+    #[arg(long, value_name = "lbs|dqs")]
+    pub skinning: Option<crease_core::runtime::skin::Skinning>,
+    /// A label shown by `crease job list`.
+    #[arg(long, default_value = "")]
+    pub name: String,
+}
+
+/// A job id on a server.
+#[derive(Clone, Debug, clap::Args)]
+pub struct IdArgs {
+    /// The server to talk to.
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The job's id (`crease job submit` printed it).
+    pub job: String,
+}
+
+/// Options of `crease job get`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct GetArgs {
+    /// The job.
+    #[command(flatten)]
+    pub id: IdArgs,
+    /// Output folder (created): `frame_00000.obj` ... as `crease synth` writes them.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Mesh format of the frames.
+    #[arg(long, default_value = "obj", value_parser = ["obj", "ply"])]
+    pub format: String,
+}
+
+/// Options of `crease job list`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ListArgs {
+    /// The server to talk to.
+    #[command(flatten)]
+    pub server: ServerArgs,
+}
+
+/// Options of `crease job cancel`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CancelArgs {
+    /// The job.
+    #[command(flatten)]
+    pub id: IdArgs,
+    /// The admin token.
+    #[command(flatten)]
+    pub admin: AdminArgs,
+}
+
+/// Runs `crease job`.
+pub fn run(args: &JobArgs) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the network runtime")?;
+    runtime.block_on(async {
+        match &args.action {
+            JobAction::Submit(a) => submit(a).await,
+            JobAction::Watch(a) => watch(a).await,
+            JobAction::Get(a) => get(a).await,
+            JobAction::List(a) => list(a).await,
+            JobAction::Cancel(a) => cancel(a).await,
+        }
+    })
+}
+
+/// One line about a job.
+fn describe(j: &v1::JobInfo) -> String {
+    let level = if j.level == v1::Level::Detail as i32 {
+        "detail"
+    } else {
+        "base"
+    };
+    let mut line = format!(
+        "job {} ({}) on model {:?} at the {level} level: {} of {} frames, {} of {} chunks",
+        j.job,
+        JobState::from_wire(j.state).as_str(),
+        j.model,
+        j.frames_done,
+        j.frames_total,
+        j.chunks_done,
+        j.chunks_total
+    );
+    if j.frames_per_second > 0.0 {
+        line += &format!(", {:.1} frames/s", j.frames_per_second);
+    }
+    if !j.name.is_empty() {
+        line += &format!(", {:?}", j.name);
+    }
+    if !j.error.is_empty() {
+        line += &format!(": {}", j.error);
+    }
+    line
+}
+
+async fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
+    if let Some(beta) = args.beta
+        && !(beta.is_finite() && beta > 0.0)
+    {
+        bail!("--beta must be finite and > 0, got {beta}");
+    }
+    let mut client = args.server.connect().await?;
+    let info = get_model(&mut client, &args.model)
+        .await
+        .with_context(|| format!("asking {} for model {:?}", args.server.server, args.model))?;
+    let frames = read_control_frames(&args.controls, info.control_points.len())?;
+    let request = JobRequest {
+        model: args.model.clone(),
+        detail: args.detail,
+        beta: args.beta,
+        refine: args.refine,
+        skinning: args.skinning,
+        name: args.name.clone(),
+    };
+    let job = submit_job(&mut client, &args.admin.admin_token, &request, &frames)
+        .await
+        .with_context(|| {
+            format!(
+                "submitting {} frames of {} to {}",
+                frames.len(),
+                args.controls.display(),
+                args.server.server
+            )
+        })?;
+    eprintln!(
+        "queued {} (crease job watch {} --server {})",
+        describe(&job),
+        job.job,
+        args.server.server
+    );
+    println!("{}", job.job);
+    Ok(())
+}
+
+async fn watch(args: &IdArgs) -> anyhow::Result<()> {
+    let mut client = args.server.connect().await?;
+    let mut updates = watch_job(&mut client, &args.job).await?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} frames, {per_sec}, ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let mut last = None;
+    while let Some(update) = updates.next().await {
+        let j = update.map_err(|s| anyhow::anyhow!("{}", s.message()))?;
+        bar.set_length(j.frames_total);
+        bar.set_position(j.frames_done);
+        bar.set_message(format!(
+            "job {} {}",
+            j.job,
+            JobState::from_wire(j.state).as_str()
+        ));
+        last = Some(j);
+    }
+    bar.finish_and_clear();
+    let Some(j) = last else {
+        bail!("job {}: the server sent no status", args.job);
+    };
+    println!("{}", describe(&j));
+    match JobState::from_wire(j.state) {
+        JobState::Done => Ok(()),
+        JobState::Failed | JobState::Cancelled => bail!("job {} did not finish", j.job),
+        JobState::Queued | JobState::Running => {
+            bail!(
+                "job {}: the server ended the watch before the job ended",
+                j.job
+            )
+        }
+    }
+}
+
+async fn get(args: &GetArgs) -> anyhow::Result<()> {
+    let mut client = args.id.server.connect().await?;
+    // The job's model and level say how many vertices a frame has.
+    let job = watch_job(&mut client, &args.id.job)
+        .await?
+        .next()
+        .await
+        .context("the server sent no status")?
+        .map_err(|s| anyhow::anyhow!("{}", s.message()))?;
+    let model = get_model(&mut client, &job.model)
+        .await
+        .with_context(|| format!("job {}", job.job))?;
+    let vertices = if job.level == v1::Level::Detail as i32 {
+        model.detail_vertices
+    } else {
+        model.base_vertices
+    } as usize;
+    let stream = job_result(&mut client, &job.job).await?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let total = job.frames_total as usize;
+    let summary =
+        super::remote_synth::write_frames(stream, &args.out, &args.format, vertices, total)
+            .await
+            .with_context(|| format!("fetching job {}", job.job))?;
+    println!(
+        "wrote {total} frames of job {} to {} ({summary})",
+        job.job,
+        args.out.display()
+    );
+    Ok(())
+}
+
+async fn list(args: &ListArgs) -> anyhow::Result<()> {
+    let mut client = args.server.connect().await?;
+    let jobs = list_jobs(&mut client).await?;
+    if jobs.is_empty() {
+        eprintln!("no jobs on {}", args.server.server);
+    }
+    for j in &jobs {
+        println!("{}", describe(j));
+    }
+    Ok(())
+}
+
+async fn cancel(args: &CancelArgs) -> anyhow::Result<()> {
+    let mut client = args.id.server.connect().await?;
+    let j = cancel_job(&mut client, &args.admin.admin_token, &args.id.job).await?;
+    println!("{}", describe(&j));
+    Ok(())
+}

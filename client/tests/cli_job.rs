@@ -1,0 +1,308 @@
+//! Batch jobs without a cluster (issue 45): `crease job submit|watch|get|list|cancel` against
+//! a server in this process (the server's default configuration, chunks of 2 frames so the
+//! held points cross chunk boundaries: frames 2 and 4 start a chunk while a point is
+//! occluded). The fetched frames equal a local `crease synth` of the same file within the
+//! 16-bit bound of batches; a refused frame is named by its index in the job; unknown models
+//! and jobs, a cancel of an ended job, a cancel that stops a long job, and a result fetched
+//! after it expired each get a clear answer.
+
+use crate::cli_synth_remote::{ANGLES, assert_close, batch_bound, controls_csv, names, stderr};
+use crate::common;
+
+use std::time::Duration;
+
+use common::{crease, serve_config, train_model};
+use crease_core::glam::Vec3;
+use crease_core::mesh::Mesh;
+use crease_core::model::TrainedModel;
+use crease_proto::v1;
+use crease_proto::v1::crease_client::CreaseClient;
+use crease_server::jobs::JobSettings;
+
+const ADMIN: &str = "job-admin";
+
+/// A server hosting `model` as `tube` with the default configuration but `jobs`.
+async fn serve(model: TrainedModel, jobs: JobSettings) -> common::Served {
+    serve_config(
+        [("tube", model)],
+        crease_server::Config {
+            admin_token: Some(ADMIN.into()),
+            jobs,
+            ..crease_server::Config::default()
+        },
+    )
+    .await
+}
+
+fn small_chunks() -> JobSettings {
+    JobSettings {
+        chunk_frames: 2,
+        ..JobSettings::default()
+    }
+}
+
+#[test]
+fn a_job_equals_local_synth_and_every_refusal_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let model_path = train_model(dir);
+    let model = TrainedModel::load(&model_path).unwrap();
+    let count = model.controls.len();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let (addr, bound, _served) = runtime.block_on(async {
+        let served = serve(model.clone(), small_chunks()).await;
+        let bound = batch_bound(served.grpc).await;
+        (served.grpc, bound, served)
+    });
+    let url = format!("http://{addr}");
+    let controls = dir.join("controls.csv");
+    std::fs::write(&controls, controls_csv()).unwrap();
+    let job = |args: &[&str]| {
+        let mut c = crease();
+        c.arg("job").args(args).args(["--server", &url]);
+        c.env("CREASE_ADMIN_TOKEN", ADMIN);
+        c.output().unwrap()
+    };
+
+    // The reference: local synthesis of the same file.
+    let local = dir.join("local");
+    let out = crease()
+        .args(["synth", "--model"])
+        .arg(&model_path)
+        .arg("--controls")
+        .arg(&controls)
+        .arg("--out")
+        .arg(&local)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "local synth: {}", stderr(&out));
+
+    // Submit: the id on stdout, at once.
+    let out = job(&[
+        "submit",
+        "--model",
+        "tube",
+        "--controls",
+        controls.to_str().unwrap(),
+        "--name",
+        "bend",
+    ]);
+    assert!(out.status.success(), "submit: {}", stderr(&out));
+    let id = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    assert!(crease_proto::job::is_job_id(&id), "{id:?}");
+    assert!(stderr(&out).contains("4 chunks"), "{}", stderr(&out));
+
+    // Watch until it ends: done, every frame.
+    let out = job(&["watch", &id]);
+    assert!(out.status.success(), "watch: {}", stderr(&out));
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        line.contains(&format!("job {id} (done)")) && line.contains("7 of 7 frames"),
+        "{line}"
+    );
+
+    // Get: the same file names as local synthesis, the same meshes within the bound.
+    let fetched = dir.join("fetched");
+    let out = job(&["get", &id, "--out", fetched.to_str().unwrap()]);
+    assert!(out.status.success(), "get: {}", stderr(&out));
+    assert_eq!(names(&fetched), names(&local));
+    for i in 0..ANGLES.len() {
+        let want = Mesh::read(local.join(format!("frame_{i:05}.obj"))).unwrap();
+        let got = Mesh::read(fetched.join(format!("frame_{i:05}.obj"))).unwrap();
+        assert_close(&format!("job frame {i}"), &got, &want, bound);
+    }
+
+    // List: the job, named.
+    let out = job(&["list"]);
+    let listed = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        listed.contains(&id) && listed.contains("\"bend\""),
+        "{listed}"
+    );
+
+    // A cancel of an ended job says so.
+    let out = job(&["cancel", &id]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains(&format!(
+            "job {id:?} already ended (done): nothing to cancel"
+        )),
+        "{}",
+        stderr(&out)
+    );
+    // Unknown jobs and models.
+    let out = job(&["watch", "nosuchjob123"]);
+    assert!(
+        stderr(&out).contains("no job \"nosuchjob123\""),
+        "{}",
+        stderr(&out)
+    );
+    let out = job(&[
+        "get",
+        "nosuchjob123",
+        "--out",
+        dir.join("x").to_str().unwrap(),
+    ]);
+    assert!(
+        stderr(&out).contains("no job \"nosuchjob123\""),
+        "{}",
+        stderr(&out)
+    );
+    let out = job(&[
+        "submit",
+        "--model",
+        "nope",
+        "--controls",
+        controls.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("no model \"nope\""),
+        "{}",
+        stderr(&out)
+    );
+
+    runtime.block_on(async {
+        let mut client = CreaseClient::connect(url.clone()).await.unwrap();
+        // A frame with a point missing, deep in the job: refused whole, by its index.
+        let frame = |points: usize| {
+            crease_proto::control::control_frame(
+                "",
+                0,
+                0,
+                &vec![Vec3::ZERO; points],
+                &vec![true; points],
+            )
+        };
+        let mut frames: Vec<_> = (0..5).map(|_| frame(count)).collect();
+        frames[3] = frame(count - 1);
+        let submit = |frames: Vec<v1::ControlFrame>| {
+            let messages = vec![
+                v1::SubmitJobRequest {
+                    part: Some(v1::submit_job_request::Part::Spec(v1::JobSpec {
+                        model: "tube".into(),
+                        ..Default::default()
+                    })),
+                },
+                v1::SubmitJobRequest {
+                    part: Some(v1::submit_job_request::Part::Frames(v1::JobFrames {
+                        frames,
+                    })),
+                },
+            ];
+            crease_remote::client::authorized(tokio_stream::iter(messages), ADMIN).unwrap()
+        };
+        let e = client.submit_job(submit(frames)).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert_eq!(
+            e.message(),
+            format!(
+                "SubmitJob.frames[3].positions: {} values, expected {} (x, y, z of {count} control points)",
+                3 * (count - 1),
+                3 * count
+            )
+        );
+        let refused = crease_proto::errors::batch_frame_error(&e).unwrap();
+        assert_eq!(refused.frame, Some(3));
+        // Nothing was queued.
+        let jobs = client
+            .list_jobs(v1::ListJobsRequest {})
+            .await
+            .unwrap()
+            .into_inner()
+            .jobs;
+        assert_eq!(jobs.len(), 1, "only the first job: {jobs:?}");
+        // Without the admin token.
+        let e = client
+            .submit_job(tokio_stream::iter(Vec::<v1::SubmitJobRequest>::new()))
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated, "{e:?}");
+
+        // A long job (2,000 chunks of 2 frames), cancelled at once: it ends cancelled with
+        // most of its frames never run, and a watcher learns it.
+        let long: Vec<_> = (0..4000).map(|_| frame(count)).collect();
+        let info = client.submit_job(submit(long)).await.unwrap().into_inner();
+        let cancelled = client
+            .cancel_job(
+                crease_remote::client::authorized(
+                    v1::CancelJobRequest {
+                        job: info.job.clone(),
+                    },
+                    ADMIN,
+                )
+                .unwrap(),
+            )
+            .await
+            .unwrap()
+            .into_inner();
+        assert!(
+            cancelled.chunks_done < cancelled.chunks_total,
+            "{cancelled:?}"
+        );
+        let mut watch = client
+            .watch_job(v1::WatchJobRequest {
+                job: info.job.clone(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut last = None;
+        while let Some(s) = tokio::time::timeout(Duration::from_secs(10), watch.message())
+            .await
+            .expect("the watch ends once the job has")
+            .unwrap()
+        {
+            last = Some(s);
+        }
+        let last = last.unwrap();
+        assert_eq!(last.state, v1::JobState::Cancelled as i32, "{last:?}");
+        assert!(last.frames_done < 4000, "{last:?}");
+        // Its result: none.
+        let e = client
+            .get_job_result(v1::GetJobResultRequest {
+                job: info.job.clone(),
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), tonic::Code::FailedPrecondition);
+        assert!(e.message().contains("cancelled"), "{}", e.message());
+    });
+
+    // A server that keeps results for no time: the result of a done job has expired.
+    let expiring = runtime.block_on(serve(
+        model,
+        JobSettings {
+            ttl: Duration::ZERO,
+            ..small_chunks()
+        },
+    ));
+    let url = format!("http://{}", expiring.grpc);
+    let run = |args: &[&str]| {
+        crease()
+            .arg("job")
+            .args(args)
+            .args(["--server", &url])
+            .env("CREASE_ADMIN_TOKEN", ADMIN)
+            .output()
+            .unwrap()
+    };
+    let out = run(&[
+        "submit",
+        "--model",
+        "tube",
+        "--controls",
+        controls.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let id = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    assert!(run(&["watch", &id]).status.success());
+    let out = run(&["get", &id, "--out", dir.join("late").to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("its result expired"),
+        "{}",
+        stderr(&out)
+    );
+    drop(expiring);
+}
