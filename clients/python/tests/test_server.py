@@ -221,6 +221,28 @@ class AgainstTheDemoServer(unittest.TestCase):
             self.client.synthesize("demo-hand", bad)
         self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
 
+    def test_a_job_equals_synthesize_and_refuses_a_bad_frame_by_index(self) -> None:
+        m = self.client.model("demo-hand")
+        rng = np.random.default_rng(11)
+        controls = m.control_rest[None] + rng.normal(0, 0.004, (30, len(m.control_names), 3)).astype(np.float32)
+        controls[4:9, 1] = np.nan
+        job = self.client.submit_job("demo-hand", controls, name="python")
+        self.assertEqual((job.frames_total, job.name), (30, "python"))
+        states = [s.state for s in self.client.watch_job(job.job)]
+        self.assertEqual(states[-1], "done", states)
+        np.testing.assert_array_equal(self.client.job_result(job.job), self.client.synthesize("demo-hand", controls))
+        self.assertIn(job.job, [j.job for j in self.client.jobs()])
+        with self.assertRaises(crease.CreaseError) as e:
+            self.client.cancel_job(job.job)
+        self.assertEqual(e.exception.code, "FAILED_PRECONDITION")
+        # A point short in every frame: refused at its first frame, nothing queued.
+        before = len(self.client.jobs())
+        with self.assertRaises(crease.CreaseError) as e:
+            self.client.submit_job("demo-hand", controls[:, :-1])
+        self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
+        self.assertEqual(e.exception.frame, 0)
+        self.assertEqual(len(self.client.jobs()), before)
+
     def test_publish_acks_every_frame_and_refuses_a_bad_one_by_index(self) -> None:
         m = self.client.model("demo-hand")
         room = self.client.open_room("py-publish", "demo-hand")

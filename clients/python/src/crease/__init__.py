@@ -14,7 +14,7 @@ The gRPC stubs (``crease.v1``) are generated from the repository's proto/ when t
 built.
 """
 
-from .client import Ack, Client, Model, Room, StoredModel, Subscription, TakeInfo, wait_ready
+from .client import Ack, Client, JobInfo, Model, Room, StoredModel, Subscription, TakeInfo, wait_ready
 from .codec import CodecError
 from .controls import read_controls_csv
 from .errors import CreaseError, FrameRejected
@@ -29,6 +29,7 @@ __all__ = [
     "CodecError",
     "CreaseError",
     "FrameRejected",
+    "JobInfo",
     "MeshStream",
     "Model",
     "Room",

@@ -134,6 +134,53 @@ class TakeInfo:
     truncated: bool
 
 
+@dataclass(frozen=True)
+class JobInfo:
+    """A batch job on a server (``SubmitJob``, issue 45): its progress and state (``queued``,
+    ``running``, ``done``, ``failed``, ``cancelled``)."""
+
+    job: str
+    name: str
+    model: str
+    state: str
+    frames_total: int
+    frames_done: int
+    chunks_total: int
+    chunks_done: int
+    frames_per_second: float
+    eta_seconds: float
+    error: str
+
+    @property
+    def ended(self) -> bool:
+        return self.state in ("done", "failed", "cancelled")
+
+
+_JOB_STATE = {
+    pb.JOB_STATE_QUEUED: "queued",
+    pb.JOB_STATE_RUNNING: "running",
+    pb.JOB_STATE_DONE: "done",
+    pb.JOB_STATE_FAILED: "failed",
+    pb.JOB_STATE_CANCELLED: "cancelled",
+}
+
+
+def _job_info(j: pb.JobInfo) -> JobInfo:
+    return JobInfo(
+        j.job,
+        j.name,
+        j.model,
+        _JOB_STATE.get(j.state, "queued"),
+        j.frames_total,
+        j.frames_done,
+        j.chunks_total,
+        j.chunks_done,
+        j.frames_per_second,
+        j.eta_seconds,
+        j.error,
+    )
+
+
 def _take_info(t: pb.TakeInfo) -> TakeInfo:
     return TakeInfo(
         t.take, t.room, t.name, t.model, t.model_sha256, t.started_unix_us, t.frames, t.duration_us, t.bytes, t.recording, t.truncated
@@ -520,6 +567,91 @@ class Client:
         if out is None:
             return np.zeros((0, 0, 3), dtype=np.float32)
         return out
+
+    # -- jobs -------------------------------------------------------------------------------
+
+    def submit_job(
+        self,
+        model: str,
+        controls: np.ndarray,
+        *,
+        level: Level = "base",
+        beta: float = 0.0,
+        skinning: Skinning | None = None,
+        refine: Mapping[str, float] | None = None,
+        name: str = "",
+    ) -> JobInfo:
+        """Hands a batch of control frames (``(F, C, 3)``, NaN rows occluded) to the server as a
+        job that outlives this client (admin token) and returns it at once. The server checks
+        every frame: a refused one raises ``CreaseError`` whose ``frame`` is its index in
+        ``controls``, and nothing is queued. ``watch_job`` follows it, ``job_result`` fetches it."""
+        controls = np.asarray(controls, dtype=np.float32)
+        if controls.ndim != 3 or controls.shape[2] != 3:
+            raise ValueError(f"controls: expected an (F, C, 3) array, got shape {controls.shape}")
+        points = controls.shape[1]
+        per_message = max(1, CHUNK_BYTES // (12 * points + (points + 7) // 8 + 32))
+        spec = pb.JobSpec(model=model, level=_LEVEL[level], beta=beta, skinning=_SKINNING[skinning], name=name)
+        if refine is not None:
+            spec.refine.CopyFrom(pb.Refine(**refine))
+
+        def messages() -> Iterator[pb.SubmitJobRequest]:
+            yield pb.SubmitJobRequest(spec=spec)
+            for first in range(0, len(controls), per_message):
+                frames = pb.JobFrames()
+                for k, f in enumerate(controls[first : first + per_message]):
+                    flat, mask = _points(f)
+                    frames.frames.append(pb.ControlFrame(seq=first + k, positions=flat, valid=mask))
+                yield pb.SubmitJobRequest(frames=frames)
+
+        try:
+            info = self._stub.SubmitJob(messages(), timeout=self._timeout, metadata=self._auth())
+        except grpc.RpcError as e:
+            raise CreaseError.from_rpc(e, what=f"submitting a job of {len(controls)} frames on {model!r}") from None
+        return _job_info(info)
+
+    def watch_job(self, job: str) -> Iterator[JobInfo]:
+        """A job's status now, then each change, until it ends."""
+        try:
+            for info in self._stub.WatchJob(pb.WatchJobRequest(job=job), timeout=None):
+                yield _job_info(info)
+        except grpc.RpcError as e:
+            raise CreaseError.from_rpc(e, what=f"watching job {job!r}") from None
+
+    def job_result(self, job: str) -> np.ndarray:
+        """A done job's meshes, ``(F, V, 3)`` float32 (model vertex order, quantised to 16 bits in
+        the model's pose box, as ``synthesize``'s)."""
+        frames_total = None
+        for info in self.watch_job(job):
+            frames_total = info.frames_total
+            break
+        stream = MeshStream()
+        out: np.ndarray | None = None
+        received = 0
+        what = f"fetching job {job!r}"
+        try:
+            for message in self._stub.GetJobResult(pb.GetJobResultRequest(job=job), timeout=None):
+                if not stream.ready:
+                    stream.push(message)
+                    if stream.ready:
+                        out = np.empty((frames_total or 0, stream.topologies[0].vertex_count, 3), dtype=np.float32)
+                    continue
+                if out is None or received >= len(out):
+                    raise CreaseError("INTERNAL", f"{what}: more frames than the job holds")
+                stream.decode_into(message, out[received])
+                received += 1
+        except grpc.RpcError as e:
+            raise CreaseError.from_rpc(e, what=what) from None
+        if out is None or received != len(out):
+            raise CreaseError("DATA_LOSS", f"{what}: {received} frames came back for {frames_total}")
+        return out
+
+    def jobs(self) -> list[JobInfo]:
+        """The server's jobs, newest first."""
+        return [_job_info(j) for j in self._unary("ListJobs", pb.ListJobsRequest(), "ListJobs").jobs]
+
+    def cancel_job(self, job: str) -> JobInfo:
+        """Cancels a queued or running job (admin token): no chunk of it starts after this."""
+        return _job_info(self._unary("CancelJob", pb.CancelJobRequest(job=job), f"cancelling job {job!r}", admin=True))
 
     # -- takes ------------------------------------------------------------------------------
 
