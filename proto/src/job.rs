@@ -65,6 +65,7 @@ pub fn chunk_frames(
     let mut positions = vec![Vec3::ZERO; count];
     let mut valid = vec![false; count];
     let mut last_valid: Vec<Option<Vec3>> = vec![None; count];
+    let (mut sent, mut sent_valid) = (vec![Vec3::ZERO; count], vec![false; count]);
     let mut chunks = Vec::with_capacity(frames.len().div_ceil(chunk));
     for (index, frame) in frames.iter().enumerate() {
         read_control_frame(frame, &mut positions, &mut valid)
@@ -73,8 +74,8 @@ pub fn chunk_frames(
         if starts_chunk {
             chunks.push(Vec::with_capacity(chunk.min(frames.len() - index)));
         }
-        let mut sent_valid = valid.clone();
-        let mut sent = positions.clone();
+        sent.copy_from_slice(&positions);
+        sent_valid.copy_from_slice(&valid);
         for i in 0..count {
             if valid[i] {
                 last_valid[i] = Some(positions[i]);

@@ -458,9 +458,21 @@ pub fn parse_refine_flag(text: &str) -> Result<RefineFlag, String> {
     if text.trim().eq_ignore_ascii_case("off") {
         return Ok(RefineFlag(None));
     }
+    let refine = parse_iterations_strength(text)
+        .map_err(|e| e.replace("expected ITERATIONS", "expected `off` or ITERATIONS"))?;
+    refine.validate()?;
+    Ok(RefineFlag(Some(refine)))
+}
+
+/// `ITERATIONS,STRENGTH` as written (e.g. `8,0.01`), parsed but not checked: what every
+/// `--refine` reads ([`parse_refine_flag`], and `crease eval`'s, which also takes strength 0).
+///
+/// # Errors
+/// The part that does not parse, named.
+pub fn parse_iterations_strength(text: &str) -> Result<Refinement, String> {
     let (it, strength) = text
         .split_once(',')
-        .ok_or_else(|| format!("{text:?}: expected `off` or ITERATIONS,STRENGTH (e.g. 8,0.01)"))?;
+        .ok_or_else(|| format!("{text:?}: expected ITERATIONS,STRENGTH (e.g. 8,0.01)"))?;
     let iterations: usize = it
         .trim()
         .parse()
@@ -469,13 +481,11 @@ pub fn parse_refine_flag(text: &str) -> Result<RefineFlag, String> {
         .trim()
         .parse()
         .map_err(|e| format!("strength {strength:?}: {e}"))?;
-    let refine = Refinement {
+    Ok(Refinement {
         iterations,
         strength,
         from_rest: false,
-    };
-    refine.validate()?;
-    Ok(RefineFlag(Some(refine)))
+    })
 }
 
 /// A parsed `--refine` flag ([`parse_refine_flag`]): `None` is `off`.

@@ -204,6 +204,12 @@ pub async fn get_model(
         .map_err(|s| anyhow::anyhow!("{}", s.message()))
 }
 
+/// A refusal of a job call as an error: the server's message (it names the field or the job)
+/// and the code.
+fn refused(s: &tonic::Status) -> anyhow::Error {
+    anyhow::anyhow!("{} ({:?})", s.message(), s.code())
+}
+
 /// What a batch job synthesises (issue 45), as `crease job submit` takes it.
 #[derive(Clone, Debug, Default)]
 pub struct JobRequest {
@@ -280,7 +286,7 @@ pub async fn submit_job(
         .submit_job(authorized(tokio_stream::iter(messages), admin_token)?)
         .await
         .map(tonic::Response::into_inner)
-        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+        .map_err(|s| refused(&s))
 }
 
 /// A job's progress: its status now, then each change until it ends.
@@ -297,7 +303,7 @@ pub async fn watch_job(
         })
         .await
         .map(tonic::Response::into_inner)
-        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+        .map_err(|s| refused(&s))
 }
 
 /// A done job's meshes: a topology message, then one frame per control frame in order.
@@ -314,7 +320,7 @@ pub async fn job_result(
         })
         .await
         .map(tonic::Response::into_inner)
-        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+        .map_err(|s| refused(&s))
 }
 
 /// The server's jobs, newest first.
@@ -326,7 +332,7 @@ pub async fn list_jobs(client: &mut CreaseClient<Channel>) -> anyhow::Result<Vec
         .list_jobs(v1::ListJobsRequest {})
         .await
         .map(|r| r.into_inner().jobs)
-        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+        .map_err(|s| refused(&s))
 }
 
 /// Cancels a queued or running job (admin token).
@@ -347,5 +353,5 @@ pub async fn cancel_job(
         )?)
         .await
         .map(tonic::Response::into_inner)
-        .map_err(|s| anyhow::anyhow!("{} ({:?})", s.message(), s.code()))
+        .map_err(|s| refused(&s))
 }

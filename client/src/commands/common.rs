@@ -187,25 +187,14 @@ impl ServerArgs {
 /// `ITERATIONS,STRENGTH` of a `--refine` option (issue 20's bone-level refinement, e.g.
 /// `4,0.01`). `crease eval` also takes a strength of 0 (no prior); a room refuses it.
 pub fn parse_refinement(text: &str) -> Result<Refinement, String> {
-    let (it, strength) = text
-        .split_once(',')
-        .ok_or_else(|| format!("{text:?}: expected ITERATIONS,STRENGTH (e.g. 4,0.01)"))?;
-    let iterations: usize = it
-        .trim()
-        .parse()
-        .map_err(|e| format!("iterations {it:?}: {e}"))?;
-    let strength: f32 = strength
-        .trim()
-        .parse()
-        .map_err(|e| format!("strength {strength:?}: {e}"))?;
-    if !(strength.is_finite() && strength >= 0.0) {
-        return Err(format!("strength {strength}: expected a number >= 0"));
+    let refine = crease_proto::room::parse_iterations_strength(text)?;
+    if !(refine.strength.is_finite() && refine.strength >= 0.0) {
+        return Err(format!(
+            "strength {}: expected a number >= 0",
+            refine.strength
+        ));
     }
-    Ok(Refinement {
-        iterations,
-        strength,
-        from_rest: false,
-    })
+    Ok(refine)
 }
 
 /// How `crease room open|info` print a room's refinement.
