@@ -277,6 +277,8 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
     let state = AppState::new(models, server);
     if let Some(options) = config.cluster {
         crease_server::join_cluster(&state, options).await?;
+        // This replica pulls the cluster's job chunks from now on (issue 45).
+        crease_server::job_service::start_cluster_worker(&state);
     }
     let mut demo_token = None;
     if let Some((model, animation, left)) = demo {

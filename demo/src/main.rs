@@ -184,6 +184,11 @@ struct Args {
     /// The owner's lease in milliseconds: a replica silent this long loses its rooms to others.
     #[arg(long, value_name = "MS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_LEASE.as_millis() as u64)]
     lease_ms: u64,
+    /// Seconds a job chunk pulled by a replica may go unacknowledged before another replica
+    /// gets it (the jobs' work queue's ack_wait, issue 45). A worker renews it while it runs a
+    /// chunk, so this bounds how long a dead replica's chunk waits, not a chunk's length.
+    #[arg(long, value_name = "SECONDS", requires = "nats", default_value_t = crease_server::cluster::DEFAULT_JOB_ACK_WAIT.as_secs_f64())]
+    job_ack_wait: f64,
     /// Most threads of the blocking pool that runs the frames' work (prediction, encoding,
     /// model loading). Default: 4 per core, at least 16. More threads than cores only helps
     /// when some block for long; a pool that grows with the load costs a stack and an
@@ -271,6 +276,9 @@ impl From<Args> for Config {
                     tls_client: args.nats_tls_cert.zip(args.nats_tls_key),
                 },
                 key_file: args.cluster_key_file,
+                job_ack_wait: std::time::Duration::from_secs_f64(
+                    args.job_ack_wait.clamp(0.5, 3600.0),
+                ),
                 ..crease_server::cluster::ClusterOptions::new(&url, args.replica_id)
             }),
             ..Config::default()

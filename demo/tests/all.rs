@@ -9,6 +9,7 @@ mod cluster_kit;
 mod common;
 
 mod cluster;
+mod cluster_jobs;
 mod cluster_trust;
 mod crash_safe_cache;
 mod demo;

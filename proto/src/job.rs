@@ -13,9 +13,68 @@
 use crease_core::glam::Vec3;
 
 use crate::control::{control_frame, read_control_frame};
-use crate::convert::Level;
+use crate::convert::{Level, skinning_from_wire};
 use crate::errors::WireError;
+use crate::room::{RoomOptions, refine_wire, refinement};
 use crate::v1;
+use std::time::Duration;
+
+/// What a job runs: the model, the level and the batch options, resolved where it was
+/// submitted (the server's refinement default applied), and its label.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JobPlan {
+    /// The model's name.
+    pub model: String,
+    /// The level synthesised.
+    pub level: Level,
+    /// Beta, refinement, skinning (no filter: a batch).
+    pub options: RoomOptions,
+    /// The job's label.
+    pub name: String,
+}
+
+impl JobPlan {
+    /// The plan as a resolved `JobSpec` (a cluster's `JobRecord.spec`): the refinement always
+    /// set (`iterations = 0` for off), so that [`JobPlan::from_spec`] on another replica reads
+    /// it back whatever that replica's default.
+    pub fn to_spec(&self) -> v1::JobSpec {
+        v1::JobSpec {
+            model: self.model.clone(),
+            level: match self.level {
+                Level::Base => v1::Level::Base,
+                Level::Detail => v1::Level::Detail,
+            } as i32,
+            beta: self.options.beta.unwrap_or(0.0),
+            refine: Some(refine_wire(self.options.refine)),
+            skinning: self
+                .options
+                .skinning
+                .map_or(v1::Skinning::Unspecified, v1::Skinning::from) as i32,
+            take: String::new(),
+            name: self.name.clone(),
+        }
+    }
+
+    /// The plan of a resolved spec ([`JobPlan::to_spec`]).
+    ///
+    /// # Errors
+    /// A field that is not a level, a skinning or a valid refinement, named in `JobSpec`.
+    pub fn from_spec(spec: &v1::JobSpec) -> Result<JobPlan, WireError> {
+        let refine = refinement(spec.refine, None)
+            .map_err(|e| WireError::new("JobSpec", "refine", e.to_string()))?;
+        Ok(JobPlan {
+            model: spec.model.clone(),
+            level: Level::from_wire("JobSpec", spec.level)?,
+            options: RoomOptions {
+                beta: (spec.beta != 0.0).then_some(spec.beta),
+                filter: None,
+                refine,
+                skinning: skinning_from_wire("JobSpec", spec.skinning)?,
+            },
+            name: spec.name.clone(),
+        })
+    }
+}
 
 /// Characters of a job id ([`new_job_id`]).
 pub const JOB_ID_LEN: usize = 12;
@@ -95,6 +154,90 @@ pub fn chunk_frames(
         }
     }
     Ok(chunks)
+}
+
+/// A cluster's record of a job just queued (`JobRecord`, cluster.proto): its status, its plan
+/// resolved ([`JobPlan::to_spec`]), its model's digest, no chunk counted.
+pub fn job_record(status: &JobStatus, plan: &JobPlan, model_sha256: &str) -> v1::JobRecord {
+    v1::JobRecord {
+        info: Some(v1::JobInfo::from(status)),
+        spec: Some(plan.to_spec()),
+        model_sha256: model_sha256.to_owned(),
+        done: Vec::new(),
+        started_us: 0,
+        expired: false,
+        tag: Vec::new(),
+    }
+}
+
+/// Chunk `chunk` of job `job` as the work queue carries it (`JobChunk`, cluster.proto).
+pub fn job_chunk(job: &str, chunk: u32, frames: Vec<v1::ControlFrame>) -> v1::JobChunk {
+    v1::JobChunk {
+        job: job.to_owned(),
+        chunk,
+        frames,
+    }
+}
+
+/// Whether bit `chunk` of `done` is set.
+pub fn is_done(done: &[u8], chunk: u32) -> bool {
+    done.get(chunk as usize / 8)
+        .is_some_and(|b| b & (1 << (chunk % 8)) != 0)
+}
+
+fn set_done(done: &mut Vec<u8>, chunk: u32) {
+    let byte = chunk as usize / 8;
+    if done.len() <= byte {
+        done.resize(byte + 1, 0);
+    }
+    done[byte] |= 1 << (chunk % 8);
+}
+
+/// Counts chunk `chunk` (stored) in a cluster's job record: the record's bitmap makes a
+/// redelivered chunk count once (cluster.proto, `JobRecord.done`).
+///
+/// Counts chunk `chunk` of `frames` frames, begun at `began_us`, in `record` at `now` (µs):
+/// the chunk's bit, the totals, the rate since the first chunk began and the time left; the
+/// last chunk ends the job done, its result expiring `ttl` later. Returns false (nothing
+/// changed) when the chunk was counted before or the job has ended.
+pub fn count_chunk(
+    record: &mut v1::JobRecord,
+    chunk: u32,
+    frames: u64,
+    began_us: i64,
+    now: i64,
+    ttl: Duration,
+) -> bool {
+    let Some(info) = record.info.as_mut() else {
+        return false;
+    };
+    if is_done(&record.done, chunk) || JobState::from_wire(info.state).ended() {
+        return false;
+    }
+    set_done(&mut record.done, chunk);
+    if record.started_us == 0 || began_us < record.started_us {
+        record.started_us = began_us;
+    }
+    info.chunks_done += 1;
+    info.frames_done += frames;
+    let secs = (now - record.started_us).max(1) as f64 / 1e6;
+    info.frames_per_second = info.frames_done as f64 / secs;
+    info.eta_seconds =
+        info.frames_total.saturating_sub(info.frames_done) as f64 / info.frames_per_second;
+    info.state = v1::JobState::Running as i32;
+    if info.chunks_done >= info.chunks_total {
+        end_job(info, JobState::Done, String::new(), now, ttl);
+    }
+    true
+}
+
+/// Ends a cluster's job `info` in `state` at `now`, its result expiring `ttl` later.
+pub fn end_job(info: &mut v1::JobInfo, state: JobState, error: String, now: i64, ttl: Duration) {
+    info.state = v1::JobState::from(state) as i32;
+    info.error = error;
+    info.finished_us = now;
+    info.expires_us = now.saturating_add(ttl.as_micros().min(i64::MAX as u128) as i64);
+    info.eta_seconds = 0.0;
 }
 
 /// A job's state (`JobState`).
@@ -190,6 +333,29 @@ pub struct JobStatus {
     pub finished_us: i64,
     /// When its result is deleted (0: not ended).
     pub expires_us: i64,
+}
+
+impl JobStatus {
+    /// The status a `JobInfo` says (a cluster's record).
+    pub fn from_wire(info: &v1::JobInfo) -> JobStatus {
+        JobStatus {
+            job: info.job.clone(),
+            name: info.name.clone(),
+            model: info.model.clone(),
+            level: Level::from_wire("JobInfo", info.level).unwrap_or(Level::Base),
+            state: JobState::from_wire(info.state),
+            frames_total: info.frames_total,
+            frames_done: info.frames_done,
+            chunks_total: info.chunks_total,
+            chunks_done: info.chunks_done,
+            frames_per_second: info.frames_per_second,
+            eta_seconds: info.eta_seconds,
+            error: info.error.clone(),
+            submitted_us: info.submitted_us,
+            finished_us: info.finished_us,
+            expires_us: info.expires_us,
+        }
+    }
 }
 
 impl From<&JobStatus> for v1::JobInfo {
@@ -291,11 +457,110 @@ mod tests {
     }
 
     #[test]
+    fn a_plan_and_a_status_survive_the_wire() {
+        use crease_core::predictor::Refinement;
+        use crease_core::runtime::skin::Skinning;
+        let plans = [
+            JobPlan {
+                model: "hand".into(),
+                level: Level::Detail,
+                options: RoomOptions {
+                    beta: Some(2.5),
+                    filter: None,
+                    refine: Some(Refinement::ROOM_DEFAULT),
+                    skinning: Some(Skinning::Dqs),
+                },
+                name: "take 3".into(),
+            },
+            JobPlan {
+                model: "horse".into(),
+                level: Level::Base,
+                options: RoomOptions::default(),
+                name: String::new(),
+            },
+        ];
+        for plan in plans {
+            let spec = plan.to_spec();
+            assert!(spec.refine.is_some(), "the refinement travels resolved");
+            assert_eq!(JobPlan::from_spec(&spec).unwrap(), plan);
+        }
+        let status = JobStatus {
+            job: "abcdefghijkl".into(),
+            name: "n".into(),
+            model: "m".into(),
+            level: Level::Detail,
+            state: JobState::Running,
+            frames_total: 10,
+            frames_done: 4,
+            chunks_total: 5,
+            chunks_done: 2,
+            frames_per_second: 3.5,
+            eta_seconds: 1.5,
+            error: "e".into(),
+            submitted_us: 1,
+            finished_us: 2,
+            expires_us: 3,
+        };
+        assert_eq!(JobStatus::from_wire(&v1::JobInfo::from(&status)), status);
+    }
+
+    #[test]
     fn job_ids_are_plain_names() {
         let id = new_job_id([0, 25, 26, 35, 36, 255, 1, 2, 3, 4, 5, 6]);
         assert_eq!(id, "az09adbcdefg");
         assert!(is_job_id(&id));
         assert!(!is_job_id("../etc/passw"));
         assert!(!is_job_id("short"));
+    }
+
+    fn record(chunks: u32, frames: u64) -> v1::JobRecord {
+        v1::JobRecord {
+            info: Some(v1::JobInfo {
+                job: "abcdefghijkl".into(),
+                chunks_total: chunks,
+                frames_total: frames,
+                state: v1::JobState::Queued as i32,
+                ..Default::default()
+            }),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_chunk_is_counted_once_and_the_last_ends_the_job() {
+        let ttl = Duration::from_secs(10);
+        let mut r = record(3, 25);
+        assert!(count_chunk(&mut r, 1, 10, 1_000_000, 2_000_000, ttl));
+        assert!(
+            !count_chunk(&mut r, 1, 10, 1_000_000, 2_500_000, ttl),
+            "a redelivered chunk already counted"
+        );
+        let info = r.info.clone().unwrap();
+        assert_eq!((info.chunks_done, info.frames_done), (1, 10));
+        assert_eq!(JobState::from_wire(info.state), JobState::Running);
+        // 10 frames in the second since the first chunk began; 15 left.
+        assert!((info.frames_per_second - 10.0).abs() < 1e-9);
+        assert!((info.eta_seconds - 1.5).abs() < 1e-9);
+        assert!(count_chunk(&mut r, 0, 10, 500_000, 3_000_000, ttl));
+        assert_eq!(r.started_us, 500_000, "the earliest chunk's start");
+        assert!(count_chunk(&mut r, 2, 5, 2_000_000, 4_000_000, ttl));
+        let info = r.info.clone().unwrap();
+        assert_eq!(JobState::from_wire(info.state), JobState::Done);
+        assert_eq!((info.chunks_done, info.frames_done), (3, 25));
+        assert_eq!(info.finished_us, 4_000_000);
+        assert_eq!(info.expires_us, 14_000_000);
+        assert!((0..3).all(|c| is_done(&r.done, c)) && !is_done(&r.done, 3));
+        assert!(!count_chunk(&mut r, 3, 1, 0, 5_000_000, ttl), "ended");
+    }
+
+    #[test]
+    fn the_done_bitmap_grows_as_needed() {
+        let mut done = Vec::new();
+        for c in [0, 9, 17, 800] {
+            set_done(&mut done, c);
+        }
+        assert_eq!(done.len(), 101);
+        let set: Vec<u32> = (0..1000).filter(|&c| is_done(&done, c)).collect();
+        assert_eq!(set, [0, 9, 17, 800]);
     }
 }

@@ -359,26 +359,15 @@ impl Crease for CreaseService {
         req: Request<v1::WatchJobRequest>,
     ) -> Result<Response<Self::WatchJobStream>, Status> {
         let permit = self.admit(&req)?;
-        let rx = self
-            .state
-            .jobs()
-            .watch(&req.get_ref().job)
+        let updates = crate::job_service::watch(&self.state, &req.get_ref().job)
+            .await
             .map_err(|e| status::job(&e))?;
         // The status now, then each change, ending after the job's last.
-        let updates =
-            futures_util::stream::unfold((rx, true, false), |(mut rx, first, ended)| async move {
-                if ended || (!first && rx.changed().await.is_err()) {
-                    return None;
-                }
-                let status = rx.borrow_and_update().clone();
-                let info = v1::JobInfo::from(&status);
-                Some((Ok(info), (rx, false, status.state.ended())))
-            });
         Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
             updates,
-            move |item: Result<v1::JobInfo, Status>| {
+            move |status| {
                 let _held = &permit;
-                item
+                Ok(v1::JobInfo::from(&status))
             },
         ))))
     }
@@ -390,13 +379,11 @@ impl Crease for CreaseService {
         req: Request<v1::GetJobResultRequest>,
     ) -> Result<Response<Self::GetJobResultStream>, Status> {
         let permit = self.admit(&req)?;
-        let result = self
-            .state
-            .jobs()
-            .result(&req.get_ref().job)
+        let result = crate::job_service::result(&self.state, &req.get_ref().job)
+            .await
             .map_err(|e| status::job(&e))?;
         Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
-            result.messages(),
+            result,
             move |item| {
                 let _held = &permit;
                 item.map_err(|e| status::job(&e))
@@ -408,7 +395,9 @@ impl Crease for CreaseService {
         &self,
         _req: Request<v1::ListJobsRequest>,
     ) -> Result<Response<v1::ListJobsResponse>, Status> {
-        let jobs = self.state.jobs().list();
+        let jobs = crate::job_service::list(&self.state)
+            .await
+            .map_err(|e| status::job(&e))?;
         Ok(Response::new(v1::ListJobsResponse {
             jobs: jobs.iter().map(v1::JobInfo::from).collect(),
         }))
@@ -419,9 +408,8 @@ impl Crease for CreaseService {
         req: Request<v1::CancelJobRequest>,
     ) -> Result<Response<v1::JobInfo>, Status> {
         self.require_jobs_admin(&req)?;
-        self.state
-            .jobs()
-            .cancel(&req.get_ref().job)
+        crate::job_service::cancel(&self.state, &req.get_ref().job)
+            .await
             .map(|s| Response::new(v1::JobInfo::from(&s)))
             .map_err(|e| status::job(&e))
     }
@@ -528,9 +516,12 @@ impl CreaseService {
                 spec.take
             )));
         }
-        let model = self.state.models().get(&spec.model).ok_or_else(|| {
-            Status::not_found(format!("JobSpec.model: no model {:?}", spec.model))
-        })?;
+        let model = crate::job_service::model(&self.state, &spec.model)
+            .await
+            .map_err(|e| status::job(&e))?
+            .ok_or_else(|| {
+                Status::not_found(format!("JobSpec.model: no model {:?}", spec.model))
+            })?;
         let level = Level::from_wire("JobSpec", spec.level)?;
         if level == Level::Detail && model.info.detail_vertices == 0 {
             return Err(Status::failed_precondition(format!(
@@ -566,20 +557,20 @@ impl CreaseService {
             ));
         }
         let count = model.info.control_points.len();
-        let chunks = tokio::task::spawn_blocking(move || {
-            chunk_frames(&frames, count, settings.chunk_frames)
-        })
-        .await
-        .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
-        .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
+        let chunk = crate::job_service::chunk_frames(&self.state, &frames);
+        let chunks = tokio::task::spawn_blocking(move || chunk_frames(&frames, count, chunk))
+            .await
+            .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
+            .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
         let plan = crate::jobs::JobPlan {
             model: spec.model.clone(),
             level,
             options,
             name: spec.name.clone(),
         };
-        let status =
-            crate::job_service::submit(&self.state, plan, chunks).map_err(|e| status::job(&e))?;
+        let status = crate::job_service::submit(&self.state, plan, &model, chunks)
+            .await
+            .map_err(|e| status::job(&e))?;
         tracing::info!(job = %status.job, model = %status.model, frames = status.frames_total, chunks = status.chunks_total, "job queued");
         Ok(v1::JobInfo::from(&status))
     }

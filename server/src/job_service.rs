@@ -1,46 +1,203 @@
-//! Batch jobs' worker (issue 45, without a cluster): queues a checked job in the store
-//! ([`crate::jobs`]) and runs the queue, one job after another, each chunk a fresh batch
-//! through `Synthesize`'s path (`AppState::batch_room`, `crate::stream::batch`), its encoded
-//! frames stored before the chunk counts as done. Cancelling is seen between chunks.
+//! Batch jobs (issue 45): the one way both the transports and the workers reach them, in the
+//! process or across a cluster.
+//!
+//! - **Without a cluster** the store is this process's ([`crate::jobs`]): a bounded queue that
+//!   one worker drains, one job after another.
+//! - **In a cluster** (`--nats`) the store is the cluster's ([`crate::cluster::work`]): the
+//!   chunks wait on a JetStream work queue and every replica runs a worker
+//!   ([`start_cluster_worker`]) that pulls one chunk at a time, runs it, stores its result,
+//!   counts it in the job's record and only then acks it. A replica whose live rooms took
+//!   frames since its last chunk waits after each chunk as long as the chunk took (twice for
+//!   two such rooms, at most four times), so live rooms keep their CPU and idle replicas take
+//!   more of the queue.
+//!
+//! Either way a chunk runs as a fresh batch through `Synthesize`'s path
+//! (`AppState::batch_room`, `crate::stream::batch`): [`synthesize`]. Cancelling is seen
+//! between chunks.
 
 use std::path::Path;
 use std::sync::{Arc, Weak};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-use crease_proto::job::{JobState, JobStatus};
+use crease_proto::job::{JobPlan, JobState, JobStatus, new_job_id};
 use crease_proto::v1;
+use futures_util::stream::BoxStream;
 use prost::Message;
 use tokio_stream::StreamExt;
 
-use crate::jobs::{Job, JobError, JobPlan};
+use crate::cluster::Cluster;
+use crate::cluster::work::{Pulled, now_us, status_of};
+use crate::jobs::{Job, JobError};
+use crate::registry::LoadedModel;
 use crate::state::AppState;
 use crate::stream::StreamError;
+use crease_proto::job::{count_chunk, is_done};
 
-/// Queues a job of `chunks` running `plan` on `state`'s store, starting the worker with the
-/// first job, and returns its status.
+/// The model a job names: this server's, or in a cluster the cluster's (fetched and checked).
+/// `None`: no such model.
 ///
 /// # Errors
-/// The store's refusal ([`JobError`]).
-pub fn submit(
+/// A cluster's copy that cannot be had (named).
+pub async fn model(state: &AppState, name: &str) -> Result<Option<Arc<LoadedModel>>, JobError> {
+    match state.cluster() {
+        Some(cluster) => crate::cluster::models::named(state.models(), cluster, name)
+            .await
+            .map_err(|message| JobError::Io {
+                path: "(cluster models)".into(),
+                message,
+            }),
+        None => Ok(state.models().get(name)),
+    }
+}
+
+/// Frames per chunk for a job of `frames`: `--job-chunk-frames`, and in a cluster few enough
+/// that a chunk fits in one NATS message.
+pub fn chunk_frames(state: &AppState, frames: &[v1::ControlFrame]) -> usize {
+    let setting = state.jobs().settings().chunk_frames.max(1);
+    let Some(cluster) = state.cluster() else {
+        return setting;
+    };
+    let largest = frames.iter().map(Message::encoded_len).max().unwrap_or(1) + 16;
+    let room = cluster.max_payload().saturating_sub(4096);
+    setting.min((room / largest).max(1))
+}
+
+/// Queues a job of `chunks` (checked, [`crease_proto::job::chunk_frames`]) running `plan` on
+/// `model`, and returns its status. Without a cluster the worker starts with the first job.
+///
+/// # Errors
+/// The store's refusal ([`JobError`]: the queue full, a chunk too large, NATS unavailable).
+pub async fn submit(
     state: &Arc<AppState>,
     plan: JobPlan,
+    model: &LoadedModel,
     chunks: Vec<Vec<v1::ControlFrame>>,
 ) -> Result<JobStatus, JobError> {
-    let status = state.jobs().enqueue(plan, chunks)?;
-    state.metrics().jobs_submitted.inc();
-    if let Some(mut queue) = state.jobs().take_queue() {
-        let dir = state.jobs().dir()?;
-        let state = Arc::downgrade(state);
-        tokio::spawn(async move {
-            while let Some(job) = queue.recv().await {
-                run(&state, &dir, &job).await;
+    let status = match state.cluster() {
+        Some(cluster) => {
+            let settings = state.jobs().settings();
+            let frames: usize = chunks.iter().map(Vec::len).sum();
+            if frames > settings.max_frames {
+                return Err(JobError::Full(format!(
+                    "SubmitJob.frames: {frames} frames, at most {} per job (--max-job-frames)",
+                    settings.max_frames
+                )));
             }
-        });
-    }
+            let open = cluster
+                .work()
+                .list()
+                .await?
+                .iter()
+                .filter(|s| !s.state.ended())
+                .count();
+            if open >= settings.max_queued {
+                return Err(JobError::Full(format!(
+                    "the cluster's job queue is full ({open} jobs queued or running, --max-queued-jobs): try again when one ends"
+                )));
+            }
+            let status = crate::jobs::queued_status(
+                new_job_id(rand::random()),
+                &plan,
+                frames as u64,
+                chunks.len() as u32,
+            );
+            cluster
+                .work()
+                .submit(
+                    &status,
+                    &plan,
+                    model.sha256(),
+                    chunks,
+                    cluster.max_payload(),
+                    settings.ttl,
+                )
+                .await?;
+            status
+        }
+        None => {
+            let status = state.jobs().enqueue(plan, chunks)?;
+            if let Some(mut queue) = state.jobs().take_queue() {
+                let dir = state.jobs().dir()?;
+                let state = Arc::downgrade(state);
+                tokio::spawn(async move {
+                    while let Some(job) = queue.recv().await {
+                        run(&state, &dir, &job).await;
+                    }
+                });
+            }
+            status
+        }
+    };
+    state.metrics().jobs_submitted.inc();
     Ok(status)
 }
 
-/// Runs `job`'s chunks in order, ending it done, failed or cancelled.
+/// Job `id`'s status now, then each change, ending after the job's last.
+///
+/// # Errors
+/// [`JobError::NoJob`], or the cluster's store unavailable.
+pub async fn watch(state: &AppState, id: &str) -> Result<BoxStream<'static, JobStatus>, JobError> {
+    if let Some(cluster) = state.cluster() {
+        return cluster.work().watch(id).await;
+    }
+    let rx = state.jobs().watch(id)?;
+    Ok(Box::pin(futures_util::stream::unfold(
+        (rx, true, false),
+        |(mut rx, first, ended)| async move {
+            if ended || (!first && rx.changed().await.is_err()) {
+                return None;
+            }
+            let status = rx.borrow_and_update().clone();
+            let ended = status.state.ended();
+            Some((status, (rx, false, ended)))
+        },
+    )))
+}
+
+/// Every job's status, newest first.
+///
+/// # Errors
+/// The cluster's store unavailable.
+pub async fn list(state: &AppState) -> Result<Vec<JobStatus>, JobError> {
+    match state.cluster() {
+        Some(cluster) => cluster.work().list().await,
+        None => Ok(state.jobs().list()),
+    }
+}
+
+/// Cancels a queued or running job: no chunk of it starts after this returns.
+///
+/// # Errors
+/// [`JobError::NoJob`], [`JobError::Ended`], the cluster's store unavailable.
+pub async fn cancel(state: &AppState, id: &str) -> Result<JobStatus, JobError> {
+    match state.cluster() {
+        Some(cluster) => {
+            let status = cluster
+                .work()
+                .cancel(id, state.jobs().settings().ttl)
+                .await?;
+            state.metrics().jobs_cancelled.inc();
+            Ok(status)
+        }
+        None => state.jobs().cancel(id),
+    }
+}
+
+/// A done job's result: its topology message, then every frame in order.
+///
+/// # Errors
+/// [`JobError::NoJob`], [`JobError::NotDone`], [`JobError::Expired`].
+pub async fn result(
+    state: &AppState,
+    id: &str,
+) -> Result<BoxStream<'static, Result<v1::MeshFrame, JobError>>, JobError> {
+    match state.cluster() {
+        Some(cluster) => cluster.work().result(id).await,
+        None => Ok(Box::pin(state.jobs().result(id)?.messages())),
+    }
+}
+
+/// Runs `job`'s chunks in order, ending it done, failed or cancelled (without a cluster).
 async fn run(state: &Weak<AppState>, dir: &Path, job: &Arc<Job>) {
     let Some(ttl) = state.upgrade().map(|s| s.jobs().settings().ttl) else {
         return;
@@ -62,7 +219,20 @@ async fn run(state: &Weak<AppState>, dir: &Path, job: &Arc<Job>) {
         }
         let count = frames.len() as u64;
         let chunk_started = Instant::now();
-        if let Err(e) = run_chunk(&state, job, dir, c as u32, frames).await {
+        let stored = match synthesize(&state, job.plan(), frames).await {
+            Ok((topology, bytes)) => {
+                let (job, dir) = (Arc::clone(job), dir.to_owned());
+                tokio::task::spawn_blocking(move || {
+                    let topology = topology.filter(|_| c == 0);
+                    job.store_chunk(&dir, c as u32, topology.as_ref(), &bytes)
+                })
+                .await
+                .map_err(|e| e.to_string())
+                .and_then(|r| r.map_err(|e| e.to_string()))
+            }
+            Err(e) => Err(e),
+        };
+        if let Err(e) = stored {
             state.metrics().jobs_failed.inc();
             job.end(JobState::Failed, format!("chunk {c}: {e}"), ttl);
             return;
@@ -79,15 +249,17 @@ async fn run(state: &Weak<AppState>, dir: &Path, job: &Arc<Job>) {
     job.end(JobState::Done, String::new(), ttl);
 }
 
-/// One chunk: a fresh batch room, its frames encoded as `Synthesize` sends them, stored.
-async fn run_chunk(
+/// One chunk: a fresh batch room on `plan`'s model, its frames encoded as `Synthesize` sends
+/// them. Returns the stream's topology message and the frames, each length-delimited.
+///
+/// # Errors
+/// The model gone (named), a frame refused (named by its index in the job), an encoding
+/// failure.
+pub async fn synthesize(
     state: &Arc<AppState>,
-    job: &Arc<Job>,
-    dir: &Path,
-    chunk: u32,
+    plan: &JobPlan,
     frames: Vec<v1::ControlFrame>,
-) -> Result<(), String> {
-    let plan = job.plan();
+) -> Result<(Option<v1::MeshFrame>, Vec<u8>), String> {
     let room = state
         .batch_room(&plan.model, plan.options)
         .await
@@ -116,12 +288,170 @@ async fn run_chunk(
             .encode_length_delimited(&mut bytes)
             .map_err(|e| e.to_string())?;
     }
-    let (job, dir) = (Arc::clone(job), dir.to_owned());
-    tokio::task::spawn_blocking(move || {
-        let topology = topology.filter(|_| chunk == 0);
-        job.store_chunk(&dir, chunk, topology.as_ref(), &bytes)
-    })
-    .await
-    .map_err(|e| e.to_string())?
-    .map_err(|e| e.to_string())
+    Ok((topology, bytes))
+}
+
+/// How often the cluster's worker looks for expired results.
+const EXPIRY_SWEEP: Duration = Duration::from_secs(30);
+
+/// Starts this replica's part of the cluster's jobs (module docs): the worker that pulls
+/// chunks, and the sweep that deletes expired results. Call once, after joining the cluster.
+pub fn start_cluster_worker(state: &Arc<AppState>) {
+    let Some(cluster) = state.cluster().cloned() else {
+        return;
+    };
+    let weak = Arc::downgrade(state);
+    tokio::spawn(cluster_worker(weak, Arc::clone(&cluster)));
+    tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(EXPIRY_SWEEP).await;
+            if cluster.is_connected() {
+                cluster.work().expire().await;
+            }
+        }
+    });
+}
+
+/// The rooms that took frames since the last look (the worker's live load).
+#[derive(Default)]
+struct LiveLoad {
+    seen: std::collections::HashMap<String, u64>,
+}
+
+impl LiveLoad {
+    /// How many of `state`'s rooms took frames since the last call.
+    fn rooms(&mut self, state: &AppState) -> u32 {
+        let mut live = 0;
+        let now = state.published_counts();
+        for (id, published) in &now {
+            if self
+                .seen
+                .get(id)
+                .is_some_and(|&before| before != *published)
+            {
+                live += 1;
+            }
+        }
+        self.seen = now.into_iter().collect();
+        live
+    }
+}
+
+async fn cluster_worker(state: Weak<AppState>, cluster: Arc<Cluster>) {
+    let mut live = LiveLoad::default();
+    loop {
+        let busy = match state.upgrade() {
+            Some(s) => live.rooms(&s),
+            None => return,
+        };
+        if !cluster.is_connected() {
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            continue;
+        }
+        let Some(pulled) = cluster.work().next(&cluster.metrics).await else {
+            continue;
+        };
+        let started = Instant::now();
+        run_pulled(&state, &cluster, pulled).await;
+        if busy > 0 {
+            tokio::time::sleep(started.elapsed() * busy.min(4)).await;
+        }
+    }
+}
+
+/// One pulled chunk (module docs): skipped when its job has ended or it was counted, run
+/// unless its result is stored (a redelivery after the store), counted, acked. Left unacked
+/// (so redelivered) only when the store or the record cannot be reached.
+async fn run_pulled(state: &Weak<AppState>, cluster: &Arc<Cluster>, mut pulled: Pulled) {
+    let work = cluster.work();
+    let (job, c) = (pulled.chunk.job.clone(), pulled.chunk.chunk);
+    let Some(state) = state.upgrade() else { return };
+    if pulled.redelivered {
+        cluster.metrics.job_redeliveries.inc();
+        tracing::info!(%job, chunk = c, "a chunk redelivered (its first replica did not ack it)");
+    }
+    let ttl = state.jobs().settings().ttl;
+    let record = match work.record(&job).await {
+        Ok((r, _)) => r,
+        Err(JobError::NoJob(_)) => {
+            tracing::warn!(%job, chunk = c, "a chunk of no known job: dropped");
+            work.ack(pulled).await;
+            return;
+        }
+        Err(e) => {
+            tracing::warn!(%job, chunk = c, "reading the job's record: {e}");
+            return;
+        }
+    };
+    if status_of(&record).state.ended() || is_done(&record.done, c) {
+        work.ack(pulled).await;
+        return;
+    }
+    let frames = pulled.chunk.frames.len() as u64;
+    let began = now_us();
+    if !work.has_result(&job, c).await {
+        let chunk_started = Instant::now();
+        let chunk_frames = std::mem::take(&mut pulled.chunk.frames);
+        let outcome = async {
+            let plan = record
+                .spec
+                .as_ref()
+                .ok_or_else(|| "the job's record has no spec".to_owned())
+                .and_then(|s| JobPlan::from_spec(s).map_err(|e| e.to_string()))?;
+            crate::cluster::models::ensure(
+                state.models(),
+                cluster,
+                &plan.model,
+                &record.model_sha256,
+            )
+            .await?;
+            synthesize(&state, &plan, chunk_frames).await
+        };
+        // Runs the chunk, telling the queue it is alive every third of its ack_wait.
+        let mut outcome = std::pin::pin!(outcome);
+        let mut alive = tokio::time::interval(work.ack_wait() / 3);
+        alive.tick().await;
+        let outcome = loop {
+            tokio::select! {
+                out = &mut outcome => break out,
+                _ = alive.tick() => work.in_progress(&pulled).await,
+            }
+        };
+        let stored = match outcome {
+            Ok((topology, bytes)) => {
+                let topology = topology.filter(|_| c == 0);
+                work.store(&job, c, topology.as_ref(), &bytes)
+                    .await
+                    .map_err(|e| e.to_string())
+            }
+            Err(e) => Err(e),
+        };
+        if let Err(e) = stored {
+            state.metrics().jobs_failed.inc();
+            tracing::warn!(%job, chunk = c, "the job failed: {e}");
+            work.fail(&job, format!("chunk {c}: {e}"), ttl).await;
+            work.ack(pulled).await;
+            return;
+        }
+        cluster.metrics.job_chunks.inc();
+        state
+            .metrics()
+            .job_chunk_seconds
+            .observe(chunk_started.elapsed().as_secs_f64());
+    }
+    match work
+        .update(&job, |r| count_chunk(r, c, frames, began, now_us(), ttl))
+        .await
+    {
+        Ok((r, changed)) => {
+            if changed && status_of(&r).state == JobState::Done {
+                state.metrics().jobs_done.inc();
+                tracing::info!(%job, "job done");
+            }
+            work.ack(pulled).await;
+        }
+        Err(e) => {
+            tracing::warn!(%job, chunk = c, "counting the chunk (it will be redelivered): {e}")
+        }
+    }
 }

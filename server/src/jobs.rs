@@ -16,14 +16,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use crease_proto::convert::Level;
 use crease_proto::job::{JobState, JobStatus, new_job_id};
-use crease_proto::room::RoomOptions;
 use crease_proto::v1;
 use prost::Message;
 use tokio::sync::{mpsc, watch};
 
 pub use crate::config::JobSettings;
+pub use crease_proto::job::JobPlan;
 
 /// Why a job call was refused; each transport maps it once (`crate::status`).
 #[derive(Debug, thiserror::Error)]
@@ -63,19 +62,6 @@ pub enum JobError {
         /// The failure.
         message: String,
     },
-}
-
-/// What a job runs: the model, the level and the batch options, resolved at submit.
-#[derive(Clone, Debug)]
-pub struct JobPlan {
-    /// The model's name.
-    pub model: String,
-    /// The level synthesised.
-    pub level: Level,
-    /// Beta, refinement, skinning (no filter: a batch).
-    pub options: RoomOptions,
-    /// The job's label.
-    pub name: String,
 }
 
 /// One job: its plan, the chunks not yet run, its status.
@@ -284,23 +270,7 @@ impl Jobs {
         let id = new_job_id(rand::random());
         let job_dir = dir.join(&id);
         std::fs::create_dir_all(&job_dir).map_err(io_error(&job_dir))?;
-        let status = JobStatus {
-            job: id.clone(),
-            name: plan.name.clone(),
-            model: plan.model.clone(),
-            level: plan.level,
-            state: JobState::Queued,
-            frames_total: frames as u64,
-            frames_done: 0,
-            chunks_total: chunks.len() as u32,
-            chunks_done: 0,
-            frames_per_second: 0.0,
-            eta_seconds: 0.0,
-            error: String::new(),
-            submitted_us: now_us(),
-            finished_us: 0,
-            expires_us: 0,
-        };
+        let status = queued_status(id.clone(), &plan, frames as u64, chunks.len() as u32);
         let job = Arc::new(Job {
             id: id.clone(),
             plan,
@@ -379,20 +349,7 @@ impl Jobs {
             return Err(JobError::Expired(id.to_owned()));
         }
         let status = job.status.borrow().clone();
-        if status.state != JobState::Done {
-            return Err(JobError::NotDone {
-                job: id.to_owned(),
-                state: status.state.as_str(),
-                why: match status.state {
-                    JobState::Failed => format!("it failed: {}", status.error),
-                    JobState::Cancelled => "it was cancelled: it has no result".into(),
-                    _ => format!(
-                        "{} of {} frames done: wait for it (crease job watch)",
-                        status.frames_done, status.frames_total
-                    ),
-                },
-            });
-        }
+        check_done(&status)?;
         let job_dir = self.dir()?.join(&job.id);
         Ok(JobResult {
             topology: job_dir.join("topology.bin"),
@@ -417,6 +374,50 @@ impl Jobs {
             }
         }
     }
+}
+
+/// The status of job `id` as it is queued: `frames` frames of `plan` in `chunks` chunks,
+/// submitted now.
+pub fn queued_status(id: String, plan: &JobPlan, frames: u64, chunks: u32) -> JobStatus {
+    JobStatus {
+        job: id,
+        name: plan.name.clone(),
+        model: plan.model.clone(),
+        level: plan.level,
+        state: JobState::Queued,
+        frames_total: frames,
+        frames_done: 0,
+        chunks_total: chunks,
+        chunks_done: 0,
+        frames_per_second: 0.0,
+        eta_seconds: 0.0,
+        error: String::new(),
+        submitted_us: now_us(),
+        finished_us: 0,
+        expires_us: 0,
+    }
+}
+
+/// Whether a job's result can be read: it is done (else [`JobError::NotDone`], saying why).
+///
+/// # Errors
+/// [`JobError::NotDone`].
+pub fn check_done(status: &JobStatus) -> Result<(), JobError> {
+    if status.state == JobState::Done {
+        return Ok(());
+    }
+    Err(JobError::NotDone {
+        job: status.job.clone(),
+        state: status.state.as_str(),
+        why: match status.state {
+            JobState::Failed => format!("it failed: {}", status.error),
+            JobState::Cancelled => "it was cancelled: it has no result".into(),
+            _ => format!(
+                "{} of {} frames done: wait for it (crease job watch)",
+                status.frames_done, status.frames_total
+            ),
+        },
+    })
 }
 
 /// Where a done job's result lies ([`Jobs::result`]).
@@ -468,19 +469,26 @@ impl JobResult {
 /// The messages of a result file: one, or length-delimited ones.
 fn read_messages(path: &Path, delimited: bool) -> Result<Vec<v1::MeshFrame>, JobError> {
     let bytes = std::fs::read(path).map_err(io_error(path))?;
-    let bad = |e: prost::DecodeError| JobError::Io {
+    decode_messages(&bytes, delimited).map_err(|e| JobError::Io {
         path: path.display().to_string(),
         message: format!("not a result file: {e}"),
-    };
+    })
+}
+
+/// The messages of a stored result: one (the topology), or length-delimited ones (a chunk).
+///
+/// # Errors
+/// Bytes that are not such messages.
+pub fn decode_messages(
+    mut bytes: &[u8],
+    delimited: bool,
+) -> Result<Vec<v1::MeshFrame>, prost::DecodeError> {
     if !delimited {
-        return v1::MeshFrame::decode(bytes.as_slice())
-            .map(|m| vec![m])
-            .map_err(bad);
+        return v1::MeshFrame::decode(bytes).map(|m| vec![m]);
     }
-    let mut buf = bytes.as_slice();
     let mut out = Vec::new();
-    while !buf.is_empty() {
-        out.push(v1::MeshFrame::decode_length_delimited(&mut buf).map_err(bad)?);
+    while !bytes.is_empty() {
+        out.push(v1::MeshFrame::decode_length_delimited(&mut bytes)?);
     }
     Ok(out)
 }

@@ -236,6 +236,16 @@ impl AppState {
         using
     }
 
+    /// Every public room's id and the frames published into it so far (a batch job's worker
+    /// tells live rooms by them, `crate::job_service`).
+    pub fn published_counts(&self) -> Vec<(String, u64)> {
+        self.table()
+            .values()
+            .filter(|r| !r.is_private())
+            .map(|r| (r.id.clone(), r.published()))
+            .collect()
+    }
+
     /// How many private rooms (takes' replays) are open.
     pub fn private_rooms(&self) -> usize {
         self.table().values().filter(|r| r.is_private()).count()

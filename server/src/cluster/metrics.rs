@@ -37,6 +37,13 @@ pub struct ClusterMetrics {
     pub fenced_frames: Counter,
     /// Control frames this replica did not forward because it had just been stalled.
     pub stale_forwards: Counter,
+    /// Job chunks this replica pulled that an earlier replica had pulled and not acked (it
+    /// died or stalled; issue 45).
+    pub job_redeliveries: Counter,
+    /// Job chunks this replica took from the queue and ran.
+    pub job_chunks: Counter,
+    /// Job chunks dropped from the queue for a missing or bad tag.
+    pub refused_job_chunks: Counter,
     /// 1 while connected to NATS.
     pub nats_connected: Gauge,
 }
@@ -110,6 +117,21 @@ impl ClusterMetrics {
                 "fenced_frames",
                 "Frames not sent as owner: the lease was not renewed within a lease",
                 &self.fenced_frames,
+            ),
+            (
+                "job_redeliveries",
+                "Job chunks pulled here after another replica pulled them and did not ack (died or stalled)",
+                &self.job_redeliveries,
+            ),
+            (
+                "job_chunks",
+                "Job chunks this replica ran and stored",
+                &self.job_chunks,
+            ),
+            (
+                "refused_job_chunks",
+                "Job chunks dropped from the queue: no or a bad tag",
+                &self.refused_job_chunks,
             ),
         ];
         for (name, help, counter) in counters {

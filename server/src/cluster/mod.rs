@@ -21,6 +21,9 @@
 //!   nothing into the cluster until a renewal succeeds (fencing by the revision).
 //! - **Models** ([`models`]): a JetStream object store (`crease-models`) holds every replica's
 //!   models; a replica that lacks a room's model fetches it and checks its digest first.
+//! - **Batch jobs** ([`work`], issue 45): a JetStream work queue every replica pulls job
+//!   chunks from, the jobs' records in a key-value bucket, their results in an object store;
+//!   the worker that runs the chunks is the server's (`crate::job_service`).
 //! - **Metrics** ([`metrics`]): `crease_cluster_*`.
 //!
 //! This file: joining ([`connect`], [`Cluster::start`]), the connection watcher, the options
@@ -37,6 +40,7 @@ pub mod registry;
 pub mod relay;
 pub mod stall;
 pub mod trust;
+pub mod work;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -106,7 +110,14 @@ pub struct ClusterOptions {
     /// entries are tagged with it and believed only with a good tag (`trust` module docs).
     /// None: believed as they come.
     pub key_file: Option<std::path::PathBuf>,
+    /// How long a pulled job chunk may go unacknowledged before another replica gets it
+    /// (the work queue's `ack_wait`, `--job-ack-wait`; set by whichever replica starts last).
+    pub job_ack_wait: Duration,
 }
+
+/// The default `ack_wait` of the jobs' work queue: a worker renews it every third while it
+/// runs a chunk, so it bounds how long a dead replica's chunk waits, not a chunk's length.
+pub const DEFAULT_JOB_ACK_WAIT: Duration = Duration::from_secs(30);
 
 impl ClusterOptions {
     /// Options for `url`, with `replica` or else the host name (a pod's name in Kubernetes)
@@ -122,6 +133,7 @@ impl ClusterOptions {
             lease: DEFAULT_LEASE,
             auth: trust::NatsAuth::default(),
             key_file: None,
+            job_ack_wait: DEFAULT_JOB_ACK_WAIT,
         }
     }
 }
@@ -228,6 +240,8 @@ pub struct Cluster {
     pub(crate) stall: Arc<stall::StallWatch>,
     /// The cluster metrics.
     pub metrics: ClusterMetrics,
+    /// Batch jobs (`work`).
+    work: work::WorkQueue,
 }
 
 impl std::fmt::Debug for Cluster {
@@ -281,6 +295,7 @@ pub async fn connect(
     let js = jetstream::new(client.clone());
     let rooms_kv = registry::open_kv(&js).await?;
     let models_store = models::open_object_store(&js).await?;
+    let work = work::WorkQueue::open(&js, key.clone(), options.job_ack_wait).await?;
     metrics.nats_connected.set(1);
     tracing::info!(
         replica = %options.replica,
@@ -305,6 +320,7 @@ pub async fn connect(
         key,
         stall: stall::StallWatch::start(),
         metrics,
+        work,
     }))
 }
 
@@ -335,6 +351,11 @@ impl Cluster {
     /// key, with one only when its seal holds.
     pub(crate) fn believed(&self, id: &str, entry: &crease_proto::v1::RoomEntry) -> bool {
         self.key.as_ref().is_none_or(|k| k.check_entry(id, entry))
+    }
+
+    /// The largest message the NATS server takes (a job chunk must fit in one).
+    pub fn max_payload(&self) -> usize {
+        self.client.server_info().max_payload
     }
 
     /// Whether this replica is connected to NATS.
