@@ -96,6 +96,9 @@ export function createState(params) {
     // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
     // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
     take: { list: [], id: takeId, loaded: false },
+    // Batch jobs (jobs.js): the server's jobs as GET /api/jobs last listed them (while the
+    // panel's "jobs" section is open).
+    jobs: [],
   };
   // In palette mode {header, frame: the raw MeshFrame messages of the header and the frame
   // displayed, frames: those from the last keyframe to it, seq, readback()}; else null.

@@ -31,6 +31,7 @@ import { createPanel } from "./panel.js";
 import { createScene, layoutActors } from "./scene.js";
 import { createState } from "./state.js";
 import { listTakes, startPlayer } from "./takes.js";
+import { followJobs } from "./jobs.js";
 import { createVertexStream } from "./vertex-stream.js";
 import { createXr } from "./xr-view.js";
 
@@ -98,4 +99,5 @@ if (crease.take.id) {
     overlay.fail(`takes: ${err.message || err}`),
   );
 }
+followJobs({ details: $("jobs"), list: $("job-list"), state: crease, onError: overlay.fail });
 view.renderer.setAnimationLoop(render);

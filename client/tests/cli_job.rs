@@ -112,6 +112,36 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
         assert_close(&format!("job frame {i}"), &got, &want, bound);
     }
 
+    // Get as codec: the stream as sent, which `crease decode-stream` decodes to the last
+    // frame's mesh.
+    let stream_file = dir.join("job.stream");
+    let out = job(&[
+        "get",
+        &id,
+        "--format",
+        "codec",
+        "--out",
+        stream_file.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "get codec: {}", stderr(&out));
+    let last = dir.join("last.obj");
+    let out = crease()
+        .arg("decode-stream")
+        .arg(&stream_file)
+        .arg("--out")
+        .arg(&last)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "decode-stream: {}", stderr(&out));
+    let n = ANGLES.len() - 1;
+    let want = Mesh::read(local.join(format!("frame_{n:05}.obj"))).unwrap();
+    assert_close(
+        "codec's last frame",
+        &Mesh::read(&last).unwrap(),
+        &want,
+        bound,
+    );
+
     // List: the job, named.
     let out = job(&["list"]);
     let listed = String::from_utf8_lossy(&out.stdout);
@@ -305,4 +335,116 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
         stderr(&out)
     );
     drop(expiring);
+}
+
+/// A job whose model is deleted while it runs fails, naming the model; `GET /api/jobs` (the
+/// viewer's list) shows it failed with that reason.
+#[test]
+fn a_job_whose_model_is_deleted_fails_naming_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = train_model(tmp.path());
+    let model = TrainedModel::load(&model_path).unwrap();
+    let models = tmp.path().join("models");
+    std::fs::create_dir_all(&models).unwrap();
+    std::fs::copy(&model_path, models.join("tube.crease")).unwrap();
+    let count = model.controls.len();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let served = serve_config(
+            [("tube", model)],
+            crease_server::Config {
+                admin_token: Some(ADMIN.into()),
+                models_dir: Some(models.clone()),
+                jobs: small_chunks(),
+                ..crease_server::Config::default()
+            },
+        )
+        .await;
+        let mut client = CreaseClient::connect(format!("http://{}", served.grpc))
+            .await
+            .unwrap();
+        let frame = crease_proto::control::control_frame(
+            "",
+            0,
+            0,
+            &vec![Vec3::ZERO; count],
+            &vec![true; count],
+        );
+        let messages = vec![
+            v1::SubmitJobRequest {
+                part: Some(v1::submit_job_request::Part::Spec(v1::JobSpec {
+                    model: "tube".into(),
+                    ..Default::default()
+                })),
+            },
+            v1::SubmitJobRequest {
+                part: Some(v1::submit_job_request::Part::Frames(v1::JobFrames {
+                    frames: vec![frame; 20_000],
+                })),
+            },
+        ];
+        let job = client
+            .submit_job(
+                crease_remote::client::authorized(tokio_stream::iter(messages), ADMIN).unwrap(),
+            )
+            .await
+            .unwrap()
+            .into_inner();
+        client
+            .delete_model(
+                crease_remote::client::authorized(
+                    v1::DeleteModelRequest {
+                        model: "tube".into(),
+                    },
+                    ADMIN,
+                )
+                .unwrap(),
+            )
+            .await
+            .unwrap();
+        let mut watch = client
+            .watch_job(v1::WatchJobRequest {
+                job: job.job.clone(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut last = None;
+        while let Some(s) = tokio::time::timeout(Duration::from_secs(30), watch.message())
+            .await
+            .expect("the watch ends once the job has")
+            .unwrap()
+        {
+            last = Some(s);
+        }
+        let last = last.unwrap();
+        assert_eq!(last.state, v1::JobState::Failed as i32, "{last:?}");
+        assert!(last.frames_done < 20_000, "{last:?}");
+        assert!(
+            last.error.contains("chunk ") && last.error.contains("\"tube\""),
+            "{}",
+            last.error
+        );
+        let body = http_get(served.http, "/api/jobs");
+        let list: crease_proto::json::JobList = serde_json::from_str(&body).unwrap();
+        let listed = list.jobs.iter().find(|j| j.job == job.job).unwrap();
+        assert_eq!(listed.state, "failed");
+        assert_eq!(listed.error, last.error);
+        assert_eq!(listed.level, "base");
+    });
+}
+
+/// The body of `GET path` on `addr` (HTTP/1.0, which must answer 200).
+fn http_get(addr: std::net::SocketAddr, path: &str) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n").unwrap();
+    let mut response = String::new();
+    s.read_to_string(&mut response).unwrap();
+    let (head, body) = response.split_once("\r\n\r\n").unwrap();
+    assert!(
+        head.starts_with("HTTP/1.0 200") || head.starts_with("HTTP/1.1 200"),
+        "{head}\n{body}"
+    );
+    body.to_owned()
 }

@@ -125,12 +125,17 @@ fn blended_weights(path: &Path) -> TrainedModel {
 /// Half a grid step (plus [`EPSILON`]) of the batches of the server at `addr`, from the
 /// `Topology` it sends a plain gRPC client.
 pub(crate) async fn batch_bound(addr: std::net::SocketAddr) -> Vec3 {
+    batch_bound_of(addr, "tube").await
+}
+
+/// [`batch_bound`] of the server's model `model`.
+pub(crate) async fn batch_bound_of(addr: std::net::SocketAddr, model: &str) -> Vec3 {
     let mut client = CreaseClient::connect(format!("http://{addr}"))
         .await
         .unwrap();
     let mut stream = client
         .synthesize(v1::SynthesizeRequest {
-            model: "tube".into(),
+            model: model.into(),
             frames: Vec::new(),
             ..Default::default()
         })

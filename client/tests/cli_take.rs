@@ -517,6 +517,55 @@ fn takes_record_survive_a_kill_replay_and_export() {
         exported += 1;
     }
     assert!(exported >= 10);
+
+    // A batch job from take 1 (issue 45): its meshes are a local `crease synth` of the control
+    // points the take recorded (as its room used them), within the 16-bit bound of batches.
+    let csv: String = t1
+        .frames
+        .iter()
+        .map(|f| {
+            let row: Vec<String> = f.controls.iter().map(|v| format!("{v}")).collect();
+            row.join(",") + "\n"
+        })
+        .collect();
+    let csv_path = tmp.path().join("take1.csv");
+    std::fs::write(&csv_path, csv).unwrap();
+    let local = tmp.path().join("take1-local");
+    run_ok(
+        crease()
+            .args(["synth", "--model"])
+            .arg(&model_file)
+            .arg("--controls")
+            .arg(&csv_path)
+            .arg("--out")
+            .arg(&local),
+    );
+    let job = run_ok(cli().args(["job", "submit", "--take", &take1, "--server", &g]));
+    let job = job.trim().to_owned();
+    let watched = run_ok(cli().args(["job", "watch", &job, "--server", &g]));
+    assert!(watched.contains("(done)"), "{watched}");
+    let fetched = tmp.path().join("take1-job");
+    run_ok(
+        cli()
+            .args(["job", "get", &job, "--server", &g, "--out"])
+            .arg(&fetched),
+    );
+    let addr: std::net::SocketAddr = g.trim_start_matches("http://").parse().unwrap();
+    let bound = rt.block_on(crate::cli_synth_remote::batch_bound(addr));
+    for i in 0..t1.frames.len() {
+        let name = format!("frame_{i:05}.obj");
+        let want = crease_core::mesh::Mesh::read(local.join(&name)).unwrap();
+        let got = crease_core::mesh::Mesh::read(fetched.join(&name)).unwrap();
+        crate::cli_synth_remote::assert_close(&format!("take job frame {i}"), &got, &want, bound);
+    }
+    // A take the server does not have is named.
+    let out = cli()
+        .args(["job", "submit", "--take", "nosuch", "--server", &g])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no take \"nosuch\" on this server"), "{err}");
     // A model that is not the take's is refused, naming both digests.
     let other = tmp.path().join("other.crease");
     let mut bytes = std::fs::read(&model_file).unwrap();

@@ -11,6 +11,8 @@
 //! - The Dockerfile's dependency layer copies every workspace member, and its toolchain and
 //!   runtime base match.
 //! - Every `--flag` the image and the Deployment pass exists in `crease-server --help`.
+//! - The optional KEDA ScaledObject (`deploy/keda/`) scales the Deployment on the stream and
+//!   consumer the replicas create for batch jobs, through NATS's monitoring port.
 //!
 //! The workspace has no YAML crate, so [`yaml`] below reads the block-style subset the manifests
 //! are written in and fails, naming the line, on anything outside it.
@@ -1200,6 +1202,62 @@ impl Dockerfile {
                 .replace(&format!("${k}"), v)
         })
     }
+}
+
+#[test]
+fn the_keda_scaler_reads_the_job_queue_the_replicas_create() {
+    let rel = "deploy/keda/scaledobject.yaml";
+    let docs = yaml::parse(&read(rel), rel);
+    assert_eq!(docs.len(), 1, "{rel}: one ScaledObject");
+    let scaled = &docs[0];
+    assert_eq!(scaled.at("kind").str(), "ScaledObject");
+    let deployment = resource("deployment.yaml", "Deployment");
+    assert_eq!(
+        scaled.at("spec.scaleTargetRef.name").str(),
+        deployment.at("metadata.name").str(),
+        "{rel}: scaleTargetRef names the Deployment"
+    );
+    let triggers = scaled.at("spec.triggers").seq();
+    let jetstream = triggers
+        .iter()
+        .find(|t| t.at("type").str() == "nats-jetstream")
+        .unwrap_or_else(|| panic!("{rel}: no nats-jetstream trigger"));
+    let meta = jetstream.at("metadata");
+    assert_eq!(
+        meta.at("stream").str(),
+        crease_server::cluster::work::JOBS_STREAM
+    );
+    assert_eq!(
+        meta.at("consumer").str(),
+        crease_server::cluster::work::JOBS_CONSUMER
+    );
+    // The monitoring endpoint: the NATS Service's `monitor` port, in the kustomization's
+    // namespace.
+    let service = resource("nats.yaml", "Service");
+    let monitor = service
+        .at("spec.ports")
+        .seq()
+        .iter()
+        .find(|p| p.at("name").str() == "monitor")
+        .expect("nats.yaml: a Service port named monitor")
+        .at("port")
+        .u16();
+    let namespace = k8s("kustomization.yaml")
+        .remove(0)
+        .at("namespace")
+        .str()
+        .to_owned();
+    assert_eq!(
+        meta.at("natsServerMonitoringEndpoint").str(),
+        format!(
+            "{}.{namespace}.svc.cluster.local:{monitor}",
+            service.at("metadata.name").str()
+        )
+    );
+    assert!(
+        triggers.iter().any(|t| t.at("type").str() == "cpu"),
+        "{rel}: the CPU trigger keeps the HPA's rule for live rooms"
+    );
 }
 
 // ----- YAML subset ----------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 //! room documents of `GET /api/rooms` ([`RoomList`]) and `GET /api/rooms/{id}`
 //! ([`RoomDocument`]), which the browser viewer reads; the takes of `GET /api/takes`
 //! ([`TakeList`]), a take's frames for the viewer's player ([`TakeFrames`]) and its private
-//! replay room ([`ReplayRoom`]).
+//! replay room ([`ReplayRoom`]); the batch jobs of `GET /api/jobs` ([`JobList`], issue 45).
 //!
 //! The shapes are frozen by the viewer (`web/viewer.js`) and the tests pinning them: the room
 //! document's keys come in alphabetical order and its floats as the `f64` widening of the `f32`
@@ -681,6 +681,61 @@ impl From<&v1::TakeInfo> for TakeSummary {
             bytes: t.bytes,
             recording: t.recording,
             truncated: t.truncated,
+        }
+    }
+}
+
+/// `GET /api/jobs`: `{"jobs": [...]}`, newest first (issue 45; the viewer's job list).
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct JobList {
+    /// The jobs.
+    pub jobs: Vec<JobSummary>,
+}
+
+/// A job in [`JobList`]: `JobInfo` with its state and level by name.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct JobSummary {
+    /// The job's id.
+    pub job: String,
+    /// Its label.
+    pub name: String,
+    /// The model.
+    pub model: String,
+    /// `base` or `detail`.
+    pub level: String,
+    /// `queued`, `running`, `done`, `failed` or `cancelled`.
+    pub state: String,
+    /// Control frames in the job.
+    pub frames_total: u64,
+    /// Frames whose chunk is stored.
+    pub frames_done: u64,
+    /// Frames per second since the first chunk began.
+    pub frames_per_second: f64,
+    /// Seconds left at that rate (0 when unknown or ended).
+    pub eta_seconds: f64,
+    /// Why it failed or was cancelled.
+    pub error: String,
+    /// When it was submitted, microseconds since the Unix epoch.
+    pub submitted_us: i64,
+    /// When its result is deleted (0: not ended).
+    pub expires_us: i64,
+}
+
+impl From<&crate::job::JobStatus> for JobSummary {
+    fn from(s: &crate::job::JobStatus) -> Self {
+        JobSummary {
+            job: s.job.clone(),
+            name: s.name.clone(),
+            model: s.model.clone(),
+            level: s.level.name().to_owned(),
+            state: s.state.as_str().to_owned(),
+            frames_total: s.frames_total,
+            frames_done: s.frames_done,
+            frames_per_second: s.frames_per_second,
+            eta_seconds: s.eta_seconds,
+            error: s.error.clone(),
+            submitted_us: s.submitted_us,
+            expires_us: s.expires_us,
         }
     }
 }

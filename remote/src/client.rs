@@ -226,6 +226,9 @@ pub struct JobRequest {
     pub skinning: Option<crease_core::runtime::skin::Skinning>,
     /// A label for `crease job list`.
     pub name: String,
+    /// The control frames of this take on the server instead of frames sent (its model and
+    /// settings are the take's; `model`, `beta`, `refine` and `skinning` are ignored).
+    pub take: Option<String>,
 }
 
 /// Most bytes of control frames per `SubmitJob` message: 1 MiB below the server's default
@@ -255,7 +258,7 @@ pub async fn submit_job(
         beta: job.beta.unwrap_or(0.0),
         refine: job.refine.map(|f| crease_proto::room::refine_wire(f.0)),
         skinning: job.skinning.map_or(0, |s| v1::Skinning::from(s) as i32),
-        take: String::new(),
+        take: job.take.clone().unwrap_or_default(),
         name: job.name.clone(),
     };
     let points = frames.first().map_or(0, |f| f.positions.len());

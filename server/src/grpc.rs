@@ -510,51 +510,62 @@ impl CreaseService {
                 ));
             }
         };
-        if !spec.take.is_empty() {
-            return Err(Status::unimplemented(format!(
-                "JobSpec.take {:?}: jobs from a take are not built yet; send its frames (crease take get, crease job submit --controls)",
-                spec.take
-            )));
-        }
-        let model = crate::job_service::model(&self.state, &spec.model)
-            .await
-            .map_err(|e| status::job(&e))?
-            .ok_or_else(|| {
-                Status::not_found(format!("JobSpec.model: no model {:?}", spec.model))
-            })?;
         let level = Level::from_wire("JobSpec", spec.level)?;
-        if level == Level::Detail && model.info.detail_vertices == 0 {
-            return Err(Status::failed_precondition(format!(
-                "JobSpec.level: model {:?} has no detail layer",
-                spec.model
-            )));
-        }
-        let options = self.batch_options("JobSpec", &spec_as_batch(&spec))?;
         let settings = self.state.jobs().settings().clone();
-        let mut frames: Vec<v1::ControlFrame> = Vec::new();
-        while let Some(message) = stream.message().await? {
-            match message.part {
-                Some(Part::Frames(f)) => {
-                    if frames.len() + f.frames.len() > settings.max_frames {
-                        return Err(Status::resource_exhausted(format!(
-                            "SubmitJob.frames: more than {} frames, the most a job may hold (--max-job-frames)",
-                            settings.max_frames
-                        )));
-                    }
-                    frames.extend(f.frames);
-                }
-                Some(Part::Spec(_)) => {
-                    return Err(Status::invalid_argument(
-                        "SubmitJob: a second JobSpec; a job has one, first",
-                    ));
-                }
-                None => {}
+        let check_level = |model: &crate::registry::LoadedModel| {
+            if level == Level::Detail && model.info.detail_vertices == 0 {
+                return Err(Status::failed_precondition(format!(
+                    "JobSpec.level: model {:?} has no detail layer",
+                    model.name
+                )));
             }
-        }
+            Ok(())
+        };
+        let (model, options, frames) = if spec.take.is_empty() {
+            let model = crate::job_service::model(&self.state, &spec.model)
+                .await
+                .map_err(|e| status::job(&e))?
+                .ok_or_else(|| {
+                    Status::not_found(format!("JobSpec.model: no model {:?}", spec.model))
+                })?;
+            check_level(&model)?;
+            let options = self.batch_options("JobSpec", &spec_as_batch(&spec))?;
+            let frames = read_job_frames(&mut stream, settings.max_frames).await?;
+            (model, options, frames)
+        } else {
+            // The take's own frames, model and settings (JobSpec: the other fields but the
+            // level and the name are ignored); frames sent after the spec are refused.
+            if read_job_frames(&mut stream, 0).await.is_err() {
+                return Err(Status::invalid_argument(
+                    "SubmitJob: a job from a take (JobSpec.take) takes no frames after its spec",
+                ));
+            }
+            crate::take_service::job_source(&self.state, spec.take.clone())
+                .await
+                .map_err(|e| match e {
+                    crate::take_service::TakeOpError::Take(
+                        crate::takes::TakeError::NoTake(_),
+                    ) => Status::not_found(format!(
+                        "JobSpec.take: no take {:?} on this server (a take lives on the server that recorded it: crease take list)",
+                        spec.take
+                    )),
+                    e => status::take(&e),
+                })?
+        };
+        check_level(&model)?;
         if frames.is_empty() {
-            return Err(Status::invalid_argument(
-                "SubmitJob: no frames after the JobSpec",
-            ));
+            return Err(Status::invalid_argument(if spec.take.is_empty() {
+                "SubmitJob: no frames after the JobSpec".to_owned()
+            } else {
+                format!("JobSpec.take {:?}: the take has no frames", spec.take)
+            }));
+        }
+        if frames.len() > settings.max_frames {
+            return Err(Status::resource_exhausted(format!(
+                "SubmitJob.frames: {} frames, at most {} per job (--max-job-frames)",
+                frames.len(),
+                settings.max_frames
+            )));
         }
         let count = model.info.control_points.len();
         let chunk = crate::job_service::chunk_frames(&self.state, &frames);
@@ -563,7 +574,7 @@ impl CreaseService {
             .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
             .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
         let plan = crate::jobs::JobPlan {
-            model: spec.model.clone(),
+            model: model.name.clone(),
             level,
             options,
             name: spec.name.clone(),
@@ -574,6 +585,35 @@ impl CreaseService {
         tracing::info!(job = %status.job, model = %status.model, frames = status.frames_total, chunks = status.chunks_total, "job queued");
         Ok(v1::JobInfo::from(&status))
     }
+}
+
+/// The `JobFrames` that follow a job's spec, at most `max` frames (more: RESOURCE_EXHAUSTED,
+/// naming the cap); a second spec is refused.
+async fn read_job_frames(
+    stream: &mut Streaming<v1::SubmitJobRequest>,
+    max: usize,
+) -> Result<Vec<v1::ControlFrame>, Status> {
+    use v1::submit_job_request::Part;
+    let mut frames: Vec<v1::ControlFrame> = Vec::new();
+    while let Some(message) = stream.message().await? {
+        match message.part {
+            Some(Part::Frames(f)) => {
+                if frames.len() + f.frames.len() > max {
+                    return Err(Status::resource_exhausted(format!(
+                        "SubmitJob.frames: more than {max} frames, the most a job may hold (--max-job-frames)"
+                    )));
+                }
+                frames.extend(f.frames);
+            }
+            Some(Part::Spec(_)) => {
+                return Err(Status::invalid_argument(
+                    "SubmitJob: a second JobSpec; a job has one, first",
+                ));
+            }
+            None => {}
+        }
+    }
+    Ok(frames)
 }
 
 /// `stream`, holding `permit` (a stream slot) until it is dropped, its error as a status.

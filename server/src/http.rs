@@ -3,7 +3,8 @@
 //! [`crate::ws`]), the rooms (`/api/rooms`, `/api/rooms/{id}`), the takes (issue 22:
 //! `GET /api/takes[?room=ID]`, `GET /api/takes/{id}` the file, `.../frames` as JSON for the
 //! viewer's player, `.../glb` as a skinned glTF animation, `POST .../replay` opens a private
-//! room to play it back in; [`crate::take_service`]), and the static files of the browser
+//! room to play it back in; [`crate::take_service`]), the batch jobs (issue 45: `GET
+//! /api/jobs`, the viewer's job list; [`crate::job_service`]), and the static files of the browser
 //! viewer (`Config::web`) at `/`.
 
 use std::sync::Arc;
@@ -31,6 +32,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/ws/rooms/{id}", get(crate::ws::room_socket))
         .route("/api/rooms", get(rooms))
         .route("/api/rooms/{id}", get(room_info))
+        .route("/api/jobs", get(jobs_list))
         .route("/api/takes", get(takes_list))
         .route("/api/takes/{id}", get(take_file))
         .route("/api/takes/{id}/frames", get(take_frames))
@@ -134,6 +136,20 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         )],
         state.metrics().render(),
     )
+}
+
+/// `GET /api/jobs`: the batch jobs, newest first ([`crease_proto::json::JobList`]).
+async fn jobs_list(State(state): State<Arc<AppState>>) -> axum::response::Response {
+    match crate::job_service::list(&state).await {
+        Ok(jobs) => axum::Json(crease_proto::json::JobList {
+            jobs: jobs
+                .iter()
+                .map(crease_proto::json::JobSummary::from)
+                .collect(),
+        })
+        .into_response(),
+        Err(e) => (status::job_http(&e), format!("{e}\n")).into_response(),
+    }
 }
 
 /// `?room=ID` of `GET /api/takes`.

@@ -27,14 +27,16 @@
 //! - [`registry`]: the models of a model directory, loaded once (and, in a cluster, the
 //!   models fetched from it).
 //! - [`cluster`]: rooms across replicas over NATS (`--nats`): the room registry, relays,
-//!   frames, forwarded controls, leases and failover, models in the cluster's store; below
-//!   [`state`], which it reaches through a trait.
+//!   frames, forwarded controls, leases and failover, models in the cluster's store, the batch
+//!   jobs' work queue (`cluster::work`); below [`state`], which it reaches through a trait.
 //! - [`takes`]: a room's recordings (issue 22) in the takes folder: the recorder in the
 //!   pipeline, its writer thread, listing and reading takes; [`take_service`]: the take
 //!   operations both transports call (start, stop, list, export, replay rooms).
 //! - [`jobs`]: batch jobs (issue 45) in this process, the store: a bounded queue of chunked
-//!   jobs, their status, results in the jobs folder until they expire; [`job_service`]: the
-//!   worker that runs each chunk as a `Synthesize` batch and stores it.
+//!   jobs, their status, results in the jobs folder until they expire (in a cluster the store
+//!   is `cluster::work`'s JetStream queue, bucket and object store); [`job_service`]: the one
+//!   way to jobs for the transports, and the worker that runs each chunk as a `Synthesize`
+//!   batch and stores it (one per process, or one per replica pulling the cluster's queue).
 //! - [`model_api`]: models through the API (issue 39): uploads checked and written
 //!   atomically into the models folder, deletes, the cluster's models.
 //! - [`http`]: `/healthz`, `/readyz`, `/metrics`, `/api/rooms` (axum); [`metrics`]: the

@@ -150,6 +150,18 @@ pub fn job(e: &JobError) -> Status {
     }
 }
 
+/// HTTP: a job call's error (`GET /api/jobs`).
+pub fn job_http(e: &JobError) -> StatusCode {
+    match e {
+        JobError::NoJob(_) => StatusCode::NOT_FOUND,
+        JobError::NotDone { .. } | JobError::Expired(_) | JobError::Ended { .. } => {
+            StatusCode::CONFLICT
+        }
+        JobError::Full(_) => StatusCode::TOO_MANY_REQUESTS,
+        JobError::Io { .. } => StatusCode::INTERNAL_SERVER_ERROR,
+    }
+}
+
 /// gRPC: a refused model upload or delete (issue 39).
 pub fn model_op(e: &ModelOpError) -> Status {
     use ModelOpError as E;

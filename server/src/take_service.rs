@@ -219,6 +219,58 @@ fn take_and_model(
     Ok((take, model))
 }
 
+/// Take `id` as a batch job's source (issue 45, `JobSpec.take`): its model (here, and the one
+/// it was recorded on), its room's options as recorded (beta, refinement, skinning; no
+/// filter: the recorded control points are already filtered or retargeted) and one control
+/// frame per recorded frame, every point as the prediction used it (occluded points held), so
+/// the job's meshes are the take's.
+///
+/// # Errors
+/// [`TakeError::NoTake`] (named), the model missing or changed, a take of several actors (not
+/// a job's source yet), the file's.
+pub async fn job_source(
+    state: &Arc<AppState>,
+    id: String,
+) -> Result<
+    (
+        Arc<crate::registry::LoadedModel>,
+        crease_proto::room::RoomOptions,
+        Vec<v1::ControlFrame>,
+    ),
+    TakeOpError,
+> {
+    let state = Arc::clone(state);
+    blocking(move || {
+        let (take, model) = take_and_model(&state, &id)?;
+        if !take.header().actors.is_empty() {
+            return Err(TakeOpError::Model(format!(
+                "take {id:?} is of a room of several actors: a job runs one model; replay it into a room instead (crease take replay)"
+            )));
+        }
+        let spec = RoomSpec::from_take(&id, take.header())
+            .map_err(|e| TakeOpError::Open(format!("take {id:?}'s room settings: {e}")))?;
+        let options = crease_proto::room::RoomOptions {
+            filter: None,
+            ..spec.options
+        };
+        let frames = take
+            .frames
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                crease_proto::control::control_frame_flat(
+                    "",
+                    i as u64,
+                    f.received_us,
+                    f.controls.clone(),
+                )
+            })
+            .collect();
+        Ok((model, options, frames))
+    })
+    .await
+}
+
 /// Take `id` as a skinned glTF animation ([`gltf_export::skinned_recording_to_glb`]) with the
 /// server's copy of its model.
 ///

@@ -146,7 +146,17 @@ if take="$("$bin/crease" take start --room demo --name browser --server "http://
             failed=1
         fi
     done
-    CREASE_HTTP="$http_addr" CREASE_TAKE="$take" CREASE_ACTORS_TAKE="$actors_take" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
+    # Issue 45: the take as a batch job on this server (no NATS: jobs in its process), then
+    # listed by the viewer's jobs section.
+    job=""
+    if job="$("$bin/crease" job submit --take "$take" --name browser --server "http://$grpc_addr" --admin-token "$admin")" &&
+        "$bin/crease" job watch "$job" --server "http://$grpc_addr" >/dev/null; then
+        echo "ok   crease job submit --take $take ran as job $job"
+    else
+        echo "FAIL crease job submit --take $take"
+        failed=1
+    fi
+    CREASE_HTTP="$http_addr" CREASE_TAKE="$take" CREASE_JOB="$job" CREASE_ACTORS_TAKE="$actors_take" CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" \
         node tests/browser/takes.test.mjs || failed=1
 else
     failed=1

@@ -5,6 +5,7 @@
 // run.sh records the take and runs this; alone:
 //   CREASE_HTTP=127.0.0.1:PORT CREASE_TAKE=ID node tests/browser/takes.test.mjs
 // Env: CREASE_HTTP (host:port of the server's HTTP side), CREASE_TAKE (a take of room demo),
+// CREASE_JOB (optional: a done batch job of that take, listed by the viewer's jobs section),
 // CREASE_SHOTS (screenshots; default ${CARGO_TARGET_DIR:-target}/browser-test), CHROMIUM.
 // Prints one line per check and closes on "takes: N passed, N failed"; exits 1 on a failure.
 
@@ -19,6 +20,7 @@ import { LAUNCH_ARGS, checkList, screenshotPng, sleep, waitForCrease, watchPage 
 const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
 const httpAddr = process.env.CREASE_HTTP;
 const takeId = process.env.CREASE_TAKE;
+const jobId = process.env.CREASE_JOB;
 if (!httpAddr || !takeId) {
   console.error("FAIL: set CREASE_HTTP (host:port of crease-server's HTTP side) and CREASE_TAKE");
   process.exit(2);
@@ -73,6 +75,23 @@ try {
     assert.equal(href, `/api/takes/${encodeURIComponent(takeId)}/glb`);
     return `${c.take.list.length} takes; row: ${(await row.textContent()).trim()}`;
   });
+
+  if (jobId) {
+    // Issue 45: run.sh ran the take as a batch job (`crease job submit --take`) on this
+    // server, which has no NATS; the viewer's jobs section lists it, done, its bar full.
+    await check("the viewer's jobs section lists the take's batch job, done", async () => {
+      await page.locator("#jobs summary").click();
+      const row = page.locator(`#job-list .job[data-job="${jobId}"]`);
+      await row.waitFor({ timeout: 10_000 });
+      assert.equal(await row.getAttribute("data-state"), "done");
+      const bar = await row.locator("progress").evaluate((p) => [p.value, p.max]);
+      assert.equal(bar[0], bar[1], `progress ${bar}`);
+      assert.equal(bar[1], info.frames, "one job frame per take frame");
+      const c = await page.evaluate(() => window.crease.jobs);
+      assert.ok(c.some((j) => j.job === jobId && j.state === "done"), JSON.stringify(c));
+      return (await row.textContent()).trim();
+    });
+  }
 
   let replayRoom = null;
   await check("play opens a private replay room and publishes the take into it", async () => {

@@ -15,6 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use tokio_stream::StreamExt as _;
 
 use super::common::ServerArgs;
+use super::retarget::{ModelControls, RecordingArgs, parse_rate};
 use super::room::AdminArgs;
 
 /// Options of `crease job`.
@@ -50,11 +51,23 @@ pub struct SubmitArgs {
     #[command(flatten)]
     pub admin: AdminArgs,
     /// The model's name on the server.
-    #[arg(long)]
-    pub model: String,
+    #[arg(long, required_unless_present = "take", conflicts_with = "take")]
+    pub model: Option<String>,
     /// Control frames: CSV or JSON, as `crease synth --controls` reads them.
-    #[arg(long, value_name = "FILE")]
-    pub controls: PathBuf,
+    #[arg(long, value_name = "FILE", required_unless_present_any = ["take", "tsv", "c3d"], conflicts_with_all = ["tsv", "c3d"])]
+    pub controls: Option<PathBuf>,
+    /// A marker recording (`--tsv` or `--c3d`) and its marker map (`--map`): retargeted here
+    /// onto the model's control points exactly as `crease retarget` does (registration, gap
+    /// filling), then sent as the job's frames.
+    #[command(flatten)]
+    pub recording: RecordingArgs,
+    /// With a recording: resample it to this many frames per second (default: its own rate).
+    #[arg(long, value_parser = parse_rate, requires = "map")]
+    pub rate: Option<f64>,
+    /// Synthesise a take recorded on the server instead (`crease take list`): its model, its
+    /// room's beta, refinement and skinning, and the control points as its room used them.
+    #[arg(long, value_name = "ID", conflicts_with_all = ["controls", "beta", "refine", "skinning"])]
+    pub take: Option<String>,
     /// Synthesise the detailed meshes (the model must have a detail layer).
     #[arg(long)]
     pub detail: bool,
@@ -88,11 +101,15 @@ pub struct GetArgs {
     /// The job.
     #[command(flatten)]
     pub id: IdArgs,
-    /// Output folder (created): `frame_00000.obj` ... as `crease synth` writes them.
-    #[arg(long, value_name = "DIR")]
+    /// Output folder (created): `frame_00000.obj` ... as `crease synth` writes them; with
+    /// `--format codec`, the file to write.
+    #[arg(long, value_name = "DIR|FILE")]
     pub out: PathBuf,
-    /// Mesh format of the frames.
-    #[arg(long, default_value = "obj", value_parser = ["obj", "ply"])]
+    /// Mesh format of the frames (`obj`, `ply`), or `codec`: the stream as the server sent it
+    /// (the topology, then every quantised codec frame, as `crease watch --record` writes a
+    /// stream), decoded by `crease decode-stream` or any codec client; ~0.5-3 bytes a vertex
+    /// a frame instead of an OBJ's ~60.
+    #[arg(long, default_value = "obj", value_parser = ["obj", "ply", "codec"])]
     pub format: String,
 }
 
@@ -168,28 +185,59 @@ async fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
         bail!("--beta must be finite and > 0, got {beta}");
     }
     let mut client = args.server.connect().await?;
-    let info = get_model(&mut client, &args.model)
-        .await
-        .with_context(|| format!("asking {} for model {:?}", args.server.server, args.model))?;
-    let frames = read_control_frames(&args.controls, info.control_points.len())?;
-    let request = JobRequest {
-        model: args.model.clone(),
+    let mut request = JobRequest {
+        model: args.model.clone().unwrap_or_default(),
         detail: args.detail,
         beta: args.beta,
         refine: args.refine,
         skinning: args.skinning,
         name: args.name.clone(),
+        take: args.take.clone(),
     };
-    let job = submit_job(&mut client, &args.admin.admin_token, &request, &frames)
-        .await
-        .with_context(|| {
-            format!(
-                "submitting {} frames of {} to {}",
-                frames.len(),
-                args.controls.display(),
-                args.server.server
-            )
-        })?;
+    let job = match &args.model {
+        Some(model) => {
+            let info = get_model(&mut client, model)
+                .await
+                .with_context(|| format!("asking {} for model {model:?}", args.server.server))?;
+            let (frames, source) = match &args.controls {
+                Some(controls) => (
+                    read_control_frames(controls, info.control_points.len())?,
+                    controls.display().to_string(),
+                ),
+                None => {
+                    let path = args
+                        .recording
+                        .path()
+                        .context("--controls, --tsv, --c3d or --take is needed")?
+                        .display()
+                        .to_string();
+                    let controls = ModelControls::from_info(&info);
+                    let recording = args.recording.clone();
+                    let rate = args.rate;
+                    let retargeted =
+                        tokio::task::spawn_blocking(move || recording.retarget(&controls, rate))
+                            .await??;
+                    (retargeted.frames, path)
+                }
+            };
+            submit_job(&mut client, &args.admin.admin_token, &request, &frames)
+                .await
+                .with_context(|| {
+                    format!(
+                        "submitting {} frames of {source} to {}",
+                        frames.len(),
+                        args.server.server
+                    )
+                })?
+        }
+        _ => {
+            request.model.clear();
+            let take = args.take.clone().unwrap_or_default();
+            submit_job(&mut client, &args.admin.admin_token, &request, &[])
+                .await
+                .with_context(|| format!("submitting take {take:?} to {}", args.server.server))?
+        }
+    };
     eprintln!(
         "queued {} (crease job watch {} --server {})",
         describe(&job),
@@ -240,6 +288,9 @@ async fn watch(args: &IdArgs) -> anyhow::Result<()> {
 
 async fn get(args: &GetArgs) -> anyhow::Result<()> {
     let mut client = args.id.server.connect().await?;
+    if args.format == "codec" {
+        return get_codec(&mut client, args).await;
+    }
     // The job's model and level say how many vertices a frame has.
     let job = watch_job(&mut client, &args.id.job)
         .await?
@@ -266,6 +317,36 @@ async fn get(args: &GetArgs) -> anyhow::Result<()> {
     println!(
         "wrote {total} frames of job {} to {} ({summary})",
         job.job,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// `get --format codec`: every message as it came, in `crease watch --record`'s file format.
+async fn get_codec(
+    client: &mut crease_proto::v1::crease_client::CreaseClient<tonic::transport::Channel>,
+    args: &GetArgs,
+) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let mut stream = job_result(client, &args.id.job).await?;
+    let file = std::fs::File::create(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mut w = std::io::BufWriter::new(file);
+    let (mut frames, mut bytes) = (0u64, 0u64);
+    while let Some(message) = stream.next().await {
+        let message = message.map_err(|s| anyhow::anyhow!("{}", s.message()))?;
+        if matches!(message.body, Some(v1::mesh_frame::Body::Frame(_))) {
+            frames += 1;
+        }
+        super::decode_stream::write_capture_message(&mut w, &message)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        bytes += 4 + prost::Message::encoded_len(&message) as u64;
+    }
+    w.flush()
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "wrote {frames} frames of job {} to {} ({bytes} bytes; crease decode-stream reads it)",
+        args.id.job,
         args.out.display()
     );
     Ok(())

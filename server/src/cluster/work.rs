@@ -543,7 +543,8 @@ impl WorkQueue {
     ) -> Result<BoxStream<'static, Result<v1::MeshFrame, JobError>>, JobError> {
         let (record, _) = self.record(id).await?;
         let status = status_of(&record);
-        if record.expired {
+        // Expired: swept, or past its time and not yet swept (`expire` runs every 30 s).
+        if record.expired || (status.expires_us != 0 && status.expires_us <= now_us()) {
             return Err(JobError::Expired(id.to_owned()));
         }
         crate::jobs::check_done(&status)?;
