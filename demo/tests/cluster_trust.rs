@@ -411,8 +411,97 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
     })
     .await;
 
+    // Issue 45: a batch job under the shipped permissions and the key: submitted to A, run
+    // by both, watched and fetched on B.
+    let frames: Vec<v1::ControlFrame> = (0..200)
+        .map(|i| control_frame(&model, "", i, 0.005 * i as f32))
+        .collect();
+    let parts = vec![
+        v1::SubmitJobRequest {
+            part: Some(v1::submit_job_request::Part::Spec(v1::JobSpec {
+                model: "tube".into(),
+                ..Default::default()
+            })),
+        },
+        v1::SubmitJobRequest {
+            part: Some(v1::submit_job_request::Part::Frames(v1::JobFrames {
+                frames,
+            })),
+        },
+    ];
+    let job = a
+        .client()
+        .await
+        .submit_job(authed(tokio_stream::iter(parts), ADMIN))
+        .await
+        .unwrap()
+        .into_inner();
+    let mut on_b = b.client().await;
+    let mut watch = on_b
+        .watch_job(v1::WatchJobRequest {
+            job: job.job.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut last = None;
+    while let Some(info) = tokio::time::timeout(Duration::from_secs(60), watch.message())
+        .await
+        .expect("the job's watch went silent")
+        .unwrap()
+    {
+        last = Some(info);
+    }
+    let last = last.unwrap();
+    assert_eq!(
+        last.state,
+        v1::JobState::Done as i32,
+        "{last:?}\n{}",
+        a.log()
+    );
+    let mut result = on_b
+        .get_job_result(v1::GetJobResultRequest {
+            job: job.job.clone(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut messages = 0;
+    while let Some(_m) = result.message().await.unwrap() {
+        messages += 1;
+    }
+    assert_eq!(messages, 201, "the topology, then 200 frames");
+
     // An insider: NATS access, no cluster key.
     let mallory = insider(&nats, &pki, USER, PASSWORD).await;
+    // A job chunk of the insider's: no tag, dropped by the replica that pulls it.
+    let refused_before = a.metric("crease_cluster_refused_job_chunks_total").await
+        + b.metric("crease_cluster_refused_job_chunks_total").await;
+    let js = async_nats::jetstream::new(mallory.clone());
+    js.publish(
+        crease_server::cluster::work::subject("forgedjob123"),
+        v1::JobChunk {
+            job: "forgedjob123".into(),
+            chunk: 0,
+            frames: Vec::new(),
+        }
+        .encode_to_vec()
+        .into(),
+    )
+    .await
+    .unwrap()
+    .await
+    .unwrap();
+    until(
+        Duration::from_secs(20),
+        "the forged chunk refused",
+        || async {
+            a.metric("crease_cluster_refused_job_chunks_total").await
+                + b.metric("crease_cluster_refused_job_chunks_total").await
+                > refused_before
+        },
+    )
+    .await;
     let mut sniff = mallory.subscribe("crease.frames.trusted.>").await.unwrap();
     let real = sniff.next().await.unwrap();
     drop(sniff);

@@ -54,10 +54,11 @@ pub enum JobError {
     /// The queue is full or the job too long.
     #[error("{0}")]
     Full(String),
-    /// The jobs folder failed.
-    #[error("jobs folder {path}: {message}")]
+    /// The jobs' store failed: the jobs folder, or in a cluster its bucket, object store or
+    /// queue (`crate::cluster::work`).
+    #[error("job store {path}: {message}")]
     Io {
-        /// The file or folder.
+        /// The file or folder, or the cluster's store (in parentheses).
         path: String,
         /// The failure.
         message: String,
