@@ -270,22 +270,7 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
             cancelled.chunks_done < cancelled.chunks_total,
             "{cancelled:?}"
         );
-        let mut watch = client
-            .watch_job(v1::WatchJobRequest {
-                job: info.job.clone(),
-            })
-            .await
-            .unwrap()
-            .into_inner();
-        let mut last = None;
-        while let Some(s) = tokio::time::timeout(Duration::from_secs(10), watch.message())
-            .await
-            .expect("the watch ends once the job has")
-            .unwrap()
-        {
-            last = Some(s);
-        }
-        let last = last.unwrap();
+        let last = watch_to_end(&mut client, &info.job).await;
         assert_eq!(last.state, v1::JobState::Cancelled as i32, "{last:?}");
         assert!(last.frames_done < 4000, "{last:?}");
         // Its result: none.
@@ -402,22 +387,7 @@ fn a_job_whose_model_is_deleted_fails_naming_it() {
             )
             .await
             .unwrap();
-        let mut watch = client
-            .watch_job(v1::WatchJobRequest {
-                job: job.job.clone(),
-            })
-            .await
-            .unwrap()
-            .into_inner();
-        let mut last = None;
-        while let Some(s) = tokio::time::timeout(Duration::from_secs(30), watch.message())
-            .await
-            .expect("the watch ends once the job has")
-            .unwrap()
-        {
-            last = Some(s);
-        }
-        let last = last.unwrap();
+        let last = watch_to_end(&mut client, &job.job).await;
         assert_eq!(last.state, v1::JobState::Failed as i32, "{last:?}");
         assert!(last.frames_done < 20_000, "{last:?}");
         assert!(
@@ -447,4 +417,25 @@ fn http_get(addr: std::net::SocketAddr, path: &str) -> String {
         "{head}\n{body}"
     );
     body.to_owned()
+}
+
+/// Watches `job` on `client` to its end (no gap of 30 s between updates); its last status.
+async fn watch_to_end(
+    client: &mut CreaseClient<tonic::transport::Channel>,
+    job: &str,
+) -> v1::JobInfo {
+    let mut watch = client
+        .watch_job(v1::WatchJobRequest { job: job.into() })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut last = None;
+    while let Some(s) = tokio::time::timeout(Duration::from_secs(30), watch.message())
+        .await
+        .expect("the watch ends once the job has")
+        .unwrap()
+    {
+        last = Some(s);
+    }
+    last.expect("a watch sends the status at least once")
 }

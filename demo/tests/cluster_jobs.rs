@@ -39,7 +39,11 @@ fn frames(model: &crease_core::model::TrainedModel) -> Vec<v1::ControlFrame> {
         .collect()
 }
 
-async fn submit(client: &mut CreaseClient<Channel>, frames: &[v1::ControlFrame]) -> v1::JobInfo {
+/// Submits a job of `frames` on the tube model (admin token).
+pub(crate) async fn submit(
+    client: &mut CreaseClient<Channel>,
+    frames: &[v1::ControlFrame],
+) -> v1::JobInfo {
     let mut parts = vec![v1::SubmitJobRequest {
         part: Some(v1::submit_job_request::Part::Spec(v1::JobSpec {
             model: "tube".into(),
@@ -68,7 +72,7 @@ async fn info(client: &mut CreaseClient<Channel>, job: &str) -> v1::JobInfo {
 }
 
 /// Watches `job` to its end; returns its last status.
-async fn watch_to_end(client: &mut CreaseClient<Channel>, job: &str) -> v1::JobInfo {
+pub(crate) async fn watch_to_end(client: &mut CreaseClient<Channel>, job: &str) -> v1::JobInfo {
     let mut watch = client
         .watch_job(v1::WatchJobRequest { job: job.into() })
         .await
@@ -85,7 +89,8 @@ async fn watch_to_end(client: &mut CreaseClient<Channel>, job: &str) -> v1::JobI
     last.expect("a watch sends the status at least once")
 }
 
-async fn result(client: &mut CreaseClient<Channel>, job: &str) -> Vec<v1::MeshFrame> {
+/// A done job's result: its topology, then every frame.
+pub(crate) async fn result(client: &mut CreaseClient<Channel>, job: &str) -> Vec<v1::MeshFrame> {
     let mut stream = client
         .get_job_result(v1::GetJobResultRequest { job: job.into() })
         .await

@@ -416,61 +416,17 @@ async fn nats_with_tls_and_a_password_and_a_cluster_key_keep_out_everyone_else()
     let frames: Vec<v1::ControlFrame> = (0..200)
         .map(|i| control_frame(&model, "", i, 0.005 * i as f32))
         .collect();
-    let parts = vec![
-        v1::SubmitJobRequest {
-            part: Some(v1::submit_job_request::Part::Spec(v1::JobSpec {
-                model: "tube".into(),
-                ..Default::default()
-            })),
-        },
-        v1::SubmitJobRequest {
-            part: Some(v1::submit_job_request::Part::Frames(v1::JobFrames {
-                frames,
-            })),
-        },
-    ];
-    let job = a
-        .client()
-        .await
-        .submit_job(authed(tokio_stream::iter(parts), ADMIN))
-        .await
-        .unwrap()
-        .into_inner();
+    let job = crate::cluster_jobs::submit(&mut a.client().await, &frames).await;
     let mut on_b = b.client().await;
-    let mut watch = on_b
-        .watch_job(v1::WatchJobRequest {
-            job: job.job.clone(),
-        })
-        .await
-        .unwrap()
-        .into_inner();
-    let mut last = None;
-    while let Some(info) = tokio::time::timeout(Duration::from_secs(60), watch.message())
-        .await
-        .expect("the job's watch went silent")
-        .unwrap()
-    {
-        last = Some(info);
-    }
-    let last = last.unwrap();
+    let last = crate::cluster_jobs::watch_to_end(&mut on_b, &job.job).await;
     assert_eq!(
         last.state,
         v1::JobState::Done as i32,
         "{last:?}\n{}",
         a.log()
     );
-    let mut result = on_b
-        .get_job_result(v1::GetJobResultRequest {
-            job: job.job.clone(),
-        })
-        .await
-        .unwrap()
-        .into_inner();
-    let mut messages = 0;
-    while let Some(_m) = result.message().await.unwrap() {
-        messages += 1;
-    }
-    assert_eq!(messages, 201, "the topology, then 200 frames");
+    let got = crate::cluster_jobs::result(&mut on_b, &job.job).await;
+    assert_eq!(got.len(), 201, "the topology, then 200 frames");
 
     // An insider: NATS access, no cluster key.
     let mallory = insider(&nats, &pki, USER, PASSWORD).await;

@@ -231,12 +231,22 @@ pub struct JobRequest {
     pub take: Option<String>,
 }
 
-/// Most bytes of control frames per `SubmitJob` message: 1 MiB below the server's default
-/// 4 MiB message limit.
-pub const JOB_MESSAGE_BYTES: usize = 3 << 20;
+/// Most bytes of control frames per request or message (`Synthesize`, `SubmitJob`): 1 MiB
+/// below the 4 MiB message limit that crease-server enforces by default
+/// (`Limits::message_bytes`, gRPC's usual default), leaving room for the other fields.
+pub const MESSAGE_BYTES: usize = 3 << 20;
+
+/// Control frames of `points` points per request or message: at most `max_frames`, and at
+/// most [`MESSAGE_BYTES`] of frames (never fewer than one).
+pub fn frames_per_message(points: usize, max_frames: usize) -> usize {
+    // An upper bound of one encoded `ControlFrame`: the packed positions, the mask, `seq` (at
+    // most 10 bytes) and the tags and lengths around them and the frame.
+    let frame_bytes = 12 * points + points.div_ceil(8) + 32;
+    max_frames.min(MESSAGE_BYTES / frame_bytes).max(1)
+}
 
 /// Submits a batch job (admin token): the spec, then `frames` (one per control frame, the
-/// points and validity as read from a file) in messages of at most [`JOB_MESSAGE_BYTES`].
+/// points and validity as read from a file) in messages of at most [`MESSAGE_BYTES`].
 /// Returns the job as the server accepted it.
 ///
 /// # Errors
@@ -262,7 +272,7 @@ pub async fn submit_job(
         name: job.name.clone(),
     };
     let points = frames.first().map_or(0, |f| f.positions.len());
-    let per_message = (JOB_MESSAGE_BYTES / (12 * points + points.div_ceil(8) + 32)).max(1);
+    let per_message = frames_per_message(points, usize::MAX);
     let mut messages = vec![v1::SubmitJobRequest {
         part: Some(Part::Spec(spec)),
     }];

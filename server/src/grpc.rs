@@ -568,11 +568,15 @@ impl CreaseService {
             )));
         }
         let count = model.info.control_points.len();
-        let chunk = crate::job_service::chunk_frames(&self.state, &frames);
-        let chunks = tokio::task::spawn_blocking(move || chunk_frames(&frames, count, chunk))
-            .await
-            .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
-            .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
+        // Sizing the chunks reads every frame too: off the executor with the checks.
+        let state = Arc::clone(&self.state);
+        let chunks = tokio::task::spawn_blocking(move || {
+            let chunk = crate::job_service::chunk_frames(&state, &frames);
+            chunk_frames(&frames, count, chunk)
+        })
+        .await
+        .map_err(|e| Status::internal(format!("checking the job's frames: {e}")))?
+        .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))?;
         let plan = crate::jobs::JobPlan {
             model: model.name.clone(),
             level,

@@ -62,8 +62,9 @@ pub fn chunk_frames(state: &AppState, frames: &[v1::ControlFrame]) -> usize {
     setting.min((room / largest).max(1))
 }
 
-/// Queues a job of `chunks` (checked, [`crease_proto::job::chunk_frames`]) running `plan` on
-/// `model`, and returns its status. Without a cluster the worker starts with the first job.
+/// Queues a job of `chunks` (checked, [`crease_proto::job::chunk_frames`]; at most
+/// `--max-job-frames`, which `crate::grpc` checks as it reads them) running `plan` on `model`,
+/// and returns its status. Without a cluster the worker starts with the first job.
 ///
 /// # Errors
 /// The store's refusal ([`JobError`]: the queue full, a chunk too large, NATS unavailable).
@@ -77,12 +78,6 @@ pub async fn submit(
         Some(cluster) => {
             let settings = state.jobs().settings();
             let frames: usize = chunks.iter().map(Vec::len).sum();
-            if frames > settings.max_frames {
-                return Err(JobError::Full(format!(
-                    "SubmitJob.frames: {frames} frames, at most {} per job (--max-job-frames)",
-                    settings.max_frames
-                )));
-            }
             let open = cluster
                 .work()
                 .list()

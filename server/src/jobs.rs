@@ -250,11 +250,12 @@ impl Jobs {
             .take()
     }
 
-    /// Queues a job of `chunks` (checked frames, [`crease_proto::job::chunk_frames`]) running
-    /// `plan` and returns its status; the worker must be running (`crate::job_service`).
+    /// Queues a job of `chunks` (checked frames, [`crease_proto::job::chunk_frames`]; the
+    /// frame cap checked where they were read, `crate::grpc`) running `plan` and returns its
+    /// status; the worker must be running (`crate::job_service`).
     ///
     /// # Errors
-    /// [`JobError::Full`] (the queue, the frame cap), [`JobError::Io`] (the folder).
+    /// [`JobError::Full`] (the queue), [`JobError::Io`] (the folder).
     pub fn enqueue(
         &self,
         plan: JobPlan,
@@ -262,12 +263,6 @@ impl Jobs {
     ) -> Result<JobStatus, JobError> {
         let dir = self.dir()?;
         let frames: usize = chunks.iter().map(Vec::len).sum();
-        if frames > self.settings.max_frames {
-            return Err(JobError::Full(format!(
-                "SubmitJob.frames: {frames} frames, at most {} per job (--max-job-frames)",
-                self.settings.max_frames
-            )));
-        }
         let id = new_job_id(rand::random());
         let job_dir = dir.join(&id);
         std::fs::create_dir_all(&job_dir).map_err(io_error(&job_dir))?;

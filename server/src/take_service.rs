@@ -255,15 +255,10 @@ pub async fn job_source(
         };
         let frames = take
             .frames
-            .iter()
+            .into_iter()
             .enumerate()
             .map(|(i, f)| {
-                crease_proto::control::control_frame_flat(
-                    "",
-                    i as u64,
-                    f.received_us,
-                    f.controls.clone(),
-                )
+                crease_proto::control::control_frame_flat("", i as u64, f.received_us, f.controls)
             })
             .collect();
         Ok((model, options, frames))

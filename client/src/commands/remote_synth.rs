@@ -22,13 +22,9 @@ use crease_proto::{StreamTopology, control_frame, v1};
 use tokio_stream::{Stream, StreamExt};
 
 use super::synth::{SynthArgs, frame_path};
+use crease_remote::client::frames_per_message;
 use crease_remote::control_file::{ControlFrame, read_control_frames};
 use crease_remote::mesh_stream::MeshReader;
-
-/// Most bytes of control frames per request: 1 MiB below the 4 MiB message limit that
-/// crease-server enforces by default (`Limits::message_bytes`, gRPC's usual default), leaving
-/// room for the request's other fields.
-const CHUNK_BYTES: usize = 3 << 20;
 
 /// Runs `crease synth --server URL` (the rest of `args` as for local synthesis; `--model` is a
 /// model name).
@@ -117,7 +113,7 @@ async fn synth(args: &SynthArgs, server: &str, name: &str) -> anyhow::Result<()>
         None => None,
     };
 
-    let per_request = frames_per_request(count, args.chunk_frames);
+    let per_request = frames_per_message(count, args.chunk_frames);
     let requests = frames.len().div_ceil(per_request);
     eprintln!(
         "synthesising {} frames of model {name:?} on {server} ({vertices} vertices, {requests} request{} of at most {per_request} frames)",
@@ -229,15 +225,6 @@ fn renumber(status: &tonic::Status, first: usize) -> Option<String> {
         first + e.frame? as usize,
         e.message
     ))
-}
-
-/// Control frames per request for a model with `count` control points: at most `max_frames`,
-/// and at most [`CHUNK_BYTES`] of frames (never fewer than one).
-fn frames_per_request(count: usize, max_frames: usize) -> usize {
-    // An upper bound of one encoded `ControlFrame` in the request: the packed positions, the
-    // mask, `seq` (at most 10 bytes) and the tags and lengths around them and the frame.
-    let frame_bytes = 12 * count + count.div_ceil(8) + 32;
-    max_frames.min(CHUNK_BYTES / frame_bytes).max(1)
 }
 
 /// The wire frames of `chunk`, whose first frame is the control file's frame `first`:
@@ -501,13 +488,13 @@ mod tests {
 
     #[test]
     fn requests_stay_under_the_message_limit() {
-        assert_eq!(frames_per_request(5, 2000), 2000);
-        assert_eq!(frames_per_request(5, 7), 7);
+        assert_eq!(frames_per_message(5, 2000), 2000);
+        assert_eq!(frames_per_message(5, 7), 7);
         // 100k control points: ~1.2 MB a frame, two frames a request.
-        let n = frames_per_request(100_000, 2000);
+        let n = frames_per_message(100_000, 2000);
         assert_eq!(n, 2);
         // A frame alone over the budget still goes (the server then names the limit).
-        assert_eq!(frames_per_request(1_000_000, 2000), 1);
+        assert_eq!(frames_per_message(1_000_000, 2000), 1);
     }
 
     #[test]

@@ -229,6 +229,28 @@ impl ClusterKey {
             .to_vec();
     }
 
+    /// Seals job `id`'s record (issue 45, `cluster::work`): its `tag` over the id and the
+    /// record (tag cleared), as [`ClusterKey::seal_entry`] seals a room's entry.
+    pub fn seal_job(&self, id: &str, record: &mut v1::JobRecord) {
+        record.tag.clear();
+        let bytes = record.encode_to_vec();
+        record.tag = self
+            .mac(&[b"job", id.as_bytes(), &bytes])
+            .finalize()
+            .into_bytes()
+            .to_vec();
+    }
+
+    /// Whether job `id`'s record carries a seal of this key.
+    pub fn check_job(&self, id: &str, record: &v1::JobRecord) -> bool {
+        let mut unsealed = record.clone();
+        let tag = std::mem::take(&mut unsealed.tag);
+        let bytes = unsealed.encode_to_vec();
+        self.mac(&[b"job", id.as_bytes(), &bytes])
+            .verify_slice(&tag)
+            .is_ok()
+    }
+
     /// Whether room `id`'s entry carries a seal of this key.
     pub fn check_entry(&self, id: &str, entry: &v1::RoomEntry) -> bool {
         let mut unsealed = entry.clone();

@@ -243,27 +243,15 @@ impl WorkQueue {
     }
 
     fn seal(&self, id: &str, record: &mut v1::JobRecord) {
-        record.tag.clear();
-        if let Some(key) = &self.key {
-            let bytes = record.encode_to_vec();
-            record.tag = key.tag(&[b"job", id.as_bytes(), &bytes]).into_bytes();
+        match &self.key {
+            Some(key) => key.seal_job(id, record),
+            None => record.tag.clear(),
         }
-    }
-
-    fn believed(&self, id: &str, record: &v1::JobRecord) -> bool {
-        let Some(key) = &self.key else { return true };
-        let mut unsealed = record.clone();
-        let tag = std::mem::take(&mut unsealed.tag);
-        let bytes = unsealed.encode_to_vec();
-        key.verify(
-            &[b"job", id.as_bytes(), &bytes],
-            std::str::from_utf8(&tag).unwrap_or(""),
-        )
     }
 
     fn decode(&self, id: &str, value: &[u8]) -> Option<v1::JobRecord> {
         match v1::JobRecord::decode(value) {
-            Ok(r) if self.believed(id, &r) => Some(r),
+            Ok(r) if believed(self.key.as_ref(), id, &r) => Some(r),
             Ok(_) => {
                 tracing::warn!(job = id, "a job record whose seal does not hold: ignored");
                 None
@@ -495,24 +483,22 @@ impl WorkQueue {
     /// # Errors
     /// [`JobError::NoJob`], the bucket unreadable.
     pub async fn watch(&self, id: &str) -> Result<BoxStream<'static, JobStatus>, JobError> {
-        let (record, _) = self.record(id).await?;
-        let first = status_of(&record);
+        if !crease_proto::job::is_job_id(id) {
+            return Err(JobError::NoJob(id.to_owned()));
+        }
         let watch = self
             .records
             .watch(id)
             .await
             .map_err(|e| unavailable("jobs bucket")(e.to_string()))?;
-        // The record read after the watch began: no change falls between them.
-        let first = match self.record(id).await {
-            Ok((r, _)) => status_of(&r),
-            Err(_) => first,
-        };
+        // Read after the watch began: no change falls between the two.
+        let first = status_of(&self.record(id).await?.0);
         let key = self.key.clone();
         let id = id.to_owned();
         let later = watch.filter_map(move |entry| {
             let status = entry.ok().and_then(|e| {
                 let r = v1::JobRecord::decode(e.value.as_ref()).ok()?;
-                believed_with(key.as_ref(), &id, &r).then(|| status_of(&r))
+                believed(key.as_ref(), &id, &r).then(|| status_of(&r))
             });
             async move { status }
         });
@@ -718,15 +704,10 @@ impl WorkQueue {
     }
 }
 
-fn believed_with(key: Option<&ClusterKey>, id: &str, record: &v1::JobRecord) -> bool {
-    let Some(key) = key else { return true };
-    let mut unsealed = record.clone();
-    let tag = std::mem::take(&mut unsealed.tag);
-    let bytes = unsealed.encode_to_vec();
-    key.verify(
-        &[b"job", id.as_bytes(), &bytes],
-        std::str::from_utf8(&tag).unwrap_or(""),
-    )
+/// Whether job `id`'s `record` is believed: always without a key, with one only when its
+/// seal holds.
+fn believed(key: Option<&ClusterKey>, id: &str, record: &v1::JobRecord) -> bool {
+    key.is_none_or(|k| k.check_job(id, record))
 }
 
 /// The status a record says.

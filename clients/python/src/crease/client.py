@@ -207,6 +207,20 @@ def _frames(frames: np.ndarray | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
         yield f
 
 
+def _control_batch(controls: np.ndarray) -> np.ndarray:
+    """``controls`` as a float32 ``(F, C, 3)`` array (ValueError otherwise)."""
+    controls = np.asarray(controls, dtype=np.float32)
+    if controls.ndim != 3 or controls.shape[2] != 3:
+        raise ValueError(f"controls: expected an (F, C, 3) array, got shape {controls.shape}")
+    return controls
+
+
+def _frames_per_message(points: int, max_frames: int) -> int:
+    """Control frames of ``points`` points per request or message: at most ``max_frames`` and
+    ``CHUNK_BYTES`` (an upper bound of an encoded frame: positions, mask, seq, tags), at least 1."""
+    return max(1, min(max_frames, CHUNK_BYTES // (12 * points + (points + 7) // 8 + 32)))
+
+
 def _points(f: np.ndarray) -> tuple[np.ndarray, bytes]:
     """A frame's flat positions (NaN rows sent as 0) and validity mask (NaN rows invalid)."""
     valid = np.isfinite(f).all(axis=1)
@@ -523,13 +537,11 @@ class Client:
         is its index in ``controls``. ``refine`` as ``open_room``'s: the server's default
         when absent.
         """
-        controls = np.asarray(controls, dtype=np.float32)
-        if controls.ndim != 3 or controls.shape[2] != 3:
-            raise ValueError(f"controls: expected an (F, C, 3) array, got shape {controls.shape}")
+        controls = _control_batch(controls)
         if chunk_frames < 1:
             raise ValueError("chunk_frames must be at least 1")
         count, points = controls.shape[0], controls.shape[1]
-        per_request = max(1, min(chunk_frames, CHUNK_BYTES // (12 * points + (points + 7) // 8 + 32)))
+        per_request = _frames_per_message(points, chunk_frames)
         out: np.ndarray | None = None
         held = np.full((points, 3), np.nan, dtype=np.float32)
         for first in range(0, count, per_request):
@@ -585,11 +597,8 @@ class Client:
         job that outlives this client (admin token) and returns it at once. The server checks
         every frame: a refused one raises ``CreaseError`` whose ``frame`` is its index in
         ``controls``, and nothing is queued. ``watch_job`` follows it, ``job_result`` fetches it."""
-        controls = np.asarray(controls, dtype=np.float32)
-        if controls.ndim != 3 or controls.shape[2] != 3:
-            raise ValueError(f"controls: expected an (F, C, 3) array, got shape {controls.shape}")
-        points = controls.shape[1]
-        per_message = max(1, CHUNK_BYTES // (12 * points + (points + 7) // 8 + 32))
+        controls = _control_batch(controls)
+        per_message = _frames_per_message(controls.shape[1], len(controls) or 1)
         spec = pb.JobSpec(model=model, level=_LEVEL[level], beta=beta, skinning=_SKINNING[skinning], name=name)
         if refine is not None:
             spec.refine.CopyFrom(pb.Refine(**refine))
