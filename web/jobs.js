@@ -16,7 +16,7 @@ export function duration(s) {
 /** One job's line: label, state, frames done of total, rate and time left or error. */
 export function describeJob(j) {
   const label = j.name ? `${j.name} (${j.job})` : j.job;
-  const parts = [`${label} · ${j.model} ${j.level} · ${j.state}`, `${j.frames_done} / ${j.frames_total} frames`];
+  const parts = [`${label} · ${j.model} ${j.level}${j.encoding === "palette" ? " palette" : ""} · ${j.state}`, `${j.frames_done} / ${j.frames_total} frames`];
   if (j.state === "running" || j.state === "queued") {
     if (j.frames_per_second > 0) parts.push(`${j.frames_per_second.toFixed(0)} frames/s`);
     const left = duration(j.eta_seconds);

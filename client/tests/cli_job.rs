@@ -142,6 +142,26 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
         bound,
     );
 
+    // Get as glTF: the frames baked into morph targets (the first is the base), each keyframe
+    // the fetched OBJ, read back by the `gltf` crate.
+    let glb = dir.join("job.glb");
+    let out = job(&[
+        "get",
+        &id,
+        "--format",
+        "gltf",
+        "--out",
+        glb.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "get gltf: {}", stderr(&out));
+    let baked = morph_frames(&glb);
+    assert_eq!(baked.len(), ANGLES.len(), "one morph target per frame");
+    for (i, frame) in baked.iter().enumerate() {
+        let obj = Mesh::read(fetched.join(format!("frame_{i:05}.obj"))).unwrap();
+        let d = max_distance(frame, &obj.positions);
+        assert!(d <= 1e-5, "glTF frame {i}: {d} from the fetched OBJ");
+    }
+
     // List: the job, named.
     let out = job(&["list"]);
     let listed = String::from_utf8_lossy(&out.stdout);
@@ -401,7 +421,142 @@ fn a_job_whose_model_is_deleted_fails_naming_it() {
         assert_eq!(listed.state, "failed");
         assert_eq!(listed.error, last.error);
         assert_eq!(listed.level, "base");
+        assert_eq!(listed.encoding, "vertices");
     });
+}
+
+/// Runs `crease job ARGS --server URL` with the admin token.
+fn job_cli(url: &str, args: &[&str]) -> std::process::Output {
+    let mut c = crease();
+    c.arg("job").args(args).args(["--server", url]);
+    c.env("CREASE_ADMIN_TOKEN", ADMIN);
+    c.output().unwrap()
+}
+
+#[test]
+fn a_palette_job_is_a_skinned_gltf_of_its_decoded_bones() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let model_path = train_model(dir);
+    let model = TrainedModel::load(&model_path).unwrap();
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let served = runtime.block_on(serve(model, small_chunks()));
+    let url = format!("http://{}", served.grpc);
+    let controls = dir.join("controls.csv");
+    std::fs::write(&controls, controls_csv()).unwrap();
+    let controls = controls.to_str().unwrap();
+    let local = dir.join("local");
+    let out = crease()
+        .args(["synth", "--model"])
+        .arg(&model_path)
+        .args(["--controls", controls, "--out"])
+        .arg(&local)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "local synth: {}", stderr(&out));
+
+    // A palette job skinned with DQS is refused at submit, saying why.
+    let submit = ["submit", "--model", "tube", "--controls", controls];
+    let out = job_cli(
+        &url,
+        &[&submit[..], &["--encoding", "palette", "--skinning", "dqs"]].concat(),
+    );
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("JobSpec.encoding") && stderr(&out).contains("DQS"),
+        "{}",
+        stderr(&out)
+    );
+
+    let out = job_cli(&url, &[&submit[..], &["--encoding", "palette"]].concat());
+    assert!(out.status.success(), "submit: {}", stderr(&out));
+    let id = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    let out = job_cli(&url, &["watch", &id]);
+    assert!(out.status.success(), "watch: {}", stderr(&out));
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        line.contains("(done)") && line.contains("palette"),
+        "{line}"
+    );
+
+    // The frames the reference decoder makes of the palette frames, and the skinned glTF.
+    let decoded = dir.join("decoded");
+    let out = job_cli(&url, &["get", &id, "--out", decoded.to_str().unwrap()]);
+    assert!(out.status.success(), "get: {}", stderr(&out));
+    let glb = dir.join("skinned.glb");
+    let out = job_cli(
+        &url,
+        &[
+            "get",
+            &id,
+            "--format",
+            "gltf",
+            "--fps",
+            "10",
+            "--out",
+            glb.to_str().unwrap(),
+        ],
+    );
+    assert!(out.status.success(), "get gltf: {}", stderr(&out));
+    let doc = gltf::Gltf::from_slice(&std::fs::read(&glb).unwrap()).unwrap();
+    let anim = doc.animations().next().expect("one animation");
+    let keyframes = anim.channels().next().unwrap().sampler().input().count();
+    assert_eq!(keyframes, ANGLES.len(), "one keyframe per frame");
+
+    let rest = Mesh::read(local.join("frame_00000.obj")).unwrap();
+    let (lo, hi) = rest.positions.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let size = lo.distance(hi);
+    let mut moved = 0.0f32;
+    for k in 0..ANGLES.len() {
+        let want = Mesh::read(local.join(format!("frame_{k:05}.obj"))).unwrap();
+        let palette = Mesh::read(decoded.join(format!("frame_{k:05}.obj"))).unwrap();
+        // The glTF, skinned as a viewer does, is the decoded frame (f32 rounding apart).
+        let skinned = crate::cli_take::gltf_skinned(&doc, k);
+        let d = max_distance(&skinned, &palette.positions);
+        assert!(
+            d <= 1e-5 * size,
+            "frame {k}: glTF {d} from the decoded palette frame"
+        );
+        // And the palette frame is the prediction within its quantisation (rotations to
+        // ~2e-5 rad, translations to 16 bits of the pose box: well under 1e-3 of the size).
+        let d = max_distance(&palette.positions, &want.positions);
+        assert!(
+            d <= 1e-3 * size,
+            "frame {k}: palette {d} from local synth (size {size})"
+        );
+        moved = moved.max(max_distance(&want.positions, &rest.positions));
+    }
+    assert!(moved > 0.05 * size, "the frames bend the tube ({moved})");
+    drop(served);
+}
+
+/// Every keyframe's mesh of a morph-target animation (`crease synth --gltf`'s layout): the base
+/// positions plus target `i`'s displacements.
+fn morph_frames(glb: &std::path::Path) -> Vec<Vec<Vec3>> {
+    let (doc, buffers, _) = gltf::import(glb).expect("the GLB loads");
+    let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+    let reader = prim.reader(|b| Some(&buffers[b.index()]));
+    let base: Vec<Vec3> = reader.read_positions().unwrap().map(Vec3::from).collect();
+    reader
+        .read_morph_targets()
+        .map(|t| {
+            base.iter()
+                .zip(t.0.expect("POSITION displacements"))
+                .map(|(b, d)| *b + Vec3::from(d))
+                .collect()
+        })
+        .collect()
+}
+
+fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.distance(*y))
+        .fold(0.0, f32::max)
 }
 
 /// The body of `GET path` on `addr` (HTTP/1.0, which must answer 200).

@@ -220,7 +220,7 @@ fn listed(server: &Server) -> BTreeMap<String, serde_json::Value> {
 
 /// The glTF's rest positions skinned with its own joints, weights, inverse bind matrices and
 /// keyframe `k` of its animation, as a glTF viewer does (glTF 2.0 §3.7.3).
-fn gltf_skinned(doc: &gltf::Gltf, k: usize) -> Vec<Vec3> {
+pub(crate) fn gltf_skinned(doc: &gltf::Gltf, k: usize) -> Vec<Vec3> {
     let blob = doc.blob.clone().unwrap();
     let get = |_: gltf::Buffer<'_>| Some(&blob[..]);
     let skin = doc.skins().next().unwrap();

@@ -13,7 +13,7 @@
 use crease_core::glam::Vec3;
 
 use crate::control::{control_frame, read_control_frame};
-use crate::convert::{Level, skinning_from_wire};
+use crate::convert::{Encoding, Level, skinning_from_wire};
 use crate::errors::WireError;
 use crate::room::{RoomOptions, refine_wire, refinement};
 use crate::v1;
@@ -31,6 +31,8 @@ pub struct JobPlan {
     pub options: RoomOptions,
     /// The job's label.
     pub name: String,
+    /// How its result's frames travel: every vertex, or the palette (the bone transforms).
+    pub encoding: Encoding,
 }
 
 impl JobPlan {
@@ -52,6 +54,7 @@ impl JobPlan {
                 .map_or(v1::Skinning::Unspecified, v1::Skinning::from) as i32,
             take: String::new(),
             name: self.name.clone(),
+            encoding: v1::Encoding::from(self.encoding) as i32,
         }
     }
 
@@ -72,6 +75,7 @@ impl JobPlan {
                 skinning: skinning_from_wire("JobSpec", spec.skinning)?,
             },
             name: spec.name.clone(),
+            encoding: Encoding::from_wire("JobSpec", spec.encoding)?,
         })
     }
 }
@@ -333,6 +337,8 @@ pub struct JobStatus {
     pub finished_us: i64,
     /// When its result is deleted (0: not ended).
     pub expires_us: i64,
+    /// How its result's frames travel.
+    pub encoding: Encoding,
 }
 
 impl JobStatus {
@@ -354,6 +360,7 @@ impl JobStatus {
             submitted_us: info.submitted_us,
             finished_us: info.finished_us,
             expires_us: info.expires_us,
+            encoding: Encoding::from_wire("JobInfo", info.encoding).unwrap_or_default(),
         }
     }
 }
@@ -379,6 +386,7 @@ impl From<&JobStatus> for v1::JobInfo {
             submitted_us: s.submitted_us,
             finished_us: s.finished_us,
             expires_us: s.expires_us,
+            encoding: v1::Encoding::from(s.encoding) as i32,
         }
     }
 }
@@ -471,12 +479,14 @@ mod tests {
                     skinning: Some(Skinning::Dqs),
                 },
                 name: "take 3".into(),
+                encoding: Encoding::Vertices,
             },
             JobPlan {
                 model: "horse".into(),
                 level: Level::Base,
                 options: RoomOptions::default(),
                 name: String::new(),
+                encoding: Encoding::Palette,
             },
         ];
         for plan in plans {
@@ -500,6 +510,7 @@ mod tests {
             submitted_us: 1,
             finished_us: 2,
             expires_us: 3,
+            encoding: Encoding::Palette,
         };
         assert_eq!(JobStatus::from_wire(&v1::JobInfo::from(&status)), status);
     }

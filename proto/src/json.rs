@@ -703,6 +703,9 @@ pub struct JobSummary {
     pub model: String,
     /// `base` or `detail`.
     pub level: String,
+    /// How its result's frames travel: `vertices` or `palette`.
+    #[serde(default)]
+    pub encoding: String,
     /// `queued`, `running`, `done`, `failed` or `cancelled`.
     pub state: String,
     /// Control frames in the job.
@@ -728,6 +731,7 @@ impl From<&crate::job::JobStatus> for JobSummary {
             name: s.name.clone(),
             model: s.model.clone(),
             level: s.level.name().to_owned(),
+            encoding: s.encoding.name().to_owned(),
             state: s.state.as_str().to_owned(),
             frames_total: s.frames_total,
             frames_done: s.frames_done,

@@ -229,6 +229,8 @@ pub struct JobRequest {
     /// The control frames of this take on the server instead of frames sent (its model and
     /// settings are the take's; `model`, `beta`, `refine` and `skinning` are ignored).
     pub take: Option<String>,
+    /// How the result's frames travel: every vertex, or the palette (bone transforms).
+    pub encoding: crease_proto::Encoding,
 }
 
 /// Most bytes of control frames per request or message (`Synthesize`, `SubmitJob`): 1 MiB
@@ -270,6 +272,7 @@ pub async fn submit_job(
         skinning: job.skinning.map_or(0, |s| v1::Skinning::from(s) as i32),
         take: job.take.clone().unwrap_or_default(),
         name: job.name.clone(),
+        encoding: v1::Encoding::from(job.encoding) as i32,
     };
     let points = frames.first().map_or(0, |f| f.positions.len());
     let per_message = frames_per_message(points, usize::MAX);

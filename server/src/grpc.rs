@@ -340,7 +340,12 @@ impl Crease for CreaseService {
         check_level(&room, level)?;
         Ok(Response::new(holding(
             permit,
-            crate::stream::batch(Arc::clone(&self.state), room, level, r.frames),
+            crate::stream::batch(
+                Arc::clone(&self.state),
+                room,
+                Channel::vertices(level),
+                r.frames,
+            ),
         )))
     }
 
@@ -511,6 +516,7 @@ impl CreaseService {
             }
         };
         let level = Level::from_wire("JobSpec", spec.level)?;
+        let encoding = Encoding::from_wire("JobSpec", spec.encoding)?;
         let settings = self.state.jobs().settings().clone();
         let check_level = |model: &crate::registry::LoadedModel| {
             if level == Level::Detail && model.info.detail_vertices == 0 {
@@ -553,6 +559,15 @@ impl CreaseService {
                 })?
         };
         check_level(&model)?;
+        if encoding == Encoding::Palette
+            && options.skinning.unwrap_or(model.model.skinning)
+                == crease_core::runtime::skin::Skinning::Dqs
+        {
+            return Err(Status::failed_precondition(format!(
+                "JobSpec.encoding: a palette job's frames are skinned by the client with LBS, and this job skins model {:?} with DQS: submit with encoding vertices, or with skinning lbs",
+                model.name
+            )));
+        }
         if frames.is_empty() {
             return Err(Status::invalid_argument(if spec.take.is_empty() {
                 "SubmitJob: no frames after the JobSpec".to_owned()
@@ -582,6 +597,7 @@ impl CreaseService {
             level,
             options,
             name: spec.name.clone(),
+            encoding,
         };
         let status = crate::job_service::submit(&self.state, plan, &model, chunks)
             .await

@@ -27,6 +27,7 @@ use tokio_stream::StreamExt;
 
 use crate::cluster::Cluster;
 use crate::cluster::work::{Pulled, now_us, status_of};
+use crate::fanout::Channel;
 use crate::jobs::{Job, JobError};
 use crate::registry::LoadedModel;
 use crate::state::AppState;
@@ -263,7 +264,7 @@ pub async fn synthesize(
     let mut stream = std::pin::pin!(crate::stream::batch(
         Arc::clone(state),
         room,
-        plan.level,
+        Channel::new(plan.level, plan.encoding),
         frames
     ));
     let mut topology = None;

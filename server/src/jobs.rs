@@ -391,6 +391,7 @@ pub fn queued_status(id: String, plan: &JobPlan, frames: u64, chunks: u32) -> Jo
         submitted_us: now_us(),
         finished_us: 0,
         expires_us: 0,
+        encoding: plan.encoding,
     }
 }
 

@@ -1,5 +1,5 @@
 //! Mesh streams: the topology message, then encoded frames (`core::codec`), for a live
-//! subscription or a batch; or for a palette subscription (issue 18) the palette header, then
+//! subscription or a batch; or for a palette subscription or job (issues 18, 45) the palette header, then
 //! palette frames (`core::codec::palette`: codec frames of lanes, keyframes and deltas like
 //! vertex frames).
 //!
@@ -335,20 +335,29 @@ impl Live {
 pub fn batch(
     state: Arc<AppState>,
     room: Room,
-    level: Level,
+    channel: Channel,
     frames: Vec<v1::ControlFrame>,
 ) -> impl Stream<Item = Result<v1::MeshFrame, StreamError>> + Send + 'static {
     let (tx, rx) = mpsc::channel(BUFFER);
     let room = Arc::new(room);
     tokio::spawn(async move {
-        let first = topology(room.pipeline(), &room.model.name, level);
+        // A batch room has one actor: one first message.
+        let first = first_messages(&room, channel).await.and_then(|m| {
+            m.into_iter()
+                .next()
+                .ok_or_else(|| internal("topology")("no actor"))
+        });
         let failed = first.is_err();
         if tx.send(first).await.is_err() || failed {
             return;
         }
         // A private room: nobody else subscribes.
-        let Ok(mut sub) = room.subscribe(Channel::vertices(level), 1) else {
-            return;
+        let mut sub = match room.subscribe(channel, 1) {
+            Ok(sub) => sub,
+            Err(e) => {
+                let _ = tx.send(Err(internal("subscription")(e))).await;
+                return;
+            }
         };
         let mut last_sent: Option<u32> = None;
         for (k, frame) in frames.into_iter().enumerate() {

@@ -5,12 +5,15 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use crease_core::mesh::Mesh;
+use crease_core::model::{Rig, gltf_export};
 use crease_proto::job::JobState;
 use crease_proto::v1;
 use crease_remote::client::{
     JobRequest, cancel_job, get_model, job_result, list_jobs, submit_job, watch_job,
 };
 use crease_remote::control_file::read_control_frames;
+use crease_remote::mesh_stream::PaletteReader;
 use indicatif::{ProgressBar, ProgressStyle};
 use tokio_stream::StreamExt as _;
 
@@ -83,6 +86,16 @@ pub struct SubmitArgs {
     /// A label shown by `crease job list`.
     #[arg(long, default_value = "")]
     pub name: String,
+    /// How the result's frames are kept and sent: `vertices` (every vertex, quantised) or
+    /// `palette` (the bone transforms, and the detail layer's kernel vector at the detail
+    /// level: a few hundred bytes a frame; what `get --format gltf` makes a skinned glTF of;
+    /// needs LBS skinning).
+    #[arg(long, default_value = "vertices", value_parser = parse_encoding)]
+    pub encoding: crease_proto::Encoding,
+}
+
+fn parse_encoding(s: &str) -> Result<crease_proto::Encoding, String> {
+    crease_proto::Encoding::from_query(Some(s)).map_err(|e| e.message)
 }
 
 /// A job id on a server.
@@ -102,15 +115,21 @@ pub struct GetArgs {
     #[command(flatten)]
     pub id: IdArgs,
     /// Output folder (created): `frame_00000.obj` ... as `crease synth` writes them; with
-    /// `--format codec`, the file to write.
+    /// `--format codec` or `gltf`, the file to write.
     #[arg(long, value_name = "DIR|FILE")]
     pub out: PathBuf,
-    /// Mesh format of the frames (`obj`, `ply`), or `codec`: the stream as the server sent it
-    /// (the topology, then every quantised codec frame, as `crease watch --record` writes a
-    /// stream), decoded by `crease decode-stream` or any codec client; ~0.5-3 bytes a vertex
-    /// a frame instead of an OBJ's ~60.
-    #[arg(long, default_value = "obj", value_parser = ["obj", "ply", "codec"])]
+    /// Mesh format of the frames (`obj`, `ply`); `gltf`: one animated glTF binary (.glb), a
+    /// skinned mesh whose joints carry the frames' bone transforms for a palette job
+    /// (`submit --encoding palette`: the base layer exactly, a few dozen bytes a bone a
+    /// frame), or for a vertex job every frame baked into a morph target as
+    /// `crease synth --gltf` writes (the first frame is the morph base); or `codec`: the
+    /// stream as the server sent it (the topology or palette header, then every quantised
+    /// frame, as `crease watch --record` writes a stream), decoded by `crease decode-stream`.
+    #[arg(long, default_value = "obj", value_parser = ["obj", "ply", "gltf", "codec"])]
     pub format: String,
+    /// Frames per second of the `gltf` animation (frame `i` at `i / fps` s).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
 }
 
 /// Options of `crease job list`.
@@ -169,6 +188,9 @@ fn describe(j: &v1::JobInfo) -> String {
     if j.frames_per_second > 0.0 {
         line += &format!(", {:.1} frames/s", j.frames_per_second);
     }
+    if j.encoding == v1::Encoding::Palette as i32 {
+        line += ", palette";
+    }
     if !j.name.is_empty() {
         line += &format!(", {:?}", j.name);
     }
@@ -193,6 +215,7 @@ async fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
         skinning: args.skinning,
         name: args.name.clone(),
         take: args.take.clone(),
+        encoding: args.encoding,
     };
     let job = match &args.model {
         Some(model) => {
@@ -287,6 +310,9 @@ async fn watch(args: &IdArgs) -> anyhow::Result<()> {
 }
 
 async fn get(args: &GetArgs) -> anyhow::Result<()> {
+    if args.format == "gltf" && !(args.fps.is_finite() && args.fps > 0.0) {
+        bail!("--fps must be > 0, got {}", args.fps);
+    }
     let mut client = args.id.server.connect().await?;
     if args.format == "codec" {
         return get_codec(&mut client, args).await;
@@ -298,28 +324,139 @@ async fn get(args: &GetArgs) -> anyhow::Result<()> {
         .await
         .context("the server sent no status")?
         .map_err(|s| anyhow::anyhow!("{}", s.message()))?;
+    let total = job.frames_total as usize;
+    let stream = job_result(&mut client, &job.job).await?;
+    if job.encoding == v1::Encoding::Palette as i32 {
+        let summary = get_palette(stream, args, total)
+            .await
+            .with_context(|| format!("fetching job {}", job.job))?;
+        println!(
+            "wrote {total} frames of job {} to {} ({summary})",
+            job.job,
+            args.out.display()
+        );
+        return Ok(());
+    }
     let model = get_model(&mut client, &job.model)
         .await
         .with_context(|| format!("job {}", job.job))?;
-    let vertices = if job.level == v1::Level::Detail as i32 {
-        model.detail_vertices
+    let (vertices, triangles) = if job.level == v1::Level::Detail as i32 {
+        (model.detail_vertices, model.detail_triangles)
     } else {
-        model.base_vertices
-    } as usize;
-    let stream = job_result(&mut client, &job.job).await?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let total = job.frames_total as usize;
-    let summary =
-        super::remote_synth::write_frames(stream, &args.out, &args.format, vertices, total)
+        (model.base_vertices, model.base_triangles)
+    };
+    let vertices = vertices as usize;
+    let summary = if args.format == "gltf" {
+        gltf_export::check_animation_size(vertices, triangles as usize, total)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        let (triangles, frames) = super::remote_synth::collect_frames(stream, vertices, total)
             .await
             .with_context(|| format!("fetching job {}", job.job))?;
+        let rest = &frames[..vertices.min(frames.len())];
+        gltf_export::export_animation_glb(&args.out, &triangles, rest, &frames, args.fps)
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        format!("{total} morph targets at {} frames/s", args.fps)
+    } else {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+        super::remote_synth::write_frames(stream, &args.out, &args.format, vertices, total)
+            .await
+            .with_context(|| format!("fetching job {}", job.job))?
+    };
     println!(
         "wrote {total} frames of job {} to {} ({summary})",
         job.job,
         args.out.display()
     );
     Ok(())
+}
+
+/// A palette job's result (`submit --encoding palette`): the palette header, then a palette
+/// frame per control frame, decoded with the reference decoder (`core::codec::palette`).
+/// `obj`/`ply`: each frame's drawn mesh (the detailed one at the detail level), as
+/// `crease synth` writes them; `gltf`: the header's rest mesh and skin as a skinned glTF whose
+/// joints carry every frame's decoded bones (`gltf_export::skinned_animation_to_glb`).
+async fn get_palette<S>(mut stream: S, args: &GetArgs, total: usize) -> anyhow::Result<String>
+where
+    S: tokio_stream::Stream<Item = Result<v1::MeshFrame, tonic::Status>> + Unpin,
+{
+    use v1::mesh_frame::Body;
+    let status = |s: tonic::Status| anyhow::anyhow!("{} ({:?})", s.message(), s.code());
+    let header = match stream.next().await.transpose().map_err(status)? {
+        Some(v1::MeshFrame {
+            body: Some(Body::PaletteTopology(t)),
+        }) => t,
+        Some(_) => bail!("a palette job's result must start with its palette header"),
+        None => bail!("the result ended before its palette header"),
+    };
+    let mut reader = PaletteReader::new(&header)?;
+    let gltf = args.format == "gltf";
+    if !gltf {
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+    }
+    let mut mesh = Mesh {
+        positions: Vec::with_capacity(reader.vertex_count()),
+        triangles: reader.synth().triangles().to_vec(),
+    };
+    let mut transforms = Vec::new();
+    let (mut frames, mut bytes) = (0usize, 0u64);
+    while let Some(message) = stream.next().await.transpose().map_err(status)? {
+        let Some(Body::Frame(f)) = message.body else {
+            bail!("frame {frames}: expected a palette frame");
+        };
+        if f.seq != frames as u64 {
+            bail!("frame {frames}: the server sent frame seq {}", f.seq);
+        }
+        reader
+            .decode(&f.data)
+            .with_context(|| format!("decoding frame {frames}"))?;
+        bytes += f.data.len() as u64;
+        if gltf {
+            transforms.extend_from_slice(&reader.frame().bones);
+        } else {
+            mesh.positions.clear();
+            mesh.positions.extend_from_slice(reader.synth().output());
+            let path = super::synth::frame_path(&args.out, frames, &args.format);
+            mesh.write(&path)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        frames += 1;
+    }
+    if frames != total {
+        bail!("the result ended after {frames} of {total} frames");
+    }
+    if !gltf {
+        return Ok(format!(
+            "{bytes} bytes of palette frames received, {:.1} bytes a frame",
+            bytes as f64 / frames.max(1) as f64
+        ));
+    }
+    let synth = reader.synth();
+    let rig = Rig {
+        rest: Mesh {
+            positions: synth.rest().to_vec(),
+            triangles: synth.base_triangles().to_vec(),
+        },
+        bone_count: transforms.len() / frames.max(1),
+        skin: synth.skin().clone(),
+        examples: Vec::new(),
+        fit_rms: None,
+    };
+    let times: Vec<f32> = (0..frames).map(|f| f as f32 / args.fps).collect();
+    let glb = gltf_export::skinned_animation_to_glb(&rig, "job", &times, &transforms)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    crease_core::model::file::write_atomic(&args.out, &glb)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    if synth.detail().is_some() {
+        eprintln!(
+            "note: a skinned glTF carries the base layer; the detail layer is in --format obj|ply, or bake it with a vertices job and --format gltf"
+        );
+    }
+    Ok(format!(
+        "a skinned glTF of {} bones, {bytes} bytes of palette frames received",
+        rig.bone_count
+    ))
 }
 
 /// `get --format codec`: every message as it came, in `crease watch --record`'s file format.

@@ -206,6 +206,25 @@ where
     ))
 }
 
+/// Reads a whole vertex stream of `total` frames (a `GetJobResult`) into memory for a glTF
+/// animation: the mesh's triangles and every frame's positions (model order), one frame
+/// after another; progress on stderr.
+///
+/// # Errors
+/// A refused or broken stream, a frame out of order.
+pub(crate) async fn collect_frames<S>(
+    stream: S,
+    vertices: usize,
+    total: usize,
+) -> anyhow::Result<(Vec<[u32; 3]>, Vec<Vec3>)>
+where
+    S: Stream<Item = Result<v1::MeshFrame, tonic::Status>> + Unpin,
+{
+    let mut sink = Sink::new(None, "obj", vertices, true, true);
+    sink.receive(stream, total, total).await?;
+    Ok((sink.mesh.triangles, sink.animation))
+}
+
 /// A status from the server as an error: its message (which names the field) and code, with a
 /// batch's refused frame (counted within its request) renumbered to the control file's frame.
 fn status_error(status: &tonic::Status, first: usize) -> anyhow::Error {

@@ -106,6 +106,17 @@ impl PaletteSynth {
             .map_or(&self.triangles, |d| &d.header.triangles)
     }
 
+    /// The header's rest mesh (what every frame's bones skin).
+    pub fn rest(&self) -> &[Vec3] {
+        &self.rest
+    }
+
+    /// The base mesh's triangles (at the detail level too, where [`PaletteSynth::triangles`]
+    /// are the subdivision's).
+    pub fn base_triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
     /// The skinned base mesh of the last frame.
     pub fn base(&self) -> &[Vec3] {
         &self.base
