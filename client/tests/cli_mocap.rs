@@ -232,6 +232,53 @@ fn all_finger_markers_missing_still_yields_finite_meshes() {
         let got = Mesh::read(fetched.join(&name)).unwrap();
         crate::cli_synth_remote::assert_close(&format!("job frame {k}"), &got, &mesh(k), bound);
     }
+
+    // The server retargeted the raw markers (JobSpec.retarget) exactly as `crease retarget`
+    // did here: a job of the offline control frames streams the same bytes.
+    let offline = run_ok(
+        job(&[
+            "submit",
+            "--model",
+            "glove-hand",
+            "--beta",
+            "0.3",
+            "--refine",
+            "8,0.01",
+        ])
+        .arg("--controls")
+        .arg(&csv),
+    );
+    let offline = offline.trim().to_owned();
+    run_ok(&mut job(&["watch", &offline]));
+    let offline_frames = tmp.path().join("offline-job");
+    run_ok(&mut job(&[
+        "get",
+        &offline,
+        "--out",
+        offline_frames.to_str().unwrap(),
+    ]));
+    for k in 0..200 {
+        let name = format!("frame_{k:05}.obj");
+        assert!(
+            std::fs::read(fetched.join(&name)).unwrap()
+                == std::fs::read(offline_frames.join(&name)).unwrap(),
+            "frame {k}: the server-retargeted job differs from the offline retarget's"
+        );
+    }
+
+    // A map for markers the recording does not have is refused at submit, naming the map.
+    let out = job(&["submit", "--model", "glove-hand"])
+        .arg("--tsv")
+        .arg(&tsv)
+        .arg("--map")
+        .arg(map("vmc-glove13.toml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("JobSpec.retarget"),
+        "{err}"
+    );
 }
 
 struct Room {

@@ -250,6 +250,21 @@ pub fn control_frame(
     }
 }
 
+/// A retargeting input frame ([`v1::Retarget`]): `markers` and their mask laid out as
+/// [`control_frame`] lays out control points, in the `markers` fields.
+pub fn marker_frame(
+    room: &str,
+    seq: u64,
+    capture_time_us: i64,
+    markers: &[Vec3],
+    valid: &[bool],
+) -> v1::ControlFrame {
+    let mut frame = control_frame(room, seq, capture_time_us, markers, valid);
+    frame.markers = std::mem::take(&mut frame.positions);
+    frame.markers_valid = std::mem::take(&mut frame.valid);
+    frame
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -55,6 +55,8 @@ impl JobPlan {
             take: String::new(),
             name: self.name.clone(),
             encoding: v1::Encoding::from(self.encoding) as i32,
+            // Retargeted at submit: the job's frames are control points.
+            retarget: None,
         }
     }
 

@@ -44,7 +44,8 @@ pub mod take;
 pub mod take_info;
 
 pub use control::{
-    control_frame, encode_valid_mask, read_control_frame, read_marker_frame, valid_bit,
+    control_frame, encode_valid_mask, marker_frame, read_control_frame, read_marker_frame,
+    valid_bit,
 };
 pub use convert::{Encoding, Level, box3, model_info};
 pub use errors::WireError;

@@ -231,6 +231,9 @@ pub struct JobRequest {
     pub take: Option<String>,
     /// How the result's frames travel: every vertex, or the palette (bone transforms).
     pub encoding: crease_proto::Encoding,
+    /// A marker recording sent raw: the frames are then markers (in `Retarget.markers`'
+    /// order), retargeted by the server through the map (`JobSpec.retarget`).
+    pub retarget: Option<v1::Retarget>,
 }
 
 /// Most bytes of control frames per request or message (`Synthesize`, `SubmitJob`): 1 MiB
@@ -248,7 +251,8 @@ pub fn frames_per_message(points: usize, max_frames: usize) -> usize {
 }
 
 /// Submits a batch job (admin token): the spec, then `frames` (one per control frame, the
-/// points and validity as read from a file) in messages of at most [`MESSAGE_BYTES`].
+/// points, or with `job.retarget` the markers, and their validity as read from a file) in
+/// messages of at most [`MESSAGE_BYTES`].
 /// Returns the job as the server accepted it.
 ///
 /// # Errors
@@ -273,7 +277,9 @@ pub async fn submit_job(
         take: job.take.clone().unwrap_or_default(),
         name: job.name.clone(),
         encoding: v1::Encoding::from(job.encoding) as i32,
+        retarget: job.retarget.clone(),
     };
+    let raw = job.retarget.is_some();
     let points = frames.first().map_or(0, |f| f.positions.len());
     let per_message = frames_per_message(points, usize::MAX);
     let mut messages = vec![v1::SubmitJobRequest {
@@ -286,13 +292,12 @@ pub async fn submit_job(
                     .iter()
                     .enumerate()
                     .map(|(k, f)| {
-                        crease_proto::control::control_frame(
-                            "",
-                            k as u64,
-                            0,
-                            &f.positions,
-                            &f.valid,
-                        )
+                        let frame = if raw {
+                            crease_proto::control::marker_frame
+                        } else {
+                            crease_proto::control::control_frame
+                        };
+                        frame("", k as u64, 0, &f.positions, &f.valid)
                     })
                     .collect(),
             })),

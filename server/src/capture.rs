@@ -14,7 +14,8 @@ use crease_core::glam::Vec3;
 use crease_core::model::TrainedModel;
 use crease_mocap::map::{BoundMap, MarkerMap};
 use crease_mocap::{Recording, Retarget};
-use crease_proto::{WireError, read_marker_frame, v1};
+use crease_proto::job::JobFrameError;
+use crease_proto::{WireError, control_frame, read_marker_frame, v1};
 
 /// Why a room's [`v1::Retarget`] was refused: names what is wrong.
 #[derive(Debug, thiserror::Error)]
@@ -160,6 +161,53 @@ impl CaptureSpec {
     /// Markers a frame carries.
     pub fn marker_count(&self) -> usize {
         self.wire.markers.len()
+    }
+    /// A whole recording's raw marker frames (a job's, `JobSpec.retarget`) retargeted as
+    /// `crease retarget` does offline: the registration calibrated on the recording's first
+    /// frames, then every frame through the map (mixing, registration, gap filling), into
+    /// control frames numbered from 0 with each frame's capture time. Runs on the caller's
+    /// thread (the blocking pool).
+    ///
+    /// # Errors
+    /// The first frame whose markers do not fit (count, mask, a non-finite valid marker), by
+    /// its index in the job.
+    pub fn retarget_recording(
+        &self,
+        frames: &[v1::ControlFrame],
+    ) -> Result<Vec<v1::ControlFrame>, JobFrameError> {
+        let n = self.marker_count();
+        let mut positions = Vec::with_capacity(frames.len() * n);
+        let mut valid = Vec::with_capacity(frames.len() * n);
+        let (mut markers, mut seen) = (vec![Vec3::ZERO; n], vec![false; n]);
+        for (index, frame) in frames.iter().enumerate() {
+            read_marker_frame(frame, &mut markers, &mut seen)
+                .map_err(|error| JobFrameError { index, error })?;
+            positions.extend_from_slice(&markers);
+            valid.extend_from_slice(&seen);
+        }
+        let recording = Recording::new(
+            self.wire.markers.clone(),
+            0.0,
+            self.wire.units.clone(),
+            positions,
+            valid,
+        );
+        let mut retarget = Retarget::new(self.bound.clone(), &self.rest);
+        retarget.calibrate(&recording);
+        let count = self.rest.len();
+        let (mut controls, mut controls_valid) = (vec![Vec3::ZERO; count], vec![false; count]);
+        let mut out = Vec::with_capacity(frames.len());
+        for (k, (marker_frame, frame)) in recording.frames().zip(frames).enumerate() {
+            retarget.frame(&marker_frame, &mut controls, &mut controls_valid);
+            out.push(control_frame(
+                "",
+                k as u64,
+                frame.capture_time_us,
+                &controls,
+                &controls_valid,
+            ));
+        }
+        Ok(out)
     }
 }
 

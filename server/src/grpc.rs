@@ -537,8 +537,17 @@ impl CreaseService {
             check_level(&model)?;
             let options = self.batch_options("JobSpec", &spec_as_batch(&spec))?;
             let frames = read_job_frames(&mut stream, settings.max_frames).await?;
+            let frames = match spec.retarget.clone() {
+                Some(wire) => self.retarget_job(wire, &model, frames).await?,
+                None => frames,
+            };
             (model, options, frames)
         } else {
+            if spec.retarget.is_some() {
+                return Err(Status::invalid_argument(
+                    "JobSpec.retarget: a job from a take (JobSpec.take) has its control points already; send one or the other",
+                ));
+            }
             // The take's own frames, model and settings (JobSpec: the other fields but the
             // level and the name are ignored); frames sent after the spec are refused.
             if read_job_frames(&mut stream, 0).await.is_err() {
@@ -604,6 +613,26 @@ impl CreaseService {
             .map_err(|e| status::job(&e))?;
         tracing::info!(job = %status.job, model = %status.model, frames = status.frames_total, chunks = status.chunks_total, "job queued");
         Ok(v1::JobInfo::from(&status))
+    }
+}
+
+impl CreaseService {
+    /// A job's raw marker frames retargeted through `wire`'s map onto `model`'s control points
+    /// (`crate::capture`), off the executor.
+    async fn retarget_job(
+        &self,
+        wire: v1::Retarget,
+        model: &Arc<crate::registry::LoadedModel>,
+        frames: Vec<v1::ControlFrame>,
+    ) -> Result<Vec<v1::ControlFrame>, Status> {
+        let maps = self.state.config().maps.clone();
+        let capture = crate::capture::CaptureSpec::build(wire, maps, Arc::clone(model))
+            .await
+            .map_err(|e| Status::invalid_argument(format!("JobSpec.{e}")))?;
+        tokio::task::spawn_blocking(move || capture.retarget_recording(&frames))
+            .await
+            .map_err(|e| Status::internal(format!("retargeting the job's markers: {e}")))?
+            .map_err(|e| crease_proto::errors::job_frame_status(e.index, &e.error))
     }
 }
 

@@ -12,13 +12,13 @@ use crease_proto::v1;
 use crease_remote::client::{
     JobRequest, cancel_job, get_model, job_result, list_jobs, submit_job, watch_job,
 };
-use crease_remote::control_file::read_control_frames;
+use crease_remote::control_file::{ControlFrame, read_control_frames};
 use crease_remote::mesh_stream::PaletteReader;
 use indicatif::{ProgressBar, ProgressStyle};
 use tokio_stream::StreamExt as _;
 
 use super::common::ServerArgs;
-use super::retarget::{ModelControls, RecordingArgs, parse_rate};
+use super::retarget::{RecordingArgs, parse_rate};
 use super::room::AdminArgs;
 
 /// Options of `crease job`.
@@ -59,9 +59,9 @@ pub struct SubmitArgs {
     /// Control frames: CSV or JSON, as `crease synth --controls` reads them.
     #[arg(long, value_name = "FILE", required_unless_present_any = ["take", "tsv", "c3d"], conflicts_with_all = ["tsv", "c3d"])]
     pub controls: Option<PathBuf>,
-    /// A marker recording (`--tsv` or `--c3d`) and its marker map (`--map`): retargeted here
-    /// onto the model's control points exactly as `crease retarget` does (registration, gap
-    /// filling), then sent as the job's frames.
+    /// A marker recording (`--tsv` or `--c3d`) and its marker map (`--map`): the markers are
+    /// sent raw with the map, and the server retargets them onto the model's control points
+    /// exactly as `crease retarget` does (registration, gap filling).
     #[command(flatten)]
     pub recording: RecordingArgs,
     /// With a recording: resample it to this many frames per second (default: its own rate).
@@ -216,6 +216,7 @@ async fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
         name: args.name.clone(),
         take: args.take.clone(),
         encoding: args.encoding,
+        retarget: None,
     };
     let job = match &args.model {
         Some(model) => {
@@ -228,19 +229,37 @@ async fn submit(args: &SubmitArgs) -> anyhow::Result<()> {
                     controls.display().to_string(),
                 ),
                 None => {
+                    // The recording's markers go raw, with the map: the server retargets
+                    // them (`JobSpec.retarget`) as `crease retarget` does.
                     let path = args
                         .recording
                         .path()
                         .context("--controls, --tsv, --c3d or --take is needed")?
                         .display()
                         .to_string();
-                    let controls = ModelControls::from_info(&info);
-                    let recording = args.recording.clone();
-                    let rate = args.rate;
-                    let retargeted =
-                        tokio::task::spawn_blocking(move || recording.retarget(&controls, rate))
-                            .await??;
-                    (retargeted.frames, path)
+                    let map = args
+                        .recording
+                        .map
+                        .as_ref()
+                        .context("--map is needed with --tsv or --c3d")?;
+                    let map_toml = std::fs::read_to_string(map)
+                        .with_context(|| format!("reading the marker map {}", map.display()))?;
+                    let (recording, rate) = (args.recording.clone(), args.rate);
+                    let (recording, _) =
+                        tokio::task::spawn_blocking(move || recording.read(rate)).await??;
+                    request.retarget = Some(crease_proto::room::retarget(
+                        map_toml,
+                        recording.names.clone(),
+                        recording.units.clone(),
+                    ));
+                    let frames = recording
+                        .frames()
+                        .map(|f| ControlFrame {
+                            positions: f.positions.to_vec(),
+                            valid: f.valid.to_vec(),
+                        })
+                        .collect();
+                    (frames, path)
                 }
             };
             submit_job(&mut client, &args.admin.admin_token, &request, &frames)

@@ -105,7 +105,7 @@ impl RecordingArgs {
     }
 
     /// Reads the recording and resamples it to `rate` when given, reporting on stderr.
-    fn read(&self, rate: Option<f64>) -> anyhow::Result<(Recording, f64)> {
+    pub(crate) fn read(&self, rate: Option<f64>) -> anyhow::Result<(Recording, f64)> {
         let path = self.path().context("--tsv or --c3d is needed")?;
         let start = Instant::now();
         let mut recording = Recording::read(path)?;

@@ -235,6 +235,25 @@ class AgainstTheDemoServer(unittest.TestCase):
         with self.assertRaises(crease.CreaseError) as e:
             self.client.cancel_job(job.job)
         self.assertEqual(e.exception.code, "FAILED_PRECONDITION")
+        # The same frames kept as bones (palette): skinned here on the CPU, the same meshes within
+        # the palette's quantisation (rotations to ~2e-5 rad, translations to 16 bits).
+        palette = self.client.submit_job("demo-hand", controls, encoding="palette")
+        self.assertEqual(palette.encoding, "palette")
+        self.assertEqual([s.state for s in self.client.watch_job(palette.job)][-1], "done")
+        vertices = self.client.job_result(job.job)
+        np.testing.assert_allclose(self.client.job_result(palette.job), vertices, atol=5e-4)
+        # Raw markers through a map that does not name them: refused at submit, naming the map.
+        with self.assertRaises(crease.CreaseError) as e:
+            self.client.submit_job(
+                "demo-hand",
+                markers=np.zeros((2, 2, 3), dtype=np.float32),
+                marker_names=["a", "b"],
+                marker_map=(HERE.parents[2] / "bench" / "mocap" / "webxr-back.toml").read_text(),
+            )
+        self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
+        self.assertIn("JobSpec.retarget", str(e.exception))
+        with self.assertRaises(ValueError):
+            self.client.submit_job("demo-hand", controls, take="x")
         # A point short in every frame: refused at its first frame, nothing queued.
         before = len(self.client.jobs())
         with self.assertRaises(crease.CreaseError) as e:
@@ -271,6 +290,14 @@ class AgainstTheDemoServer(unittest.TestCase):
             self.assertIn(take.take, [t.take for t in self.client.takes(room.room)])
             glb = self.client.take_glb(take.take)
             self.assertEqual(glb[:4], b"glTF")
+            # The take as a job: its own model, settings and recorded control points (the
+            # refused frame was never recorded), the same meshes as a job of those points.
+            from_take = self.client.submit_job(take=take.take)
+            self.assertEqual(from_take.frames_total, 12)
+            self.assertEqual([s.state for s in self.client.watch_job(from_take.job)][-1], "done")
+            same = self.client.submit_job("demo-hand", recorded.controls)
+            self.assertEqual([s.state for s in self.client.watch_job(same.job)][-1], "done")
+            np.testing.assert_array_equal(self.client.job_result(from_take.job), self.client.job_result(same.job))
         finally:
             self.client.close_room(room.room)
 

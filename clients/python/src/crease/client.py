@@ -6,7 +6,7 @@ import hashlib
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -150,6 +150,8 @@ class JobInfo:
     frames_per_second: float
     eta_seconds: float
     error: str
+    #: How its result's frames travel: "vertices" or "palette".
+    encoding: str = "vertices"
 
     @property
     def ended(self) -> bool:
@@ -178,6 +180,7 @@ def _job_info(j: pb.JobInfo) -> JobInfo:
         j.frames_per_second,
         j.eta_seconds,
         j.error,
+        "palette" if j.encoding == pb.ENCODING_PALETTE else "vertices",
     )
 
 
@@ -584,38 +587,69 @@ class Client:
 
     def submit_job(
         self,
-        model: str,
-        controls: np.ndarray,
+        model: str = "",
+        controls: np.ndarray | None = None,
         *,
+        take: str = "",
+        markers: np.ndarray | None = None,
+        marker_names: Sequence[str] = (),
+        marker_map: str = "",
+        units: str = "",
         level: Level = "base",
+        encoding: Encoding = "vertices",
         beta: float = 0.0,
         skinning: Skinning | None = None,
         refine: Mapping[str, float] | None = None,
         name: str = "",
     ) -> JobInfo:
-        """Hands a batch of control frames (``(F, C, 3)``, NaN rows occluded) to the server as a
-        job that outlives this client (admin token) and returns it at once. The server checks
-        every frame: a refused one raises ``CreaseError`` whose ``frame`` is its index in
-        ``controls``, and nothing is queued. ``watch_job`` follows it, ``job_result`` fetches it."""
-        controls = _control_batch(controls)
-        per_message = _frames_per_message(controls.shape[1], len(controls) or 1)
-        spec = pb.JobSpec(model=model, level=_LEVEL[level], beta=beta, skinning=_SKINNING[skinning], name=name)
+        """Hands a batch to the server as a job that outlives this client (admin token) and
+        returns it at once. The frames are one of: ``controls`` (``(F, C, 3)``, NaN rows
+        occluded) on ``model``; ``markers`` (``(F, M, 3)`` raw capture markers named
+        ``marker_names``, NaN rows missing, in ``units``) on ``model``, retargeted by the server
+        through the marker map ``marker_map`` (its TOML text, as ``bench/mocap/*.toml``) as
+        ``crease retarget`` does; or ``take``, a take recorded on this server (its model,
+        settings and control points; ``model`` and the settings are then ignored). The server
+        checks every frame: a refused one raises ``CreaseError`` whose ``frame`` is its index,
+        and nothing is queued. ``encoding`` "palette" keeps the bones instead of every vertex
+        (``job_result`` skins them on the CPU). ``watch_job`` follows it, ``job_result`` fetches
+        it."""
+        if encoding not in _ENCODING:
+            raise ValueError(f"encoding {encoding!r}: expected 'vertices' or 'palette'")
+        given = [n for n, v in (("controls", controls), ("markers", markers), ("take", take or None)) if v is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of controls, markers and take, got {given or 'none'}")
+        spec = pb.JobSpec(model=model, level=_LEVEL[level], beta=beta, skinning=_SKINNING[skinning], name=name, take=take, encoding=_ENCODING[encoding])
         if refine is not None:
             spec.refine.CopyFrom(pb.Refine(**refine))
+        frames_in = np.zeros((0, 0, 3), dtype=np.float32)
+        if markers is not None:
+            frames_in = _control_batch(markers)
+            if len(marker_names) != frames_in.shape[1]:
+                raise ValueError(f"marker_names: {len(marker_names)} names for {frames_in.shape[1]} markers a frame")
+            if not marker_map:
+                raise ValueError("marker_map: the map's TOML text is needed with markers")
+            spec.retarget.CopyFrom(pb.Retarget(map_toml=marker_map, markers=list(marker_names), units=units))
+        elif controls is not None:
+            frames_in = _control_batch(controls)
+        per_message = _frames_per_message(frames_in.shape[1], len(frames_in) or 1)
 
         def messages() -> Iterator[pb.SubmitJobRequest]:
             yield pb.SubmitJobRequest(spec=spec)
-            for first in range(0, len(controls), per_message):
+            for first in range(0, len(frames_in), per_message):
                 frames = pb.JobFrames()
-                for k, f in enumerate(controls[first : first + per_message]):
+                for k, f in enumerate(frames_in[first : first + per_message]):
                     flat, mask = _points(f)
-                    frames.frames.append(pb.ControlFrame(seq=first + k, positions=flat, valid=mask))
+                    if markers is not None:
+                        frames.frames.append(pb.ControlFrame(seq=first + k, markers=flat, markers_valid=mask))
+                    else:
+                        frames.frames.append(pb.ControlFrame(seq=first + k, positions=flat, valid=mask))
                 yield pb.SubmitJobRequest(frames=frames)
 
+        what = f"submitting take {take!r} as a job" if take else f"submitting a job of {len(frames_in)} frames on {model!r}"
         try:
             info = self._stub.SubmitJob(messages(), timeout=self._timeout, metadata=self._auth())
         except grpc.RpcError as e:
-            raise CreaseError.from_rpc(e, what=f"submitting a job of {len(controls)} frames on {model!r}") from None
+            raise CreaseError.from_rpc(e, what=what) from None
         return _job_info(info)
 
     def watch_job(self, job: str) -> Iterator[JobInfo]:
