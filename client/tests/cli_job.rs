@@ -49,11 +49,12 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
     let model = TrainedModel::load(&model_path).unwrap();
     let count = model.controls.len();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let (addr, bound, _served) = runtime.block_on(async {
+    let (addr, bound, served) = runtime.block_on(async {
         let served = serve(model.clone(), small_chunks()).await;
         let bound = batch_bound(served.grpc).await;
         (served.grpc, bound, served)
     });
+    let http = served.http;
     let url = format!("http://{addr}");
     let controls = dir.join("controls.csv");
     std::fs::write(&controls, controls_csv()).unwrap();
@@ -273,6 +274,15 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
         // most of its frames never run, and a watcher learns it.
         let long: Vec<_> = (0..4000).map(|_| frame(count)).collect();
         let info = client.submit_job(submit(long)).await.unwrap().into_inner();
+        // The gauges count it (queued or running), and the done job in neither.
+        let metrics = tokio::task::spawn_blocking(move || http_get(http, "/metrics"))
+            .await
+            .unwrap();
+        let gauge = |name: &str| -> i64 {
+            let line = metrics.lines().find(|l| l.starts_with(&format!("{name} "))).unwrap_or_else(|| panic!("no {name} in /metrics"));
+            line[name.len() + 1..].trim().parse().unwrap()
+        };
+        assert_eq!(gauge("crease_jobs_queued") + gauge("crease_jobs_running"), 1, "{metrics}");
         let cancelled = client
             .cancel_job(
                 crease_remote::client::authorized(

@@ -129,6 +129,9 @@ async fn room_info(
 }
 
 async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    if state.cluster().is_none() {
+        state.metrics().count_jobs(&state.jobs().list());
+    }
     (
         [(
             header::CONTENT_TYPE,

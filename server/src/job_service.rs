@@ -297,12 +297,13 @@ pub fn start_cluster_worker(state: &Arc<AppState>) {
         return;
     };
     let weak = Arc::downgrade(state);
-    tokio::spawn(cluster_worker(weak, Arc::clone(&cluster)));
+    tokio::spawn(cluster_worker(weak.clone(), Arc::clone(&cluster)));
     tokio::spawn(async move {
         loop {
             tokio::time::sleep(EXPIRY_SWEEP).await;
+            let Some(state) = weak.upgrade() else { return };
             if cluster.is_connected() {
-                cluster.work().expire().await;
+                cluster.work().expire(state.metrics()).await;
             }
         }
     });
@@ -315,29 +316,33 @@ struct LiveLoad {
 }
 
 impl LiveLoad {
-    /// How many of `state`'s rooms took frames since the last call.
-    fn rooms(&mut self, state: &AppState) -> u32 {
-        let mut live = 0;
-        let now = state.published_counts();
-        for (id, published) in &now {
-            if self
-                .seen
-                .get(id)
-                .is_some_and(|&before| before != *published)
-            {
-                live += 1;
-            }
-        }
-        self.seen = now.into_iter().collect();
-        live
+    /// How many rooms took frames since the last call, given each room's frames accepted so
+    /// far (`AppState::published_counts`): a room is live when its count moved; a room new
+    /// since the last look counts from the next one.
+    fn rooms(&mut self, now: impl IntoIterator<Item = (String, u64)>) -> u32 {
+        let now: std::collections::HashMap<String, u64> = now.into_iter().collect();
+        let live = now
+            .iter()
+            .filter(|(id, published)| self.seen.get(*id).is_some_and(|b| b != *published))
+            .count();
+        self.seen = now;
+        u32::try_from(live).unwrap_or(u32::MAX)
     }
+}
+
+/// Live rooms first (issue 45): after a chunk that took `chunk`, a replica with `live` rooms
+/// taking frames waits `chunk` times their number (at most 4) before pulling the next, so it
+/// spends at most 1/(1 + live) of its time on jobs while it serves rooms, and idle replicas
+/// take the queue.
+fn pause_after(chunk: Duration, live: u32) -> Duration {
+    chunk * live.min(4)
 }
 
 async fn cluster_worker(state: Weak<AppState>, cluster: Arc<Cluster>) {
     let mut live = LiveLoad::default();
     loop {
         let busy = match state.upgrade() {
-            Some(s) => live.rooms(&s),
+            Some(s) => live.rooms(s.published_counts()),
             None => return,
         };
         if !cluster.is_connected() {
@@ -349,8 +354,9 @@ async fn cluster_worker(state: Weak<AppState>, cluster: Arc<Cluster>) {
         };
         let started = Instant::now();
         run_pulled(&state, &cluster, pulled).await;
-        if busy > 0 {
-            tokio::time::sleep(started.elapsed() * busy.min(4)).await;
+        let pause = pause_after(started.elapsed(), busy);
+        if !pause.is_zero() {
+            tokio::time::sleep(pause).await;
         }
     }
 }
@@ -449,5 +455,49 @@ async fn run_pulled(state: &Weak<AppState>, cluster: &Arc<Cluster>, mut pulled: 
         Err(e) => {
             tracing::warn!(%job, chunk = c, "counting the chunk (it will be redelivered): {e}")
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn counts(c: &[(&str, u64)]) -> Vec<(String, u64)> {
+        c.iter().map(|(id, n)| ((*id).to_owned(), *n)).collect()
+    }
+
+    #[test]
+    fn a_room_is_live_when_its_frames_move() {
+        let mut load = LiveLoad::default();
+        assert_eq!(load.rooms(counts(&[("a", 5), ("b", 0)])), 0, "first look");
+        assert_eq!(load.rooms(counts(&[("a", 9), ("b", 0)])), 1);
+        assert_eq!(
+            load.rooms(counts(&[("a", 9), ("b", 3), ("c", 1)])),
+            1,
+            "c is new"
+        );
+        assert_eq!(load.rooms(counts(&[("a", 10), ("b", 4), ("c", 2)])), 3);
+        assert_eq!(
+            load.rooms(counts(&[("b", 4)])),
+            0,
+            "closed rooms and idle ones"
+        );
+    }
+
+    #[test]
+    fn a_replica_serving_rooms_takes_fewer_chunks() {
+        let chunk = Duration::from_millis(300);
+        assert_eq!(
+            pause_after(chunk, 0),
+            Duration::ZERO,
+            "idle: the next chunk at once"
+        );
+        assert_eq!(
+            pause_after(chunk, 1),
+            chunk,
+            "one live room: half its time on jobs"
+        );
+        assert_eq!(pause_after(chunk, 3), chunk * 3);
+        assert_eq!(pause_after(chunk, 40), chunk * 4, "never less than a fifth");
     }
 }

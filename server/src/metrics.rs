@@ -45,6 +45,12 @@ pub struct Metrics {
     pub jobs_cancelled: Counter,
     /// Seconds from a job chunk's start to its result stored.
     pub job_chunk_seconds: Histogram,
+    /// Batch jobs queued (no chunk done yet) and running: on a single server counted when
+    /// `/metrics` is rendered; in a cluster the cluster's, counted by every replica's expiry
+    /// sweep (every 30 s), so each replica reports the same number (aggregate with max).
+    pub jobs_queued: Gauge,
+    /// Batch jobs running (some chunks done); as [`Metrics::jobs_queued`].
+    pub jobs_running: Gauge,
     /// The cluster's (zero on a single server).
     pub cluster: crate::cluster::metrics::ClusterMetrics,
 }
@@ -71,6 +77,8 @@ impl Default for Metrics {
             jobs_cancelled: Counter::default(),
             // 10 ms to ~41 s.
             job_chunk_seconds: Histogram::new(exponential_buckets(0.01, 2.0, 13)),
+            jobs_queued: Gauge::default(),
+            jobs_running: Gauge::default(),
             cluster: crate::cluster::metrics::ClusterMetrics::default(),
             registry: Registry::default(),
         };
@@ -124,6 +132,16 @@ impl Default for Metrics {
             m.jobs_submitted.clone(),
         );
         registry.register("jobs_done", "Batch jobs done", m.jobs_done.clone());
+        registry.register(
+            "jobs_queued",
+            "Batch jobs queued (in a cluster: the cluster's, the same on every replica)",
+            m.jobs_queued.clone(),
+        );
+        registry.register(
+            "jobs_running",
+            "Batch jobs running (in a cluster: the cluster's, the same on every replica)",
+            m.jobs_running.clone(),
+        );
         registry.register("jobs_failed", "Batch jobs failed", m.jobs_failed.clone());
         registry.register(
             "jobs_cancelled",
@@ -163,6 +181,14 @@ impl Metrics {
             "Connections or streams refused by a per-address or total cap",
             streams.refused_counter(),
         );
+    }
+
+    /// Sets the queued and running gauges from every job's status.
+    pub fn count_jobs(&self, jobs: &[crease_proto::job::JobStatus]) {
+        use crease_proto::job::JobState;
+        let count = |state| jobs.iter().filter(|j| j.state == state).count() as i64;
+        self.jobs_queued.set(count(JobState::Queued));
+        self.jobs_running.set(count(JobState::Running));
     }
 
     /// The text exposition of every metric.

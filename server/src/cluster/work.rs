@@ -673,8 +673,9 @@ impl WorkQueue {
 
     /// Deletes the results of ended jobs past their expiry (the record stays listed, expired,
     /// for a week), as one replica: the one whose compare-and-set marks it expired.
-    pub async fn expire(&self) {
+    pub async fn expire(&self, metrics: &crate::metrics::Metrics) {
         let Ok(all) = self.list().await else { return };
+        metrics.count_jobs(&all);
         let now = now_us();
         for status in all {
             if !status.state.ended() || status.expires_us == 0 || status.expires_us > now {
