@@ -26,7 +26,8 @@
 //!   joints; WebXR joint matrices <-> joint angles; the iwer poses.
 //! - [`joint_map`]: a tracked hand's WebXR joints as mocap markers, and the marker maps that
 //!   put a layout's landmarks on them (fitted on the sweep hand); [`vmc_map`]: the same for a
-//!   VMC sender's humanoid hand bones (issue 39).
+//!   VMC sender's humanoid hand bones (issue 39); [`mediapipe_map`]: for MediaPipe Hands'
+//!   21 landmarks (a webcam, issue 46).
 //! - [`dataset`]: the data-set generator of `crease handgen` (poses, control-point layouts,
 //!   meshes at both resolutions, joint angles, manifests, contact sheet).
 //! - [`render`]: a software rasteriser and PNG writer for contact sheets and picture strips
@@ -36,6 +37,7 @@ pub mod collide;
 pub mod creases;
 pub mod dataset;
 pub mod joint_map;
+pub mod mediapipe_map;
 pub mod palm;
 pub mod render;
 pub mod rig;

@@ -71,6 +71,15 @@ const fn chain_slot(digit: Digit, s: usize) -> usize {
 /// The VMC markers of one posed sweep hand from its WebXR joint centres (`webxr_centres`,
 /// `crate::joint_map::virtual_markers`' first 25), as the bridge would publish them.
 pub fn vmc_virtual_markers(webxr_centres: &[Vec3]) -> Vec<Vec3> {
+    chain_markers(webxr_centres, Some(TIP_RATIO))
+}
+
+/// The 21 centre markers of one posed sweep hand in the order VMC and MediaPipe Hands share
+/// (the wrist, then per digit base first: a finger's MCP, PIP, DIP and tip, the thumb's CMC,
+/// MCP, IP and tip), from its WebXR joint centres. The tip: with `extend_tip`, the bridge's
+/// (the distal joint plus that share of the intermediate segment along the distal phalanx);
+/// without, the WebXR tip joint (MediaPipe's `*_TIP`, at the fingertip).
+pub(crate) fn chain_markers(webxr_centres: &[Vec3], extend_tip: Option<f32>) -> Vec<Vec3> {
     let at = |d: Digit, slot: usize| webxr_centres[Side::Centre.marker(webxr_index(d, slot))];
     let mut out = vec![Vec3::ZERO; VMC_MARKERS];
     out[0] = webxr_centres[Side::Centre.marker(0)];
@@ -83,8 +92,13 @@ pub fn vmc_virtual_markers(webxr_centres: &[Vec3]) -> Vec<Vec3> {
             at(d, chain_slot(d, 2)),
             at(d, d.chain_len() - 1),
         );
-        let along = (tip - distal).normalize_or_zero();
-        out[marker(d, 3)] = distal + TIP_RATIO * distal.distance(inter) * along;
+        out[marker(d, 3)] = match extend_tip {
+            Some(ratio) => {
+                let along = (tip - distal).normalize_or_zero();
+                distal + ratio * distal.distance(inter) * along
+            }
+            None => tip,
+        };
     }
     out
 }
@@ -108,8 +122,8 @@ fn vmc_at(digit: Digit, slot: usize) -> Option<usize> {
         .map(|s| marker(digit, s))
 }
 
-/// The candidate markers of a landmark (module docs).
-fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
+/// The candidate markers of a landmark (module docs), indices of [`chain_markers`].
+pub(crate) fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
     let mut c: Vec<usize> = match anchor {
         LandmarkAnchor::Bone { digit, from } => (from.saturating_sub(1)..=from + 2)
             .filter(|&slot| slot < digit.chain_len())

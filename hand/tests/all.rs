@@ -8,6 +8,7 @@
 mod common;
 
 mod joint_map;
+mod mediapipe_map;
 mod render;
 mod subdivision_hand;
 mod sweep_bind;

@@ -103,7 +103,7 @@ fn fitted_vmc_maps_put_the_landmarks_on_the_bones_of_unseen_poses() {
             let committed = std::fs::read_to_string(&path).unwrap_or_default();
             assert!(
                 committed == text,
-                "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --test all vmc_map:: rewrites it); the fit:\n{text}",
+                "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --features crease-core/test-meshes --test all vmc_map:: rewrites it); the fit:\n{text}",
                 path.display()
             );
         }
