@@ -4,6 +4,7 @@
 // tracking line that the page and the headset's panel (xr-view.js) show in an XR session.
 
 import * as THREE from "three";
+import { cameraText } from "./camera-view.js";
 
 /** The headset panel's canvas size (pixels) and its size in the world (metres). */
 const PANEL_PIXELS = [640, 96];
@@ -133,7 +134,8 @@ export function createOverlay(state, { banner, stats }) {
       `published ${c.published} · acks ${c.acks}` +
       (c.actors.length > 1 ? `\n${actorsText(state)}` : "") +
       (c.confidence != null ? `\nconfidence ${c.confidence.toFixed(2)}${c.confidence > 1 ? " (outside the examples)" : ""}` : "") +
-      (state.xr.tracker ? `\n${xrText(state)}` : state.room?.capture && c.xr.reason ? `\nWebXR: ${c.xr.reason}` : "");
+      (state.xr.tracker ? `\n${xrText(state)}` : state.room?.capture && c.xr.reason && !c.camera.active ? `\nWebXR: ${c.xr.reason}` : "") +
+      (c.camera.active ? `\n${cameraText(c)}` : "");
   }
 
   return { showBanner, fail, meshFrame, update, panel };

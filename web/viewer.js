@@ -34,6 +34,7 @@ import { listTakes, startPlayer } from "./takes.js";
 import { followJobs } from "./jobs.js";
 import { createVertexStream } from "./vertex-stream.js";
 import { createXr } from "./xr-view.js";
+import { createCamera } from "./camera-view.js";
 
 const state = createState(new URLSearchParams(location.search));
 const crease = state.crease;
@@ -68,6 +69,15 @@ const xr = createXr(state, {
   token: panel.token,
 });
 
+const camera = createCamera(state, {
+  connection,
+  overlay,
+  elements: { row: $("camera-row"), button: $("camera") },
+  token: panel.token,
+});
+crease.camera.start = camera.start;
+crease.camera.stop = camera.stop;
+
 crease.reconnect = connection.reconnect;
 crease.publish = handles.publish;
 crease.controlPositions = handles.controlPositions;
@@ -92,6 +102,7 @@ try {
 }
 connection.connect();
 xr.updateControl();
+camera.updateControl();
 if (crease.take.id) {
   startPlayer({ takeId: crease.take.id, root: $("player"), state: crease, send: handles.sendFrame, onError: overlay.fail });
 } else {

@@ -53,9 +53,13 @@ export function createXr(state, { view, connection, overlay, elements, token }) 
 
   /** Shows "track my hands" in rooms whose markers are WebXR joints; enabled where XR is. */
   async function updateControl() {
-    row.hidden = !state.room?.capture;
-    if (row.hidden) return;
     const plan = handsToTrack();
+    // A room of other markers (the camera's MediaPipe landmarks) has its own control.
+    row.hidden = !state.room?.capture || /is not a WebXR joint/.test(plan.error || "");
+    if (row.hidden) {
+      c.xr.reason = "";
+      return;
+    }
     // A room of actors with sides tracks both hands: nothing to pick.
     hand.hidden = Boolean(state.room.actors?.length);
     let supported = false;

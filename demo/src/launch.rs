@@ -16,9 +16,9 @@ use crease_server::{AppState, OpenRoomError, Running};
 use crate::animation::{ActorAnimation, DemoAnimation, drive};
 use crate::hand_model::{DemoError, default_cache_dir, demo_model};
 use crate::{
-    DEMO_BETA, DEMO_BOTH_HANDS_ROOM, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM, DEMO_MODEL,
-    DEMO_PERFORMER_ROOM, DEMO_ROOM, DEMO_VMC_ROOM, PERFORMER_LEFT_POSES, VMC_LEFT_MAP, VMC_MAP,
-    WEBXR_LEFT_MAP, WEBXR_MAP,
+    DEMO_BETA, DEMO_BOTH_HANDS_ROOM, DEMO_CAMERA_ROOM, DEMO_HANDS_REFINE, DEMO_HANDS_ROOM,
+    DEMO_MODEL, DEMO_PERFORMER_ROOM, DEMO_ROOM, DEMO_VMC_ROOM, MEDIAPIPE_LEFT_MAP, MEDIAPIPE_MAP,
+    PERFORMER_LEFT_POSES, VMC_LEFT_MAP, VMC_MAP, WEBXR_LEFT_MAP, WEBXR_MAP,
 };
 
 /// Everything `crease-server` is told: what to serve and how.
@@ -173,6 +173,12 @@ impl Started {
             host(grpc),
             grpc.port()
         ));
+        lines.push(format!(
+            "demo: room {DEMO_CAMERA_ROOM:?} follows your hands on a webcam: open {scheme}://{}:{}/?room={DEMO_CAMERA_ROOM} \
+             and press \"track my hands (camera)\" (only the hands' landmarks leave the page)",
+            host(http),
+            http.port(),
+        ));
         if !token_chosen {
             lines.push(format!(
                 "demo: publish token {token} (enter it in the viewer to drag control points)"
@@ -318,6 +324,10 @@ pub async fn start(config: Config, progress: Progress) -> Result<Started, Launch
             .open_room(vmc_room(&model, &token))
             .await
             .map_err(|e| LaunchError::Hands(e.to_string()))?;
+        state
+            .open_room(camera_room(&model, &token))
+            .await
+            .map_err(|e| LaunchError::Hands(e.to_string()))?;
         let performer = state
             .open_room(performer_room(&model, &token))
             .await
@@ -423,31 +433,66 @@ fn both_hands_room(model: &crease_server::registry::LoadedModel, token: &str) ->
 /// [`VMC_MAP`], `left` on the model mirrored across x through [`VMC_LEFT_MAP`], one
 /// performer, as [`DEMO_HANDS_ROOM`] otherwise.
 fn vmc_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
-    let actor = |name: &str, side, mirror, map: &str, unity: &str| ActorSpec {
+    use crease_hand::vmc_map::vmc_markers;
+    two_hands_room(
+        model,
+        token,
+        DEMO_VMC_ROOM,
+        "vmc",
+        [
+            (VMC_MAP, vmc_markers("Right")),
+            (VMC_LEFT_MAP, vmc_markers("Left")),
+        ],
+    )
+}
+
+/// The camera room [`DEMO_CAMERA_ROOM`] on the demo model (issue 46): the viewer's "track my
+/// hands (camera)" publishes MediaPipe Hands' 21 world landmarks per hand (metres), the right
+/// hand onto the demo hand through [`MEDIAPIPE_MAP`], the left onto it mirrored across x
+/// through [`MEDIAPIPE_LEFT_MAP`], one performer, as [`DEMO_HANDS_ROOM`] otherwise.
+fn camera_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
+    use crease_hand::mediapipe_map::mediapipe_markers;
+    two_hands_room(
+        model,
+        token,
+        DEMO_CAMERA_ROOM,
+        "camera",
+        [
+            (MEDIAPIPE_MAP, mediapipe_markers()),
+            (MEDIAPIPE_LEFT_MAP, mediapipe_markers()),
+        ],
+    )
+}
+
+/// A room of two actors on the demo model driven by one performer's tracked hands (marker
+/// positions in metres): `right` as trained, `left` mirrored across x, each through its map
+/// of the markers named, with the hands rooms' options.
+fn two_hands_room(
+    model: &crease_server::registry::LoadedModel,
+    token: &str,
+    id: &str,
+    performer: &str,
+    [right, left]: [(&str, Vec<String>); 2],
+) -> RoomSpec {
+    let actor = |name: &str, side, mirror, (map, markers): (&str, Vec<String>)| ActorSpec {
         name: name.into(),
         model: model.name.clone(),
         side,
         mirror,
-        performer: "vmc".into(),
+        performer: performer.into(),
         options: hands_options(),
         retarget: Some(crease_proto::room::retarget(
             map.to_owned(),
-            crease_hand::vmc_map::vmc_markers(unity),
+            markers,
             "m".into(),
         )),
         model_sha256: None,
     };
     RoomSpec {
-        id: DEMO_VMC_ROOM.into(),
+        id: id.into(),
         actors: vec![
-            actor("right", Side::Right, None, VMC_MAP, "Right"),
-            actor(
-                "left",
-                Side::Left,
-                Some(MirrorPlane::X),
-                VMC_LEFT_MAP,
-                "Left",
-            ),
+            actor("right", Side::Right, None, right),
+            actor("left", Side::Left, Some(MirrorPlane::X), left),
         ],
         token: RoomToken::Fixed(token.to_owned()),
         placement: Placement::Local,

@@ -67,6 +67,16 @@ pub const DEMO_VMC_ROOM: &str = "vmc";
 pub const VMC_MAP: &str = include_str!("../../bench/mocap/vmc-back.toml");
 /// Unity's left-hand bones onto the demo hand mirrored (`bench/mocap/vmc-back-left.toml`).
 pub const VMC_LEFT_MAP: &str = include_str!("../../bench/mocap/vmc-back-left.toml");
+/// The demo's camera room (issue 46): the viewer's "track my hands (camera)" publishes
+/// MediaPipe Hands' landmarks of both hands, the right onto the demo hand through
+/// [`MEDIAPIPE_MAP`], the left onto it mirrored across x through [`MEDIAPIPE_LEFT_MAP`].
+pub const DEMO_CAMERA_ROOM: &str = "camera";
+/// MediaPipe's right-hand landmarks onto the demo hand's `back` landmarks
+/// (`bench/mocap/mediapipe-back.toml`, written by hand/tests/mediapipe_map.rs).
+pub const MEDIAPIPE_MAP: &str = include_str!("../../bench/mocap/mediapipe-back.toml");
+/// MediaPipe's left-hand landmarks onto the demo hand mirrored
+/// (`bench/mocap/mediapipe-back-left.toml`).
+pub const MEDIAPIPE_LEFT_MAP: &str = include_str!("../../bench/mocap/mediapipe-back-left.toml");
 /// The demo room's beta: keyframe mode (HZY11 Fig. 11: about 3 for keyframing), so a dragged
 /// control point is followed closely.
 pub const DEMO_BETA: f32 = 3.0;
