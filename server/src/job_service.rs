@@ -302,8 +302,10 @@ pub fn start_cluster_worker(state: &Arc<AppState>) {
         loop {
             tokio::time::sleep(EXPIRY_SWEEP).await;
             let Some(state) = weak.upgrade() else { return };
-            if cluster.is_connected() {
-                cluster.work().expire(state.metrics()).await;
+            if cluster.is_connected()
+                && let Some(all) = cluster.work().expire().await
+            {
+                state.metrics().count_jobs(&all);
             }
         }
     });

@@ -672,12 +672,13 @@ impl WorkQueue {
     }
 
     /// Deletes the results of ended jobs past their expiry (the record stays listed, expired,
-    /// for a week), as one replica: the one whose compare-and-set marks it expired.
-    pub async fn expire(&self, metrics: &crate::metrics::Metrics) {
-        let Ok(all) = self.list().await else { return };
-        metrics.count_jobs(&all);
+    /// for a week), as one replica: the one whose compare-and-set marks it expired. Returns
+    /// every job's status as read (the caller counts them for the gauges); `None` when the
+    /// bucket cannot be read.
+    pub async fn expire(&self) -> Option<Vec<JobStatus>> {
+        let all = self.list().await.ok()?;
         let now = now_us();
-        for status in all {
+        for status in &all {
             if !status.state.ended() || status.expires_us == 0 || status.expires_us > now {
                 continue;
             }
@@ -702,6 +703,7 @@ impl WorkQueue {
                 Err(e) => tracing::debug!(job = %status.job, "expiring: {e}"),
             }
         }
+        Some(all)
     }
 }
 
