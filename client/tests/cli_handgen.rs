@@ -134,6 +134,26 @@ fn handgen_writes_a_trainable_data_set_and_pose_reproduces_it() {
         "pose --angles differs from handgen by {worst} m"
     );
 
+    // The posed skeleton's joint centres beside the angles: all 25 WebXR joints, each inside
+    // the test mesh near its skin (within a finger's thickness of a vertex).
+    let joints: std::collections::BTreeMap<String, [f32; 3]> = serde_json::from_str(
+        &std::fs::read_to_string(out.join("poses/test/001-sampled.joints.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(joints.len(), 25, "{:?}", joints.keys());
+    for (name, p) in &joints {
+        let p = crease_core::glam::Vec3::from(*p);
+        let nearest = b
+            .positions
+            .iter()
+            .map(|v| v.distance(p))
+            .fold(f32::MAX, f32::min);
+        assert!(
+            nearest < 0.015,
+            "joint {name} at {p} is {nearest} m from the mesh"
+        );
+    }
+
     // A named pose differs from the flat hand.
     let fist = dir.path().join("fist.obj");
     run_ok(

@@ -29,6 +29,7 @@
 //! DIR/base/train/NN-NAME.ply, DIR/base/test/NNN-sampled.ply        binary PLY, shared topology
 //! DIR/detailed/train/..., DIR/detailed/test/...                    the same poses, >= 150K vertices
 //! DIR/poses/train/NN-NAME.json, DIR/poses/test/...                 joint angles (radians, by DOF name)
+//! DIR/poses/train/NN-NAME.joints.json, ...                          joint centres (WebXR names, metres)
 //! DIR/train-palm.toml, train-back.toml, train-glove13.toml         base training manifests with control_points
 //! DIR/test.toml                                                    base test manifest (every mesh evaluated)
 //! DIR/detailed/train.toml, DIR/detailed/test.toml                  detailed manifests
@@ -424,6 +425,22 @@ fn resolution_dir(resolution: Resolution) -> &'static str {
     }
 }
 
+/// A posed skeleton's 25 joint centres by their WebXR names (`crate::webxr::JOINT_NAMES`),
+/// metres in the hand frame, as JSON: `{"wrist": [x, y, z], ...}`.
+fn joints_json(posed: &super::skeleton::PosedSkeleton) -> String {
+    use super::webxr::{JOINT_COUNT, JOINT_NAMES, joint_slot};
+    let joints: BTreeMap<&str, [f32; 3]> = (0..JOINT_COUNT)
+        .map(|j| {
+            let frame = match joint_slot(j) {
+                (None, _) => posed.wrist(),
+                (Some(d), c) => posed.chain(d)[c],
+            };
+            (JOINT_NAMES[j], frame.position.to_array())
+        })
+        .collect();
+    serde_json::to_string_pretty(&joints).expect("joints serialise")
+}
+
 /// Generates the data set into `dir` (module docs), calling `progress` as it goes, and
 /// returns the summary it also writes to `handgen.json`. `resolutions` are the ones to write
 /// (`crease handgen` writes both).
@@ -504,6 +521,19 @@ pub fn write_dataset_with(
                     res.to_owned(),
                     landmarks(layout, rig.skeleton(), rig.rest(), &normals),
                 );
+        }
+        // The posed skeleton's joint centres, once (the skeleton is the same at every
+        // resolution): what a hand tracker would report of each pose (issue 46's test).
+        if resolution == resolutions[0] {
+            for (set, poses) in [("train", &train_poses), ("test", &test_poses)] {
+                for p in poses.iter() {
+                    let path = dir
+                        .join("poses")
+                        .join(set)
+                        .join(format!("{}.joints.json", p.name));
+                    write_text(&path, &joints_json(&rig.skeleton().pose(&p.pose)))?;
+                }
+            }
         }
         let total = train_poses.len() + test_poses.len();
         let mut done = 0;
