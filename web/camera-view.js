@@ -102,6 +102,7 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     k.convertMs = performance.now() - t0;
     if (!parts.length || !connection.ready() || connection.backedUp()) return;
     const captureUs = Math.round((performance.timeOrigin + started) * 1000);
+    k.seq = state.socket.seq;
     connection.send(markerMessage(state.socket.seq++, captureUs, parts));
     c.published += 1;
     k.published += 1;
@@ -177,5 +178,12 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     }
   });
 
-  return { updateControl, start, stop };
+  /** The markers last published for `actor`'s hand (x, y, z each), for tests; null before. */
+  const markers = (actor) => {
+    const to = session?.targets;
+    const t = to && Object.values(to).find((x) => x && x.actor === (actor ?? null));
+    return t ? Array.from(t.markers) : null;
+  };
+
+  return { updateControl, start, stop, markers };
 }

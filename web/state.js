@@ -95,7 +95,7 @@ export function createState(params) {
     xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, hands: [], published: 0, dropped: 0, seq: null, latencyMs: null },
     // The webcam source (camera-view.js): hands seen in the last frame ({side, score, image:
     // 21 [x, y] pixels}), MediaPipe's time per frame, the share of frames with a hand.
-    camera: { active: false, hands: [], frames: 0, detected: 0, detectionRate: 0, published: 0, inferenceMs: 0, convertMs: 0 },
+    camera: { active: false, seq: null, hands: [], frames: 0, detected: 0, detectionRate: 0, published: 0, inferenceMs: 0, convertMs: 0 },
     // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
     // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
     take: { list: [], id: takeId, loaded: false },

@@ -77,6 +77,7 @@ const camera = createCamera(state, {
 });
 crease.camera.start = camera.start;
 crease.camera.stop = camera.stop;
+crease.cameraMarkers = camera.markers;
 
 crease.reconnect = connection.reconnect;
 crease.publish = handles.publish;
