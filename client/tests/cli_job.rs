@@ -7,6 +7,7 @@
 //! after it expired each get a clear answer.
 
 use crate::cli_synth_remote::{ANGLES, assert_close, batch_bound, controls_csv, names, stderr};
+use crate::cli_take::max_distance;
 use crate::common;
 
 use std::time::Duration;
@@ -58,12 +59,7 @@ fn a_job_equals_local_synth_and_every_refusal_is_named() {
     let url = format!("http://{addr}");
     let controls = dir.join("controls.csv");
     std::fs::write(&controls, controls_csv()).unwrap();
-    let job = |args: &[&str]| {
-        let mut c = crease();
-        c.arg("job").args(args).args(["--server", &url]);
-        c.env("CREASE_ADMIN_TOKEN", ADMIN);
-        c.output().unwrap()
-    };
+    let job = |args: &[&str]| job_cli(&url, args);
 
     // The reference: local synthesis of the same file.
     let local = dir.join("local");
@@ -559,14 +555,6 @@ fn morph_frames(glb: &std::path::Path) -> Vec<Vec<Vec3>> {
                 .collect()
         })
         .collect()
-}
-
-fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
-    assert_eq!(a.len(), b.len());
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| x.distance(*y))
-        .fold(0.0, f32::max)
 }
 
 /// The body of `GET path` on `addr` (HTTP/1.0, which must answer 200).

@@ -200,7 +200,8 @@ fn all_finger_markers_missing_still_yields_finite_meshes() {
         c.env("CREASE_ADMIN_TOKEN", "admin");
         c
     };
-    let id = run_ok(
+    // Both jobs below ask for the offline path's settings.
+    let submit = || {
         job(&[
             "submit",
             "--model",
@@ -210,10 +211,13 @@ fn all_finger_markers_missing_still_yields_finite_meshes() {
             "--refine",
             "8,0.01",
         ])
-        .arg("--tsv")
-        .arg(&tsv)
-        .arg("--map")
-        .arg(map("qualisys-glove13.toml")),
+    };
+    let id = run_ok(
+        submit()
+            .arg("--tsv")
+            .arg(&tsv)
+            .arg("--map")
+            .arg(map("qualisys-glove13.toml")),
     );
     let id = id.trim().to_owned();
     let watched = run_ok(&mut job(&["watch", &id]));
@@ -234,20 +238,8 @@ fn all_finger_markers_missing_still_yields_finite_meshes() {
     }
 
     // The server retargeted the raw markers (JobSpec.retarget) exactly as `crease retarget`
-    // did here: a job of the offline control frames streams the same bytes.
-    let offline = run_ok(
-        job(&[
-            "submit",
-            "--model",
-            "glove-hand",
-            "--beta",
-            "0.3",
-            "--refine",
-            "8,0.01",
-        ])
-        .arg("--controls")
-        .arg(&csv),
-    );
+    // did here: a job of the offline control frames gives the same meshes, file for file.
+    let offline = run_ok(submit().arg("--controls").arg(&csv));
     let offline = offline.trim().to_owned();
     run_ok(&mut job(&["watch", &offline]));
     let offline_frames = tmp.path().join("offline-job");

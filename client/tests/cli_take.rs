@@ -279,7 +279,7 @@ pub(crate) fn gltf_skinned(doc: &gltf::Gltf, k: usize) -> Vec<Vec3> {
         .collect()
 }
 
-fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
+pub(crate) fn max_distance(a: &[Vec3], b: &[Vec3]) -> f32 {
     assert_eq!(a.len(), b.len());
     a.iter()
         .zip(b)

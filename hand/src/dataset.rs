@@ -428,15 +428,9 @@ fn resolution_dir(resolution: Resolution) -> &'static str {
 /// A posed skeleton's 25 joint centres by their WebXR names (`crate::webxr::JOINT_NAMES`),
 /// metres in the hand frame, as JSON: `{"wrist": [x, y, z], ...}`.
 fn joints_json(posed: &super::skeleton::PosedSkeleton) -> String {
-    use super::webxr::{JOINT_COUNT, JOINT_NAMES, joint_slot};
+    use super::webxr::{JOINT_COUNT, JOINT_NAMES, skeleton_frame};
     let joints: BTreeMap<&str, [f32; 3]> = (0..JOINT_COUNT)
-        .map(|j| {
-            let frame = match joint_slot(j) {
-                (None, _) => posed.wrist(),
-                (Some(d), c) => posed.chain(d)[c],
-            };
-            (JOINT_NAMES[j], frame.position.to_array())
-        })
+        .map(|j| (JOINT_NAMES[j], skeleton_frame(posed, j).position.to_array()))
         .collect();
     serde_json::to_string_pretty(&joints).expect("joints serialise")
 }

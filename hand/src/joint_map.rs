@@ -35,7 +35,7 @@ use glam::{DVec3, Vec3};
 
 use super::dataset::{LandmarkAnchor, Layout, landmark_anchors, snap_to_skin};
 use super::skeleton::{Digit, HandPose, PosedSkeleton};
-use super::webxr::{JOINT_COUNT, JOINT_NAMES, joint_slot, webxr_index};
+use super::webxr::{JOINT_COUNT, JOINT_NAMES, skeleton_frame, webxr_index};
 use crate::rig::{HandRig, Layers, RigScratch};
 
 /// The suffix of a joint's dorsal point (module docs).
@@ -86,10 +86,7 @@ impl Side {
 pub fn virtual_markers(posed: &PosedSkeleton, mesh: &[Vec3], normals: &[Vec3]) -> Vec<Vec3> {
     let mut out = vec![Vec3::ZERO; MARKERS_PER_JOINT * JOINT_COUNT];
     for j in 0..JOINT_COUNT {
-        let frame = match joint_slot(j) {
-            (None, _) => posed.wrist(),
-            (Some(d), c) => posed.chain(d)[c],
-        };
+        let frame = skeleton_frame(posed, j);
         let dorsal = frame.dorsal();
         out[Side::Centre.marker(j)] = frame.position;
         out[Side::Dorsal.marker(j)] = first_skin(frame.position, dorsal, mesh, normals);

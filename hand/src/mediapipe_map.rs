@@ -16,7 +16,7 @@
 //! thumb's CMC (`thumb-metacarpal`), MCP and IP, a finger's MCP (`*-phalanx-proximal`), PIP and
 //! DIP, and every `*-tip`. That is VMC's order and its joints, but for the tip, which here is
 //! the fingertip joint itself (VMC's is extrapolated by the bridge), so the candidates of each
-//! landmark are VMC's (`crate::vmc_map::candidates`).
+//! landmark are VMC's (`crate::vmc_map::fit_chain_map`).
 //!
 //! # Fitting
 //!
@@ -27,9 +27,9 @@
 use glam::Vec3;
 
 use crate::dataset::Layout;
-use crate::joint_map::{Mix, PosedHands, errors_over, fit_mixes};
+use crate::joint_map::{Mix, PosedHands, errors_over};
 use crate::rig::HandRig;
-use crate::vmc_map::{candidates, chain_markers};
+use crate::vmc_map::{chain_hands, chain_markers, fit_chain_map};
 
 /// Landmarks of one hand.
 pub const MEDIAPIPE_MARKERS: usize = 21;
@@ -64,23 +64,13 @@ pub fn mediapipe_virtual_markers(webxr_centres: &[Vec3]) -> Vec<Vec3> {
 
 /// Per pose of `hands`, [`mediapipe_virtual_markers`].
 pub fn mediapipe_hands(hands: &PosedHands) -> Vec<Vec<Vec3>> {
-    hands
-        .markers
-        .iter()
-        .map(|m| mediapipe_virtual_markers(m))
-        .collect()
+    chain_hands(hands, None)
 }
 
 /// The mixes of `layout`'s landmarks (on `rig`'s rest mesh) over MediaPipe landmarks, fitted
 /// on `hands` (module docs).
 pub fn fit_mediapipe_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<Mix> {
-    fit_mixes(
-        layout,
-        rig,
-        &mediapipe_hands(hands),
-        &hands.meshes,
-        |anchor, _| candidates(anchor),
-    )
+    fit_chain_map(layout, rig, &mediapipe_hands(hands), hands)
 }
 
 /// Distances of each MediaPipe mix to its landmark vertex, per pose of `hands`:

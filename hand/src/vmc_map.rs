@@ -105,10 +105,15 @@ pub(crate) fn chain_markers(webxr_centres: &[Vec3], extend_tip: Option<f32>) -> 
 
 /// Per pose of `hands`, [`vmc_virtual_markers`].
 pub fn vmc_hands(hands: &PosedHands) -> Vec<Vec<Vec3>> {
+    chain_hands(hands, Some(TIP_RATIO))
+}
+
+/// Per pose of `hands`, [`chain_markers`] with `extend_tip`.
+pub(crate) fn chain_hands(hands: &PosedHands, extend_tip: Option<f32>) -> Vec<Vec<Vec3>> {
     hands
         .markers
         .iter()
-        .map(|m| vmc_virtual_markers(m))
+        .map(|m| chain_markers(m, extend_tip))
         .collect()
 }
 
@@ -123,7 +128,7 @@ fn vmc_at(digit: Digit, slot: usize) -> Option<usize> {
 }
 
 /// The candidate markers of a landmark (module docs), indices of [`chain_markers`].
-pub(crate) fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
+fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
     let mut c: Vec<usize> = match anchor {
         LandmarkAnchor::Bone { digit, from } => (from.saturating_sub(1)..=from + 2)
             .filter(|&slot| slot < digit.chain_len())
@@ -146,18 +151,25 @@ pub(crate) fn candidates(anchor: LandmarkAnchor) -> Vec<usize> {
 /// The mixes of `layout`'s landmarks (on `rig`'s rest mesh) over VMC markers, fitted on
 /// `hands` (module docs).
 pub fn fit_vmc_map(layout: Layout, rig: &HandRig, hands: &PosedHands) -> Vec<Mix> {
-    fit_mixes(
-        layout,
-        rig,
-        &vmc_hands(hands),
-        &hands.meshes,
-        |anchor, _| candidates(anchor),
-    )
+    fit_chain_map(layout, rig, &vmc_hands(hands), hands)
 }
 
 /// Distances of each VMC mix to its landmark vertex, per pose of `hands`: `[pose][landmark]`.
 pub fn vmc_mix_errors(mixes: &[Mix], hands: &PosedHands) -> Vec<Vec<f32>> {
     errors_over(mixes, &vmc_hands(hands), &hands.meshes)
+}
+
+/// The mixes of `layout`'s landmarks over `markers` ([`chain_hands`] of `hands`), each over
+/// its [`candidates`]: VMC's maps and MediaPipe's.
+pub(crate) fn fit_chain_map(
+    layout: Layout,
+    rig: &HandRig,
+    markers: &[Vec<Vec3>],
+    hands: &PosedHands,
+) -> Vec<Mix> {
+    fit_mixes(layout, rig, markers, &hands.meshes, |anchor, _| {
+        candidates(anchor)
+    })
 }
 
 #[cfg(test)]

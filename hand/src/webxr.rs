@@ -168,7 +168,7 @@ pub fn webxr_index(digit: Digit, chain: usize) -> usize {
 
 /// The frame of WebXR joint `i` in a posed skeleton (the tip frames carry the distal
 /// phalanx's orientation).
-fn skeleton_frame(posed: &PosedSkeleton, i: usize) -> JointFrame {
+pub fn skeleton_frame(posed: &PosedSkeleton, i: usize) -> JointFrame {
     match joint_slot(i) {
         (None, _) => posed.wrist(),
         (Some(d), c) => posed.chain(d)[c],

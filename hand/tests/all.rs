@@ -7,6 +7,7 @@
 #[path = "../../core/tests/common/mod.rs"]
 mod common;
 
+mod fitted_maps;
 mod joint_map;
 mod mediapipe_map;
 mod render;

@@ -614,9 +614,7 @@ impl CreaseService {
         tracing::info!(job = %status.job, model = %status.model, frames = status.frames_total, chunks = status.chunks_total, "job queued");
         Ok(v1::JobInfo::from(&status))
     }
-}
 
-impl CreaseService {
     /// A job's raw marker frames retargeted through `wire`'s map onto `model`'s control points
     /// (`crate::capture`), off the executor.
     async fn retarget_job(
