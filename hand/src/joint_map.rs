@@ -348,17 +348,20 @@ pub fn joint_map_toml(
         &capture_markers(),
         registration,
         calibration_frames,
+        &[],
         comment,
     )
 }
 
 /// [`joint_map_toml`] for mixes whose terms index `names` (another capture's markers:
-/// `crate::vmc_map`'s).
+/// `crate::vmc_map`'s), with `bones` (`(marker, parent, length)`, indices into `names`; the
+/// map's `[bones]`, `crease_mocap::map`) when the capture's joints are estimated.
 pub fn map_toml(
     mixes: &[Mix],
     names: &[String],
     registration: &[&str],
     calibration_frames: usize,
+    bones: &[(usize, usize, f32)],
     comment: &str,
 ) -> String {
     let mut s = String::new();
@@ -380,6 +383,16 @@ pub fn map_toml(
         let _ = writeln!(s, "{} = {{ {} }}", m.name, terms.join(", "));
     }
     s.push_str("\n[gaps]\nfill = \"neighbour\"\n");
+    if !bones.is_empty() {
+        s.push_str("\n[bones]\n");
+        for &(m, parent, length) in bones {
+            let _ = writeln!(
+                s,
+                "{} = {{ parent = {:?}, length = {length:.4} }}",
+                names[m], names[parent]
+            );
+        }
+    }
     s
 }
 

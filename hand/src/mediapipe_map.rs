@@ -23,6 +23,16 @@
 //! As `crate::vmc_map`: an affine mix per landmark, least squares with a small ridge over the
 //! data set's training poses, checked on sampled test poses no fit saw
 //! (`hand/tests/mediapipe_map.rs`, which writes `bench/mocap/mediapipe-*.toml`).
+//!
+//! # Bones
+//!
+//! MediaPipe estimates each frame's world landmarks afresh, and its bone lengths vary from
+//! frame to frame far more than a hand's can: on `crease handgen`'s rendered training poses
+//! (tests/browser/camera.test.mjs) from 0.2 to 1.7 times the true length, most where fingers
+//! curl towards the camera. Mixes of such a hand are targets no model can reach (the room's
+//! mesh missed them by up to 26 mm). So the maps carry `[bones]` ([`mediapipe_bones`]): the
+//! sweep hand's bone lengths along MediaPipe's tree ([`PARENTS`]), on which the room rebuilds
+//! every frame (`crease_mocap::map`): MediaPipe's directions, the model's proportions.
 
 use glam::Vec3;
 
@@ -45,6 +55,26 @@ const DIGITS: [&str; 5] = [
 const THUMB: [&str; 4] = ["cmc", "mcp", "ip", "tip"];
 /// A finger's four landmarks, base first.
 const FINGER: [&str; 4] = ["mcp", "pip", "dip", "tip"];
+
+/// Each landmark's parent in MediaPipe's hand tree (`HAND_CONNECTIONS`: the wrist to each
+/// digit's base, then along the digit); the wrist, the root, is its own.
+pub const PARENTS: [usize; MEDIAPIPE_MARKERS] = [
+    0, 0, 1, 2, 3, 0, 5, 6, 7, 0, 9, 10, 11, 0, 13, 14, 15, 0, 17, 18, 19,
+];
+
+/// The bones of MediaPipe's tree on the sweep hand, `(landmark, parent, length)` in
+/// [`mediapipe_markers`]' order, parents first: each length the mean over the poses of `hands`
+/// (the bones along a digit are rigid; those from the wrist vary a little as the palm cups).
+pub fn mediapipe_bones(hands: &PosedHands) -> Vec<(usize, usize, f32)> {
+    let posed = mediapipe_hands(hands);
+    (1..MEDIAPIPE_MARKERS)
+        .map(|m| {
+            let parent = PARENTS[m];
+            let sum: f32 = posed.iter().map(|p| p[m].distance(p[parent])).sum();
+            (m, parent, sum / posed.len().max(1) as f32)
+        })
+        .collect()
+}
 
 /// The landmarks of one hand, in MediaPipe's order (either hand: MediaPipe names them alike).
 pub fn mediapipe_markers() -> Vec<String> {

@@ -27,6 +27,8 @@ pub(crate) struct CentreMaps {
     pub(crate) markers: fn(&str) -> Vec<String>,
     /// The map's header for a layout, a side and the residuals' text.
     pub(crate) header: fn(Layout, &str, &str) -> String,
+    /// The map's `[bones]` from the training poses (none for a measured skeleton).
+    pub(crate) bones: fn(&PosedHands) -> Vec<(usize, usize, f32)>,
 }
 
 fn poses(list: &[crease_hand::dataset::DatasetPose]) -> Vec<HandPose> {
@@ -115,6 +117,7 @@ per landmark mean/max (mm): {}.",
                 &(maps.markers)(side),
                 &points,
                 40,
+                &(maps.bones)(&fit_on),
                 &(maps.header)(layout, side, &residuals),
             );
             let path = root.join(format!(

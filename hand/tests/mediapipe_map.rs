@@ -7,7 +7,9 @@
 
 use crate::fitted_maps::{CentreMaps, SEED, TEST, TRAIN, check_fitted_maps};
 use crease_hand::dataset::Layout;
-use crease_hand::mediapipe_map::{fit_mediapipe_map, mediapipe_markers, mediapipe_mix_errors};
+use crease_hand::mediapipe_map::{
+    fit_mediapipe_map, mediapipe_bones, mediapipe_markers, mediapipe_mix_errors,
+};
 
 #[test]
 fn fitted_mediapipe_maps_put_the_landmarks_on_the_joints_of_unseen_poses() {
@@ -18,6 +20,7 @@ fn fitted_mediapipe_maps_put_the_landmarks_on_the_joints_of_unseen_poses() {
         // MediaPipe names both hands' landmarks alike.
         markers: |_| mediapipe_markers(),
         header,
+        bones: mediapipe_bones,
     });
 }
 
@@ -38,8 +41,9 @@ Written by hand/tests/mediapipe_map.rs (crease_hand::mediapipe_map, which explai
 landmark is an affine mix of the joint centres around it, fitted on the sweep hand's {TRAIN}
 training poses (seed {SEED}) and checked on {TEST} sampled test poses. MediaPipe gives joint
 centres only, so the landmarks on the skin are reached through the joints around them. The
-three back-of-hand points register the hand every frame; the tracked hand's size (MediaPipe's
-estimate) is fitted over the first 40 frames.
+three back-of-hand points register the hand every frame. MediaPipe's bone lengths vary from frame
+to frame, so each frame is rebuilt on [bones] (the sweep hand's, mean over the training poses):
+MediaPipe's directions at the model's lengths; the scale is fitted over the first 40 frames.
 {residuals}",
         name = layout.name(),
     )

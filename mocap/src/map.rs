@@ -14,11 +14,22 @@
 //!
 //! [gaps]
 //! fill = "neighbour"     # or "hold" (module docs of `Retarget`)
+//!
+//! [bones]                # optional: a marker = its parent and the bone's length (file units)
+//! RIFM = { parent = "RIFI", length = 42.0 }
 //! ```
 //!
 //! Mixes serve HZY11 §7's first problem: markers rarely sit where a model's control points
 //! are, and joint-centre data (C3D from a body tracker) has no marker on the back of the hand
 //! at all. A source is valid in a frame only when every marker it mixes is.
+//!
+//! `[bones]` serves markers that are an estimated skeleton's joints rather than measured
+//! points (a camera's hand landmarks, `crease_hand::mediapipe_map`): such an estimate gets
+//! the joints' directions right more often than its bone lengths, which vary from frame to
+//! frame more than a hand's can. Each frame is rebuilt from its roots out: every bone keeps
+//! its direction in that frame and takes the map's length, so the mixes see one consistent
+//! skeleton of the model's proportions whose joints only turn (`crate::retarget`). A bone
+//! whose marker or parent is not seen keeps the marker as it is.
 //!
 //! [`MarkerMap::bind`] checks the map against a recording (markers by name) and a model
 //! (control points by name) and gives a [`BoundMap`] of indices.
@@ -26,6 +37,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use glam::Vec3;
 use serde::Deserialize;
 
 use super::{MocapError, Recording};
@@ -95,6 +107,16 @@ pub struct GapSpec {
     pub fill: GapFill,
 }
 
+/// One entry of the `[bones]` table: the marker's parent and the bone's length.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoneSpec {
+    /// The marker the bone starts at.
+    pub parent: String,
+    /// The bone's length, in the recording's units.
+    pub length: f32,
+}
+
 /// A marker map file (module docs).
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,7 +128,13 @@ pub struct MarkerMap {
     /// Gap filling.
     #[serde(default)]
     pub gaps: GapSpec,
+    /// Marker name -> its bone (module docs); empty for measured markers.
+    #[serde(default)]
+    pub bones: BTreeMap<String, BoneSpec>,
 }
+
+/// One bound bone: `(marker, parent, length)`, marker indices in the recording.
+pub type Bone = (usize, usize, f32);
 
 /// A map bound to one recording and one model: indices instead of names.
 #[derive(Clone, Debug, PartialEq)]
@@ -121,6 +149,10 @@ pub struct BoundMap {
     pub gaps: GapFill,
     /// Model control points in total (a frame carries all of them).
     pub control_count: usize,
+    /// The skeleton's bones, every parent's before its children's (module docs).
+    pub bones: Vec<Bone>,
+    /// Markers in the recording (what a frame carries).
+    pub marker_count: usize,
 }
 
 impl MarkerMap {
@@ -215,7 +247,73 @@ impl MarkerMap {
             spec: spec.clone(),
             gaps: self.gaps.fill,
             control_count: control_names.len(),
+            bones: self.bind_bones(recording)?,
+            marker_count: recording.names.len(),
         })
+    }
+
+    /// The `[bones]` table as recording indices, parents first (a bone is placed once every
+    /// bone above it is).
+    fn bind_bones(&self, recording: &Recording) -> Result<Vec<Bone>, MocapError> {
+        let index = |marker: &str, what: &str| {
+            recording.marker(marker).ok_or_else(|| {
+                MocapError::Map(format!(
+                    "[bones] {what}: the recording has no marker {marker:?} (it has {})",
+                    recording.names.join(", ")
+                ))
+            })
+        };
+        let mut pending = Vec::with_capacity(self.bones.len());
+        for (marker, bone) in &self.bones {
+            if !(bone.length.is_finite() && bone.length > 0.0) {
+                return Err(MocapError::Map(format!(
+                    "[bones] {marker}: length {}, expected a positive number",
+                    bone.length
+                )));
+            }
+            pending.push((
+                index(marker, marker)?,
+                index(&bone.parent, &format!("{marker}.parent"))?,
+                bone.length,
+            ));
+        }
+        // Parents first: take the bones whose parent is no pending bone's marker, repeatedly.
+        let mut ordered = Vec::with_capacity(pending.len());
+        while !pending.is_empty() {
+            let (ready, rest): (Vec<Bone>, Vec<Bone>) = pending
+                .iter()
+                .partition(|(_, parent, _)| !pending.iter().any(|(m, _, _)| m == parent));
+            if ready.is_empty() {
+                let names: Vec<&str> = rest
+                    .iter()
+                    .map(|(m, _, _)| recording.names[*m].as_str())
+                    .collect();
+                return Err(MocapError::Map(format!(
+                    "[bones]: {} form a loop (every marker's parent chain must end at a marker without a bone)",
+                    names.join(", ")
+                )));
+            }
+            ordered.extend(ready);
+            pending = rest;
+        }
+        Ok(ordered)
+    }
+}
+
+/// Rebuilds one frame's skeleton (module docs: `[bones]`): `out` is `positions`, but each
+/// bone's marker (seen, as its parent) moved to its parent's rebuilt place plus the bone's
+/// direction in `positions` at the bone's length. `bones` parents first, as bound.
+pub fn rebuild_bones(bones: &[Bone], positions: &[Vec3], valid: &[bool], out: &mut [Vec3]) {
+    out.copy_from_slice(positions);
+    for &(marker, parent, length) in bones {
+        if !(valid[marker] && valid[parent]) {
+            continue;
+        }
+        let d = positions[marker] - positions[parent];
+        let norm = d.length();
+        if norm > 0.0 && norm.is_finite() {
+            out[marker] = out[parent] + d * (length / norm);
+        }
     }
 }
 
@@ -255,6 +353,46 @@ fill = "hold"
         assert_eq!(b.registration, vec![2, 0, 1]);
     }
 
+    const BONES: &str = r#"
+[bones]
+D = { parent = "C", length = 2.0 }
+B = { parent = "A", length = 1.0 }
+C = { parent = "B", length = 3.0 }
+"#;
+
+    #[test]
+    fn bones_bind_parents_first_and_rebuild_at_their_lengths() {
+        let map = MarkerMap::parse(Path::new("m.toml"), &format!("{MAP}{BONES}")).unwrap();
+        let names: Vec<String> = ["right", "left", "top"].map(String::from).to_vec();
+        let b = map.bind(&recording(), &names).unwrap();
+        // A chain A -> B -> C -> D, whatever the table's order.
+        assert_eq!(b.bones, vec![(1, 0, 1.0), (2, 1, 3.0), (3, 2, 2.0)]);
+        assert_eq!(b.marker_count, 4);
+        // Directions kept, lengths the map's: an analytic chain of wrong lengths.
+        let a = Vec3::new(1.0, 2.0, 3.0);
+        let positions = [
+            a,
+            a + 5.0 * Vec3::X,
+            a + 5.0 * Vec3::X + 0.5 * Vec3::Y,
+            Vec3::ZERO,
+        ];
+        let mut out = [Vec3::NAN; 4];
+        rebuild_bones(&b.bones, &positions, &[true, true, true, true], &mut out);
+        assert_eq!(out[0], a, "a root stays");
+        assert!(out[1].distance(a + Vec3::X) < 1e-6, "{}", out[1]);
+        assert!(
+            out[2].distance(a + Vec3::X + 3.0 * Vec3::Y) < 1e-6,
+            "{}",
+            out[2]
+        );
+        // D sat on A's origin side: its direction from C, at length 2.
+        let dir = (positions[3] - positions[2]).normalize();
+        assert!(out[3].distance(out[2] + 2.0 * dir) < 1e-5, "{}", out[3]);
+        // A marker not seen, and its child: kept as they are.
+        rebuild_bones(&b.bones, &positions, &[true, true, false, true], &mut out);
+        assert_eq!(&out[2..], &positions[2..]);
+    }
+
     #[test]
     fn errors_name_the_problem() {
         let names: Vec<String> = ["right", "left", "top"].map(String::from).to_vec();
@@ -270,5 +408,20 @@ fill = "hold"
         assert!(e(&MAP.replace("\"top\", ", "")).contains("2 given, at least 3"));
         assert!(e(&MAP.replace("fill = \"hold\"", "fill = \"guess\"")).contains("m.toml"));
         assert!(e(&MAP.replace("points", "pts")).contains("m.toml"));
+        let bones = |b: &str| {
+            e(&format!(
+                "{MAP}{}",
+                BONES.replace("B = { parent = \"A\", length = 1.0 }", b)
+            ))
+        };
+        assert!(
+            bones("B = { parent = \"Q\", length = 1.0 }")
+                .contains("[bones] B.parent: the recording has no marker \"Q\"")
+        );
+        assert!(
+            bones("B = { parent = \"A\", length = -1.0 }")
+                .contains("[bones] B: length -1, expected a positive")
+        );
+        assert!(bones("B = { parent = \"D\", length = 1.0 }").contains("form a loop"));
     }
 }

@@ -20,7 +20,7 @@
 
 use glam::Vec3;
 
-use super::map::{BoundMap, GapFill};
+use super::map::{BoundMap, GapFill, rebuild_bones};
 use super::register::{Registered, Registration};
 use super::{MarkerFrame, Recording};
 
@@ -72,6 +72,8 @@ pub struct Retarget {
     seen: Vec<bool>,
     reg_points: Vec<Vec3>,
     reg_seen: Vec<bool>,
+    /// The frame's markers, rebuilt on the map's bones (empty without bones).
+    rebuilt: Vec<Vec3>,
 }
 
 impl Retarget {
@@ -112,6 +114,11 @@ impl Retarget {
             seen: vec![false; n],
             reg_points: vec![Vec3::ZERO; k],
             reg_seen: vec![false; k],
+            rebuilt: if map.bones.is_empty() {
+                Vec::new()
+            } else {
+                vec![Vec3::ZERO; map.marker_count]
+            },
             map,
         }
     }
@@ -131,15 +138,26 @@ impl Retarget {
         self.map.control_count
     }
 
-    /// Mixes the frame's markers into one point per mapped control point, and gathers the
-    /// registration points' among them.
+    /// Mixes the frame's markers (rebuilt on the map's bones, if it has any) into one point
+    /// per mapped control point, and gathers the registration points' among them.
     fn mix(&mut self, frame: &MarkerFrame<'_>) {
+        let positions = if self.map.bones.is_empty() {
+            frame.positions
+        } else {
+            rebuild_bones(
+                &self.map.bones,
+                frame.positions,
+                frame.valid,
+                &mut self.rebuilt,
+            );
+            &self.rebuilt
+        };
         for (i, (_, terms)) in self.map.controls.iter().enumerate() {
             let mut p = Vec3::ZERO;
             let mut ok = true;
             for &(m, w) in terms {
                 ok &= frame.valid[m];
-                p += w * frame.positions[m];
+                p += w * positions[m];
             }
             self.mixed[i] = p;
             self.seen[i] = ok && p.is_finite();

@@ -150,6 +150,18 @@ async function checks({ page, base, shots, env, check }) {
         r.followRms = rms(follow);
         r.restRms = rms(rest);
         line += `; mesh max ${mm(r.follow)} mm, RMS ${mm(r.followRms)} mm (rest ${mm(r.restRms)})`;
+        // Where the misses come from: MediaPipe's world landmarks against the true joints
+        // (each set fitted onto the other by a similarity), and the map's targets of the
+        // true joints against those of MediaPipe's landmarks and against the mesh.
+        const truth = pose.landmarks.flat();
+        const mp = [...Array(21).keys()].map((i) => seen.markers.slice(3 * i, 3 * i + 3));
+        const world = fittedDistances(mp, pose.landmarks);
+        const goalTruth = mapTargets(map, MAP_PATH, right.control_points, right.capture.markers, truth);
+        const input = fittedDistances(goal, goalTruth);
+        const toTruth = fittedDistances(seen.controls, goalTruth);
+        if (process.env.CREASE_CAMERA_DUMP) fs.appendFileSync(process.env.CREASE_CAMERA_DUMP, JSON.stringify({ name: pose.name, truth: pose.landmarks, markers: seen.markers, image: hand.image, projected, controls: seen.controls }) + "\n");
+        const worst = (d) => `${mm(Math.max(...d))} at ${right.control_points[d.indexOf(Math.max(...d))].name}`;
+        line += `; [world landmarks to joints mean ${mm(world.reduce((s, x) => s + x, 0) / 21)} max ${mm(Math.max(...world))} at ${AS_WEBXR[world.indexOf(Math.max(...world))]}; targets to true targets max ${worst(input)}; mesh to true targets max ${worst(toTruth)}, RMS ${mm(rms(toTruth))}; mesh to targets worst ${worst(follow)}]`;
       }
       assert.equal(hand.side, "right", `${line}: handedness`);
       if (r.follow !== undefined) {

@@ -220,9 +220,29 @@ export const mm = (x) => (1000 * x).toFixed(1);
 
 // ---- The joint map, evaluated here ---------------------------------------------------------
 
+/** `markers` (x, y, z per name of `markerNames`) rebuilt on the map's `[bones]`, here and
+ * independently of crease_mocap::map: from the roots out, each bone's marker at its parent's
+ * rebuilt place plus the bone's direction at the map's length. */
+export function rebuildBones(bones, markerNames, markers) {
+  const out = Array.from(markers);
+  const done = new Set(markerNames.filter((n) => !(n in bones)));
+  while (done.size < markerNames.length) {
+    const next = markerNames.find((n) => !done.has(n) && done.has(bones[n].parent));
+    assert.ok(next, `[bones] of ${markerNames.filter((n) => !done.has(n))}: no order`);
+    const i = markerNames.indexOf(next), j = markerNames.indexOf(bones[next].parent);
+    const d = [0, 1, 2].map((k) => markers[3 * i + k] - markers[3 * j + k]);
+    const n = Math.hypot(...d);
+    for (let k = 0; k < 3; k++) out[3 * i + k] = out[3 * j + k] + (d[k] * bones[next].length) / n;
+    done.add(next);
+  }
+  return out;
+}
+
 /** Per control point (model order) its target from the published markers (declared order),
- * through the marker map `map` (parsed TOML; `mapPath` names it in errors). */
-export function mapTargets(map, mapPath, controlPoints, markerNames, markers) {
+ * through the marker map `map` (parsed TOML, its `[bones]` applied first; `mapPath` names it
+ * in errors). */
+export function mapTargets(map, mapPath, controlPoints, markerNames, published) {
+  const markers = map.bones ? rebuildBones(map.bones, markerNames, published) : published;
   const at = (name) => {
     const i = markerNames.indexOf(name);
     assert.ok(i >= 0, `the room declares no marker ${name}`);
