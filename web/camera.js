@@ -103,13 +103,16 @@ export function fillLandmarks(plan, world, wrist, out) {
 
 /**
  * The user's side of each hand MediaPipe found in `results` (its multiHandedness), as
- * [{index, side: "right" | "left", score}]. MediaPipe labels hands as if the image were
- * mirrored (a selfie); the camera's frames are not (selfieMode off, so that the world
- * landmarks keep the hand's chirality), so its "Left" is the user's right hand.
+ * [{index, side: "right" | "left", score}], `index` into its multiHandLandmarks. MediaPipe
+ * labels hands as if the image were mirrored (a selfie); the camera's frames are not
+ * (selfieMode off, so that the world landmarks keep the hand's chirality), so its "Left" is
+ * the user's right hand. A handedness' own `index` is its label's class (0 Left, 1 Right),
+ * not the hand's place among the landmarks, whatever its typings say (MediaPipe issues
+ * #1586, #4610; the closed-loop test swapped two hands by it): the arrays are parallel.
  */
 export function handSides(multiHandedness) {
   return (multiHandedness || []).map((h, k) => ({
-    index: h.index ?? k,
+    index: k,
     side: h.label === "Left" ? "right" : "left",
     score: h.score,
   }));

@@ -355,7 +355,9 @@ pub fn joint_map_toml(
 
 /// [`joint_map_toml`] for mixes whose terms index `names` (another capture's markers:
 /// `crate::vmc_map`'s), with `bones` (`(marker, parent, length)`, indices into `names`; the
-/// map's `[bones]`, `crease_mocap::map`) when the capture's joints are estimated.
+/// map's `[bones]`, `crease_mocap::map`) when the capture's joints are estimated. A map with
+/// bones registers at scale 1 (the rebuilt hand is the fitted one's size) instead of fitting
+/// the scale over `calibration_frames`.
 pub fn map_toml(
     mixes: &[Mix],
     names: &[String],
@@ -369,9 +371,15 @@ pub fn map_toml(
         let _ = writeln!(s, "{}", format!("# {line}").trim_end());
     }
     let points: Vec<String> = registration.iter().map(|p| format!("{p:?}")).collect();
+    // A skeleton rebuilt on the fitted hand's bones has the fitted hand's size: scale 1.
+    let scale = if bones.is_empty() {
+        format!("calibration_frames = {calibration_frames}")
+    } else {
+        "scale = 1.0".to_owned()
+    };
     let _ = writeln!(
         s,
-        "\n[registration]\npoints = [{}]\ncalibration_frames = {calibration_frames}\n\n[markers]",
+        "\n[registration]\npoints = [{}]\n{scale}\n\n[markers]",
         points.join(", ")
     );
     for m in mixes {

@@ -32,7 +32,10 @@
 //! curl towards the camera. Mixes of such a hand are targets no model can reach (the room's
 //! mesh missed them by up to 26 mm). So the maps carry `[bones]` ([`mediapipe_bones`]): the
 //! sweep hand's bone lengths along MediaPipe's tree ([`PARENTS`]), on which the room rebuilds
-//! every frame (`crease_mocap::map`): MediaPipe's directions, the model's proportions.
+//! every frame (`crease_mocap::map`): MediaPipe's directions, the model's proportions. The
+//! rebuilt hand is then the sweep hand's size, so the maps register at scale 1 rather than
+//! fitting MediaPipe's estimate of the hand's size (which the palm's shape skews: a 5% larger
+//! hand on those poses, fingers the model's bones cannot reach).
 
 use glam::Vec3;
 

@@ -43,7 +43,7 @@ training poses (seed {SEED}) and checked on {TEST} sampled test poses. MediaPipe
 centres only, so the landmarks on the skin are reached through the joints around them. The
 three back-of-hand points register the hand every frame. MediaPipe's bone lengths vary from frame
 to frame, so each frame is rebuilt on [bones] (the sweep hand's, mean over the training poses):
-MediaPipe's directions at the model's lengths; the scale is fitted over the first 40 frames.
+MediaPipe's directions at the model's lengths, so the hand is the model's size (scale 1).
 {residuals}",
         name = layout.name(),
     )

@@ -22,7 +22,12 @@ import { capturePng, runBrowserTest, waitForCrease } from "./common.mjs";
 import { fittedDistances, mapTargets, mm, rms } from "./xr-common.mjs";
 
 const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
-const MAP_PATH = path.join(root, "bench/mocap/mediapipe-back.toml");
+/** Each actor's map (the room's, `crease-server --demo`). */
+const MAPS = { right: "bench/mocap/mediapipe-back.toml", left: "bench/mocap/mediapipe-back-left.toml" };
+/** Where each hand's wrist sits (x, metres): the performer's right hand on the camera's left,
+ * the backs of both hands towards it. */
+const WRIST_X = { right: -0.065, left: 0.065 };
+const SIDES = ["right", "left"];
 const ROOM = "camera";
 const SIZE = { width: 640, height: 480 };
 const POSES = 12;
@@ -31,6 +36,8 @@ const MAX_MEAN_PX = 15;
 // The WebXR tests' per-pose bounds (webxr.test.mjs).
 const MAX_FOLLOW_MM = 15;
 const MAX_FOLLOW_TO_REST = 0.6;
+/** Poses near the rest hand, where the ratio to the rest hand's says nothing (as there). */
+const NEAR_REST = /flat|relaxed|spread/;
 /** MediaPipe's landmarks as the WebXR joints they are (crease_hand::mediapipe_map). */
 const AS_WEBXR = [
   "wrist",
@@ -68,9 +75,9 @@ async function checks({ page, base, shots, env, check }) {
     const joints = JSON.parse(fs.readFileSync(path.join(work, "poses/train", `${name}.joints.json`), "utf8"));
     return { name, mesh: readPly(path.join(work, "base/train", `${name}.ply`)), landmarks: AS_WEBXR.map((j) => joints[j]) };
   });
-  const map = parseToml(fs.readFileSync(MAP_PATH, "utf8"));
+  const maps = Object.fromEntries(SIDES.map((s) => [s, { path: MAPS[s], toml: parseToml(fs.readFileSync(path.join(root, MAPS[s]), "utf8")) }]));
   const room = await fetch(`${base}/api/rooms/${ROOM}`).then((r) => r.json());
-  const right = room.actors.find((a) => a.name === "right");
+  const actor = Object.fromEntries(SIDES.map((s) => [s, room.actors.find((a) => a.side === s)]));
 
   await page.goto(`${base}/?room=${ROOM}#token=${encodeURIComponent(env.CREASE_TOKEN)}`, { waitUntil: "load" });
   await check("(c1) room camera: both hands' actors take MediaPipe's landmarks; the button shows", async () => {
@@ -80,8 +87,9 @@ async function checks({ page, base, shots, env, check }) {
     assert.equal(await page.locator("#xr-row").isHidden(), true, "no WebXR row for MediaPipe markers");
   });
 
-  // The stage: the hand in the hand frame (wrist at the origin, fingers along +y, palm towards
-  // -z) seen from its back, 45 cm away, a 40-degree vertical field of view.
+  // The stage: the hands in the hand frame (wrist at the origin, fingers along +y, palm towards
+  // -z), each moved to its WRIST_X, the left one the right mirrored across x = 0, seen from
+  // their backs 45 cm away, a 40-degree vertical field of view.
   await page.evaluate(async ({ size }) => {
     const THREE = await import("three");
     const canvas = document.createElement("canvas");
@@ -99,85 +107,124 @@ async function checks({ page, base, shots, env, check }) {
     camera.position.set(0, 0.09, 0.45);
     camera.lookAt(0, 0.09, 0);
     const material = new THREE.MeshStandardMaterial({ color: 0xe0ac8a, roughness: 0.7 });
-    window.__camTest = { THREE, canvas, renderer, scene, camera, material, mesh: null };
+    window.__camTest = { THREE, canvas, renderer, scene, camera, material, meshes: [] };
   }, { size: SIZE });
 
-  /** Renders `pose`; the joints' pixel positions. */
-  const show = (pose) =>
-    page.evaluate(({ mesh, landmarks, size }) => {
+  /** Per side its pose's joints where the picture has them (the left mirrored, each moved). */
+  const placed = (shown) =>
+    Object.fromEntries(SIDES.map((s) => [s, shown[s].landmarks.map(([x, y, z]) => [(s === "left" ? -x : x) + WRIST_X[s], y, z])]));
+
+  /** Renders both hands (`shown`: side -> pose); per side the joints' pixel positions. */
+  const show = (shown) =>
+    page.evaluate(({ hands, size }) => {
       const t = window.__camTest;
       const { THREE } = t;
-      if (t.mesh) t.scene.remove(t.mesh);
-      const geometry = new THREE.BufferGeometry();
-      geometry.setAttribute("position", new THREE.Float32BufferAttribute(mesh.positions, 3));
-      geometry.setIndex(mesh.indices);
-      geometry.computeVertexNormals();
-      t.mesh = new THREE.Mesh(geometry, t.material);
-      t.scene.add(t.mesh);
+      for (const m of t.meshes) t.scene.remove(m);
+      t.meshes = [];
+      const projected = {};
+      for (const { side, mesh, joints, dx } of hands) {
+        const positions = mesh.positions.slice();
+        const indices = mesh.indices.slice();
+        for (let i = 0; i < positions.length; i += 3) positions[i] = (side === "left" ? -positions[i] : positions[i]) + dx;
+        // A mirror turns the triangles inside out: swap two corners of each.
+        if (side === "left") for (let f = 0; f < indices.length; f += 3) [indices[f + 1], indices[f + 2]] = [indices[f + 2], indices[f + 1]];
+        const geometry = new THREE.BufferGeometry();
+        geometry.setAttribute("position", new THREE.Float32BufferAttribute(positions, 3));
+        geometry.setIndex(indices);
+        geometry.computeVertexNormals();
+        const m = new THREE.Mesh(geometry, t.material);
+        t.scene.add(m);
+        t.meshes.push(m);
+        projected[side] = joints.map(([x, y, z]) => {
+          const p = new THREE.Vector3(x, y, z).project(t.camera);
+          return [((p.x + 1) / 2) * size.width, ((1 - p.y) / 2) * size.height];
+        });
+      }
       t.renderer.render(t.scene, t.camera);
-      return landmarks.map(([x, y, z]) => {
-        const p = new THREE.Vector3(x, y, z).project(t.camera);
-        return [((p.x + 1) / 2) * size.width, ((1 - p.y) / 2) * size.height];
-      });
-    }, { mesh: pose.mesh, landmarks: pose.landmarks, size: SIZE });
+      return projected;
+    }, { hands: SIDES.map((side) => ({ side, mesh: shown[side].mesh, joints: placed(shown)[side], dx: WRIST_X[side] })), size: SIZE });
 
-  const results = [];
-  for (const [k, pose] of poses.entries()) {
-    await check(`(c2) ${pose.name}: found, right, landmarks on the joints, the mesh follows`, async () => {
-      const projected = await show(pose);
+  const meanPx = (image, projected) => image.reduce((s, p, i) => s + Math.hypot(p[0] - projected[i][0], p[1] - projected[i][1]), 0) / image.length;
+  const views = [];
+  for (let k = 0; k < POSES; k++) {
+    // The left hand shows another pose than the right: the actors must not swap.
+    const shown = { right: poses[k], left: poses[(k + POSES / 2) % POSES] };
+    await check(`(c2) right ${shown.right.name}, left ${shown.left.name}: found, each side right, landmarks on the joints, the meshes follow`, async () => {
+      const projected = await show(shown);
+      if (process.env.CREASE_CAMERA_DUMP) {
+        const url = await page.evaluate(() => window.__camTest.canvas.toDataURL("image/png"));
+        fs.writeFileSync(path.join(shots, `camera-${k}.png`), Buffer.from(url.split(",")[1], "base64"));
+      }
       if (k === 0) await page.evaluate(() => window.crease.camera.start(window.__camTest.canvas));
       const before = await page.evaluate(() => window.crease.camera.frames);
-      // Two frames of this pose: MediaPipe's second has tracked from its first.
-      const c = await waitForCrease(page, `${pose.name}: MediaPipe's frames`, (c) => c.camera.frames >= before + 2, 90_000);
+      // Two frames of this picture: MediaPipe's second has tracked from its first.
+      const c = await waitForCrease(page, `${shown.right.name}: MediaPipe's frames`, (c) => c.camera.frames >= before + 2, 120_000);
       if (k === 0) fs.writeFileSync(path.join(shots, "camera-first-pose.png"), await capturePng(page, { x: 0, y: 0, width: 1024, height: 768 }));
-      const hand = c.camera.hands.find((h) => h.side === "right") ?? c.camera.hands[0];
-      const r = { name: pose.name, found: Boolean(hand), side: hand?.side, score: hand?.score };
-      results.push(r);
-      if (!hand) return `not found (${c.camera.inferenceMs.toFixed(0)} ms a frame)`;
-      r.px = hand.image.reduce((s, p, i) => s + Math.hypot(p[0] - projected[i][0], p[1] - projected[i][1]), 0) / 21;
-      // The room's mesh of the last published frame.
-      // (The camera goes on publishing this pose meanwhile: the mesh and the markers read
-      // below may be a frame newer, of the same picture.)
-      const target = c.camera.seq;
-      await waitForCrease(page, `${pose.name}: the room's frame ${target}`, (c) => c.actors.find((a) => a.name === "right")?.frameSeq >= target, 30_000);
-      const seen = await page.evaluate(() => ({ markers: window.crease.cameraMarkers("right"), controls: window.crease.controlPositions("right") }));
-      let line = `${hand.side} ${hand.score.toFixed(2)}, landmarks ${r.px.toFixed(1)} px from the joints`;
-      if (seen.markers && seen.controls) {
-        const goal = mapTargets(map, MAP_PATH, right.control_points, right.capture.markers, seen.markers);
-        const follow = fittedDistances(goal, seen.controls);
-        const rest = fittedDistances(goal, right.control_points.map((p) => p.rest));
-        r.follow = Math.max(...follow);
-        r.followRms = rms(follow);
-        r.restRms = rms(rest);
-        line += `; mesh max ${mm(r.follow)} mm, RMS ${mm(r.followRms)} mm (rest ${mm(r.restRms)})`;
-        // Where the misses come from: MediaPipe's world landmarks against the true joints
-        // (each set fitted onto the other by a similarity), and the map's targets of the
-        // true joints against those of MediaPipe's landmarks and against the mesh.
-        const truth = pose.landmarks.flat();
-        const mp = [...Array(21).keys()].map((i) => seen.markers.slice(3 * i, 3 * i + 3));
-        const world = fittedDistances(mp, pose.landmarks);
-        const goalTruth = mapTargets(map, MAP_PATH, right.control_points, right.capture.markers, truth);
-        const input = fittedDistances(goal, goalTruth);
-        const toTruth = fittedDistances(seen.controls, goalTruth);
-        if (process.env.CREASE_CAMERA_DUMP) fs.appendFileSync(process.env.CREASE_CAMERA_DUMP, JSON.stringify({ name: pose.name, truth: pose.landmarks, markers: seen.markers, image: hand.image, projected, controls: seen.controls }) + "\n");
-        const worst = (d) => `${mm(Math.max(...d))} at ${right.control_points[d.indexOf(Math.max(...d))].name}`;
-        line += `; [world landmarks to joints mean ${mm(world.reduce((s, x) => s + x, 0) / 21)} max ${mm(Math.max(...world))} at ${AS_WEBXR[world.indexOf(Math.max(...world))]}; targets to true targets max ${worst(input)}; mesh to true targets max ${worst(toTruth)}, RMS ${mm(rms(toTruth))}; mesh to targets worst ${worst(follow)}]`;
+      // Each hand MediaPipe reports is the side whose joints its landmarks lie on.
+      const found = {};
+      for (const hand of c.camera.hands) {
+        const px = Object.fromEntries(SIDES.map((s) => [s, meanPx(hand.image, projected[s])]));
+        const truth = px.right <= px.left ? "right" : "left";
+        assert.equal(hand.side, truth, `a hand ${px[truth].toFixed(1)} px from the ${truth} hand's joints is called ${hand.side}`);
+        found[truth] = { ...hand, px: px[truth] };
       }
-      assert.equal(hand.side, "right", `${line}: handedness`);
-      if (r.follow !== undefined) {
-        assert.ok(r.follow <= MAX_FOLLOW_MM / 1000, `${line}: over ${MAX_FOLLOW_MM} mm`);
-        if (!/flat|relaxed/.test(pose.name)) assert.ok(r.followRms <= MAX_FOLLOW_TO_REST * r.restRms, `${line}: no closer than ${MAX_FOLLOW_TO_REST} x the rest hand's`);
+      // The room's meshes of the last published frame (the camera goes on publishing this
+      // picture meanwhile: the mesh and markers read below may be a frame newer, of it).
+      const target = c.camera.seq;
+      await waitForCrease(page, `the room's frame ${target}`, (c) => c.actors.every((a) => a.frameSeq >= target), 30_000);
+      const lines = [];
+      for (const side of SIDES) {
+        const pose = shown[side];
+        const v = { side, pose: pose.name, found: Boolean(found[side]) };
+        views.push(v);
+        if (!v.found) {
+          lines.push(`${side} not found`);
+          continue;
+        }
+        v.px = found[side].px;
+        const a = actor[side];
+        const seen = await page.evaluate((name) => {
+          const x = window.crease.actors.find((y) => y.name === name);
+          return { markers: window.crease.cameraMarkers(name), controls: window.crease.controlPositions(name), scale: x.residual / x.residualCapture };
+        }, a.name);
+        const goal = mapTargets(maps[side].toml, maps[side].path, a.control_points, a.capture.markers, seen.markers);
+        const follow = fittedDistances(goal, seen.controls);
+        const rest = fittedDistances(goal, a.control_points.map((p) => p.rest));
+        v.follow = Math.max(...follow);
+        v.followRms = rms(follow);
+        v.restRms = rms(rest);
+        // Where misses come from: MediaPipe's world landmarks against the true joints (each
+        // set fitted onto the other by a similarity), and the mesh against the map's targets
+        // of the true joints.
+        const truth = placed(shown)[side];
+        const mp = [...Array(21).keys()].map((i) => seen.markers.slice(3 * i, 3 * i + 3));
+        const world = fittedDistances(mp, truth);
+        const toTruth = fittedDistances(seen.controls, mapTargets(maps[side].toml, maps[side].path, a.control_points, a.capture.markers, truth.flat()));
+        v.world = world.reduce((s, x) => s + x, 0) / world.length;
+        v.truthRms = rms(toTruth);
+        const worst = follow.indexOf(v.follow);
+        lines.push(
+          `${side} ${found[side].score.toFixed(2)}, landmarks ${v.px.toFixed(1)} px from the joints; mesh max ${mm(v.follow)} mm at ${a.control_points[worst].name}, RMS ${mm(v.followRms)} mm (rest ${mm(v.restRms)}) ` +
+            `[MediaPipe's world landmarks ${mm(v.world)} mm from the joints on average; the mesh RMS ${mm(v.truthRms)} mm from the true joints' targets]`,
+        );
+      }
+      const line = lines.join("; ");
+      for (const v of views.slice(-2).filter((v) => v.found)) {
+        assert.ok(v.follow <= MAX_FOLLOW_MM / 1000, `${line}: ${v.side} over ${MAX_FOLLOW_MM} mm`);
+        if (!NEAR_REST.test(v.pose)) assert.ok(v.followRms <= MAX_FOLLOW_TO_REST * v.restRms, `${line}: ${v.side} no closer than ${MAX_FOLLOW_TO_REST} x the rest hand's`);
       }
       return line;
     });
   }
 
-  await check(`(c3) found in at least ${MIN_FOUND} of ${POSES}, landmarks within ${MAX_MEAN_PX} px on average`, async () => {
-    const found = results.filter((r) => r.found);
-    const px = found.reduce((s, r) => s + r.px, 0) / Math.max(found.length, 1);
+  await check(`(c3) each hand found in at least ${MIN_FOUND} of ${POSES} pictures, landmarks within ${MAX_MEAN_PX} px on average`, async () => {
+    const found = views.filter((v) => v.found);
+    const px = found.reduce((s, v) => s + v.px, 0) / Math.max(found.length, 1);
     const c = await page.evaluate(() => ({ inference: window.crease.camera.inferenceMs, convert: window.crease.camera.convertMs }));
-    const line = `found in ${found.length} of ${POSES} (missed: ${results.filter((r) => !r.found).map((r) => r.name).join(", ") || "none"}), landmarks ${px.toFixed(1)} px from the joints on average; MediaPipe ${c.inference.toFixed(0)} ms a frame here, landmarks to frame ${c.convert.toFixed(2)} ms`;
-    assert.ok(found.length >= MIN_FOUND, line);
+    const per = SIDES.map((s) => `${s} ${found.filter((v) => v.side === s).length} of ${POSES}`).join(", ");
+    const missed = views.filter((v) => !v.found).map((v) => `${v.side} ${v.pose}`).join(", ") || "none";
+    const line = `found: ${per} (missed: ${missed}), landmarks ${px.toFixed(1)} px from the joints on average; MediaPipe ${c.inference.toFixed(0)} ms a frame here, landmarks to frame ${c.convert.toFixed(2)} ms`;
+    for (const s of SIDES) assert.ok(found.filter((v) => v.side === s).length >= MIN_FOUND, line);
     assert.ok(px <= MAX_MEAN_PX, line);
     return line;
   });
