@@ -8,6 +8,11 @@
 // seen holds its pose, flagged); in a one-actor room the right hand, or the left mirrored
 // onto the right-hand model when only it is seen.
 //
+// A hand lost from the picture holds its last pose: an actor missing from a frame is held
+// and flagged by the room; a one-actor room is sent the markers invalid (the room holds every
+// point, its acks count them held). A preview in the corner shows the picture MediaPipe saw
+// with each hand's landmarks.
+//
 // A test (or a page without a camera) can feed any video or canvas instead of the camera:
 // `crease.camera.start(element)`; `crease.camera.hands` then holds the last frame's hands.
 
@@ -34,14 +39,18 @@ function loadHands() {
 /** The overlay's camera line: hands seen, inference time, detection rate, conversion time. */
 export function cameraText(c) {
   const k = c.camera;
-  const seen = k.hands.length ? k.hands.map((h) => `${h.side} ${h.score.toFixed(2)}`).join(", ") : "no hand";
+  const seen = k.hands.length ? k.hands.map((h) => `${h.side} ${h.score.toFixed(2)}`).join(", ") : `no hand${k.lost ? `: the room holds its last pose (${c.heldControls} control points held)` : ""}`;
   return `camera: ${seen} · inference ${k.inferenceMs.toFixed(0)} ms · found in ${(100 * k.detectionRate).toFixed(0)}% of frames · landmarks to frame ${k.convertMs.toFixed(2)} ms\n(only the hands' landmarks leave this page, never the image)`;
 }
 
-/** `elements` = {row, button} (#camera-row, #camera); `token()` reads the publish token. */
+/** Each side's colour in the preview. */
+const PREVIEW_COLOUR = { right: "#ffb347", left: "#5fd3ff" };
+
+/** `elements` = {row, button, preview} (#camera-row, #camera, #camera-preview); `token()`
+ * reads the publish token. */
 export function createCamera(state, { connection, overlay, elements, token }) {
   const c = state.crease;
-  const { row, button } = elements;
+  const { row, button, preview } = elements;
   const k = c.camera;
   let session = null; // {hands (MediaPipe), video, stream, targets, stop}
 
@@ -72,6 +81,18 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     button.title = button.disabled ? "this browser cannot open a camera (it needs a secure page: https or localhost)" : "";
   }
 
+  /** The preview: the picture MediaPipe saw, each hand's landmarks on it in its side's
+   * colour (mirrored, as a selfie, for a camera). */
+  function drawPreview(results, width) {
+    const ctx = preview.getContext("2d");
+    ctx.drawImage(results.image, 0, 0, preview.width, preview.height);
+    const s = preview.width / width;
+    for (const h of k.hands) {
+      ctx.fillStyle = PREVIEW_COLOUR[h.side];
+      for (const [x, y] of h.image) ctx.fillRect(x * s - 1.5, y * s - 1.5, 3, 3);
+    }
+  }
+
   /** One MediaPipe result: the hands published, the stats updated. */
   function onResults(results, width, height, started) {
     const t0 = performance.now();
@@ -90,6 +111,10 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     // A one-actor room takes one hand: the right one, else the left mirrored.
     const first = (side) => sides.find((h) => h.side === side);
     const picked = to.single ? [first("right") ?? first("left")].filter(Boolean) : sides;
+    // A one-actor room whose hand is lost is sent its markers invalid (below): the room holds
+    // the last pose and its acks count the points held, as for occluded markers. (In a room
+    // of actors, an actor missing from the frame holds, flagged in its frames.)
+    k.lost = Boolean(to.single) && picked.length === 0 && k.published > 0;
     for (const h of picked) {
       const target = to[h.side];
       if (!target || parts.some((p) => p === target)) continue;
@@ -99,7 +124,9 @@ export function createCamera(state, { connection, overlay, elements, token }) {
       if (target.mirror) for (let i = 0; i < target.markers.length; i += 3) target.markers[i] = -target.markers[i];
       parts.push(target);
     }
+    if (k.lost) parts.push({ actor: null, markers: to.right.markers, lost: true });
     k.convertMs = performance.now() - t0;
+    drawPreview(results, width);
     if (!parts.length || !connection.ready() || connection.backedUp()) return;
     const captureUs = Math.round((performance.timeOrigin + started) * 1000);
     k.seq = state.socket.seq;
@@ -139,8 +166,10 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     await hands.initialize();
     let running = true;
     session = { hands, video, stream, targets: to, stop: () => (running = false) };
-    Object.assign(k, { active: true, frames: 0, detected: 0, published: 0, hands: [] });
+    Object.assign(k, { active: true, frames: 0, detected: 0, published: 0, hands: [], lost: false });
     button.textContent = "stop the camera";
+    preview.classList.toggle("mirror", Boolean(stream));
+    preview.hidden = false;
     // One frame at a time: the next is read when MediaPipe has answered the last.
     (async () => {
       while (running) {
@@ -165,6 +194,7 @@ export function createCamera(state, { connection, overlay, elements, token }) {
     for (const t of s.stream?.getTracks() ?? []) t.stop();
     await s.hands.close();
     k.active = false;
+    preview.hidden = true;
     button.textContent = "track my hands (camera)";
     updateControl();
   }

@@ -119,6 +119,7 @@ export function createConnection(state, { token, streams, onHeader, overlay }) {
       c.residual = ack.control_residual;
       c.residualCapture = ack.control_residual_capture ?? null;
       c.confidence = ack.confidence ?? 0; // absent at an example
+      c.heldControls = ack.held_controls ?? 0; // invalid or occluded this frame
       for (const part of ack.actors ?? []) {
         const a = c.actors.find((x) => x.name === part.actor);
         if (!a) continue;

@@ -80,6 +80,7 @@ export function createState(params) {
     renderFps: 0, // of those, per second (over the last second)
     frameSeq: null, // the seq of the last mesh frame received (and decoded)
     residual: null, // the last ack's control residual, model units
+    heldControls: 0, // the last ack's control points held (invalid or occluded)
     residualCapture: null, // ... and in the capture's units (retargeting rooms)
     confidence: null, // the last ack's distance from the training examples (1: their spread)
     // A room of several actors (issue 38): per actor {name, side, performer, model,
@@ -95,7 +96,7 @@ export function createState(params) {
     xr: { supported: false, reason: "", active: false, hand: "right", tracked: false, hands: [], published: 0, dropped: 0, seq: null, latencyMs: null },
     // The webcam source (camera-view.js): hands seen in the last frame ({side, score, image:
     // 21 [x, y] pixels}), MediaPipe's time per frame, the share of frames with a hand.
-    camera: { active: false, seq: null, hands: [], frames: 0, detected: 0, detectionRate: 0, published: 0, inferenceMs: 0, convertMs: 0 },
+    camera: { active: false, seq: null, hands: [], lost: false, frames: 0, detected: 0, detectionRate: 0, published: 0, inferenceMs: 0, convertMs: 0 },
     // Takes (takes.js): the room's take ids, and on a replay page (`?take=ID`) the player's
     // state (frames, duration, index sent last, t seconds, playing, speed, frames sent).
     take: { list: [], id: takeId, loaded: false },

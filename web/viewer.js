@@ -72,7 +72,7 @@ const xr = createXr(state, {
 const camera = createCamera(state, {
   connection,
   overlay,
-  elements: { row: $("camera-row"), button: $("camera") },
+  elements: { row: $("camera-row"), button: $("camera"), preview: $("camera-preview") },
   token: panel.token,
 });
 crease.camera.start = camera.start;

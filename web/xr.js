@@ -85,7 +85,11 @@ export function markerMessage(seq, captureTimeUs, parts) {
     return `[${text}]`;
   };
   const head = `{"seq":${seq},"capture_time_us":${captureTimeUs}`;
-  if (parts.length === 1 && parts[0].actor == null) return `${head},"markers":${list(parts[0].markers)}}`;
+  if (parts.length === 1 && parts[0].actor == null) {
+    // A one-actor room's hand lost: every marker sent invalid, the room holds its pose.
+    const lost = parts[0].lost ? `,"markers_valid":[${Array(parts[0].markers.length / 3).fill("false").join(",")}]` : "";
+    return `${head},"markers":${list(parts[0].markers)}${lost}}`;
+  }
   return `${head},"actors":[${parts.map((p) => `{"actor":${JSON.stringify(p.actor)},"markers":${list(p.markers)}}`).join(",")}]}`;
 }
 

@@ -1,16 +1,24 @@
-// The webcam source closed through our own hand (issue 46): the page renders the sweep hand
+// The webcam source closed through our own hands (issue 46): the page renders the sweep hand
 // (`crease handgen`'s training poses, three.js, a skin-like material, no handles, a plain
-// background) into a canvas, the camera path (web/camera-view.js: MediaPipe Hands from
-// web/node_modules) reads that canvas as it would a camera, and the demo's room `camera`
-// retargets the landmarks through bench/mocap/mediapipe-back.toml. Per pose the test checks
-// that MediaPipe found the hand and called it a right hand, how far its image landmarks are
-// from the rendered joints' projections (`crease handgen`'s poses/train/*.joints.json, the
-// WebXR joints MediaPipe's landmarks are), and that the room's mesh follows the published
-// landmarks within the WebXR test's per-pose bounds (webxr.test.mjs says what they mean),
-// printed per pose. Overall: found in at least 10 of 12 poses, landmarks within 15 px on
-// average. Under headless Chromium's software GL MediaPipe takes seconds a frame, so each pose
-// is shown for two of its frames. run.sh starts the server and runs this; alone:
+// background) as both hands in one picture (the right hand on the camera's left, the left the
+// right mirrored, showing another pose), into a canvas the camera path (web/camera-view.js:
+// MediaPipe Hands from web/node_modules) reads as it would a camera; the demo's room `camera`
+// retargets each hand's landmarks through bench/mocap/mediapipe-back[-left].toml. Per
+// picture and hand it checks that MediaPipe called each hand it found by its side, how far its
+// image landmarks are from the rendered joints' projections (`crease handgen`'s
+// poses/train/*.joints.json, the WebXR joints MediaPipe's landmarks are), and how closely the
+// room's mesh follows the published landmarks' targets, by the WebXR test's per-pose bounds
+// (webxr.test.mjs says what they mean): max 15 mm and, away from the rest hand, an RMS at most
+// 0.6 x the rest hand's. Printed per pose, with where misses come from (MediaPipe's world
+// landmarks against the true joints; the mesh against the true joints' targets).
+// Overall (c3): each hand found in at least 10 of 12 pictures, landmarks within 15 px on
+// average, and the meshes within 15 mm in at least 20 of the 24 hands shown (the detection
+// bar over both hands: a hand found with joint angles the model cannot take counts as a miss,
+// as one not found does; every hand found must meet the relative bound). Under headless Chromium's
+// software GL MediaPipe takes seconds a frame, so each picture is shown for three frames.
+// run.sh starts the server and runs this; alone:
 //   CREASE_HTTP=127.0.0.1:PORT CREASE_TOKEN=TOKEN CREASE_BIN=target/release/crease node tests/browser/camera.test.mjs
+// (CREASE_CAMERA_DUMP=FILE also writes each picture and each hand's figures.)
 
 import assert from "node:assert/strict";
 import { execFileSync } from "node:child_process";
@@ -25,8 +33,8 @@ const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..")
 /** Each actor's map (the room's, `crease-server --demo`). */
 const MAPS = { right: "bench/mocap/mediapipe-back.toml", left: "bench/mocap/mediapipe-back-left.toml" };
 /** Where each hand's wrist sits (x, metres): the performer's right hand on the camera's left,
- * the backs of both hands towards it. */
-const WRIST_X = { right: -0.065, left: 0.065 };
+ * the backs of both hands towards it, apart (the little fingers about 5 cm apart). */
+const WRIST_X = { right: -0.085, left: 0.085 };
 const SIDES = ["right", "left"];
 const ROOM = "camera";
 const SIZE = { width: 640, height: 480 };
@@ -90,7 +98,7 @@ async function checks({ page, base, shots, env, check }) {
   // The stage: the hands in the hand frame (wrist at the origin, fingers along +y, palm towards
   // -z), each moved to its WRIST_X, the left one the right mirrored across x = 0, seen from
   // their backs 45 cm away, a 40-degree vertical field of view.
-  await page.evaluate(async ({ size }) => {
+  const stage = () => page.evaluate(async ({ size }) => {
     const THREE = await import("three");
     const canvas = document.createElement("canvas");
     canvas.width = size.width;
@@ -109,10 +117,12 @@ async function checks({ page, base, shots, env, check }) {
     const material = new THREE.MeshStandardMaterial({ color: 0xe0ac8a, roughness: 0.7 });
     window.__camTest = { THREE, canvas, renderer, scene, camera, material, meshes: [] };
   }, { size: SIZE });
+  await stage();
 
-  /** Per side its pose's joints where the picture has them (the left mirrored, each moved). */
+  /** Per side shown its pose's joints where the picture has them (the left mirrored, each
+   * moved). */
   const placed = (shown) =>
-    Object.fromEntries(SIDES.map((s) => [s, shown[s].landmarks.map(([x, y, z]) => [(s === "left" ? -x : x) + WRIST_X[s], y, z])]));
+    Object.fromEntries(SIDES.filter((s) => shown[s]).map((s) => [s, shown[s].landmarks.map(([x, y, z]) => [(s === "left" ? -x : x) + WRIST_X[s], y, z])]));
 
   /** Renders both hands (`shown`: side -> pose); per side the joints' pixel positions. */
   const show = (shown) =>
@@ -142,7 +152,7 @@ async function checks({ page, base, shots, env, check }) {
       }
       t.renderer.render(t.scene, t.camera);
       return projected;
-    }, { hands: SIDES.map((side) => ({ side, mesh: shown[side].mesh, joints: placed(shown)[side], dx: WRIST_X[side] })), size: SIZE });
+    }, { hands: SIDES.filter((s) => shown[s]).map((side) => ({ side, mesh: shown[side].mesh, joints: placed(shown)[side], dx: WRIST_X[side] })), size: SIZE });
 
   const meanPx = (image, projected) => image.reduce((s, p, i) => s + Math.hypot(p[0] - projected[i][0], p[1] - projected[i][1]), 0) / image.length;
   const views = [];
@@ -157,9 +167,11 @@ async function checks({ page, base, shots, env, check }) {
       }
       if (k === 0) await page.evaluate(() => window.crease.camera.start(window.__camTest.canvas));
       const before = await page.evaluate(() => window.crease.camera.frames);
-      // Two frames of this picture: MediaPipe's second has tracked from its first.
-      const c = await waitForCrease(page, `${shown.right.name}: MediaPipe's frames`, (c) => c.camera.frames >= before + 2, 120_000);
-      if (k === 0) fs.writeFileSync(path.join(shots, "camera-first-pose.png"), await capturePng(page, { x: 0, y: 0, width: 1024, height: 768 }));
+      // Three frames: the first may be of the last picture (MediaPipe was busy with it when
+      // this one was drawn); of this picture's two, the second has tracked from the first.
+      const c = await waitForCrease(page, `${shown.right.name}: MediaPipe's frames`, (c) => c.camera.frames >= before + 3, 120_000);
+      // README.md's picture: the viewer with the camera's preview.
+      if (k === 3) fs.writeFileSync(path.join(shots, "camera-both-hands.png"), await capturePng(page, { x: 0, y: 0, width: 1024, height: 768 }));
       // Each hand MediaPipe reports is the side whose joints its landmarks lie on.
       const found = {};
       for (const hand of c.camera.hands) {
@@ -210,22 +222,80 @@ async function checks({ page, base, shots, env, check }) {
       }
       const line = lines.join("; ");
       for (const v of views.slice(-2).filter((v) => v.found)) {
-        assert.ok(v.follow <= MAX_FOLLOW_MM / 1000, `${line}: ${v.side} over ${MAX_FOLLOW_MM} mm`);
+        v.within = v.follow <= MAX_FOLLOW_MM / 1000;
         if (!NEAR_REST.test(v.pose)) assert.ok(v.followRms <= MAX_FOLLOW_TO_REST * v.restRms, `${line}: ${v.side} no closer than ${MAX_FOLLOW_TO_REST} x the rest hand's`);
       }
-      return line;
+      // The absolute bound is counted over the pictures (c3): a hand MediaPipe finds with
+      // joint angles the model cannot take is a miss like a hand it does not find.
+      return `${line}${views.slice(-2).some((v) => v.found && !v.within) ? ` (over ${MAX_FOLLOW_MM} mm: counted in c3)` : ""}`;
     });
   }
 
-  await check(`(c3) each hand found in at least ${MIN_FOUND} of ${POSES} pictures, landmarks within ${MAX_MEAN_PX} px on average`, async () => {
+  await check(`(c3) each hand found in at least ${MIN_FOUND} of ${POSES} pictures, the meshes within ${MAX_FOLLOW_MM} mm in ${2 * MIN_FOUND} of the ${2 * POSES} hands shown; landmarks within ${MAX_MEAN_PX} px on average`, async () => {
     const found = views.filter((v) => v.found);
     const px = found.reduce((s, v) => s + v.px, 0) / Math.max(found.length, 1);
     const c = await page.evaluate(() => ({ inference: window.crease.camera.inferenceMs, convert: window.crease.camera.convertMs }));
-    const per = SIDES.map((s) => `${s} ${found.filter((v) => v.side === s).length} of ${POSES}`).join(", ");
-    const missed = views.filter((v) => !v.found).map((v) => `${v.side} ${v.pose}`).join(", ") || "none";
-    const line = `found: ${per} (missed: ${missed}), landmarks ${px.toFixed(1)} px from the joints on average; MediaPipe ${c.inference.toFixed(0)} ms a frame here, landmarks to frame ${c.convert.toFixed(2)} ms`;
-    for (const s of SIDES) assert.ok(found.filter((v) => v.side === s).length >= MIN_FOUND, line);
+    const count = (side, f) => views.filter((v) => v.side === side && f(v)).length;
+    const per = SIDES.map((s) => `${s} found in ${count(s, (v) => v.found)}, within ${MAX_FOLLOW_MM} mm in ${count(s, (v) => v.within)} of ${POSES}`).join("; ");
+    const missed = views.filter((v) => !v.within).map((v) => `${v.side} ${v.pose} ${v.found ? `${mm(v.follow)} mm` : "not found"}`).join(", ") || "none";
+    const line = `${per} (missed: ${missed}); landmarks ${px.toFixed(1)} px from the joints on average; MediaPipe ${c.inference.toFixed(0)} ms a frame here, landmarks to frame ${c.convert.toFixed(2)} ms`;
+    for (const s of SIDES) assert.ok(count(s, (v) => v.found) >= MIN_FOUND, line);
+    assert.ok(views.filter((v) => v.within).length >= 2 * MIN_FOUND, `${line}: within ${MAX_FOLLOW_MM} mm in fewer than ${2 * MIN_FOUND} of ${2 * POSES}`);
     assert.ok(px <= MAX_MEAN_PX, line);
+    return line;
+  });
+  await page.evaluate(() => window.crease.camera.stop());
+
+  // A one-actor room (run.sh opens it: `crease room open --map bench/mocap/mediapipe-back.toml
+  // --mediapipe`): the right hand drives it; a lost hand is sent invalid, so the room holds its
+  // pose and its acks count every point held; a left hand alone drives it mirrored.
+  const solo = process.env.CREASE_CAMERA_SOLO_TOKEN;
+  if (!solo) {
+    console.log("skip (c4): CREASE_CAMERA_SOLO_TOKEN is not set (run.sh opens room camera-solo)");
+    return;
+  }
+  const soloRoom = await fetch(`${base}/api/rooms/camera-solo`).then((r) => r.json());
+  await page.goto(`${base}/?room=camera-solo#token=${encodeURIComponent(solo)}`, { waitUntil: "load" });
+  await waitForCrease(page, "room camera-solo's header", (c) => c.connected && c.vertexCount > 0, 30_000);
+  await stage();
+  /** Shows `shown` for three MediaPipe frames (as c2); the page's state then, and the room's controls
+   * once it has the last published frame. */
+  const frames = async (shown, label) => {
+    await show(shown);
+    const before = await page.evaluate(() => window.crease.camera.frames);
+    const c = await waitForCrease(page, `${label}: MediaPipe's frames`, (c) => c.camera.frames >= before + 3, 120_000);
+    const target = c.camera.seq;
+    await waitForCrease(page, `${label}: the room's frame ${target}`, (x) => x.frameSeq >= target, 30_000);
+    const acked = await waitForCrease(page, `${label}: acked`, (x) => x.acks > c.acks, 30_000);
+    return { c: acked, controls: await page.evaluate(() => window.crease.controlPositions()) };
+  };
+  await check("(c4) a one-actor room: the right hand drives it, a lost hand holds its pose (flagged held), a left hand alone drives it mirrored", async () => {
+    await show({ right: poses[3] });
+    await page.evaluate(() => window.crease.camera.start(window.__camTest.canvas));
+    const held = await frames({ right: poses[3] }, "right hand");
+    assert.deepEqual(held.c.camera.hands.map((h) => h.side), ["right"], "the right hand found");
+    assert.equal(held.c.heldControls, 0, "nothing held while the hand is seen");
+    // The hand lost: held over the frames that follow (the mesh still; every point held).
+    const lost = await frames({}, "no hand");
+    const still = await frames({}, "no hand, later");
+    for (const x of [lost, still]) {
+      assert.equal(x.c.camera.hands.length, 0, "no hand found in an empty picture");
+      assert.ok(x.c.camera.lost, "the page marks the hand lost");
+      assert.equal(x.c.heldControls, soloRoom.control_points.length, "the room's ack holds every control point");
+    }
+    assert.ok(still.c.frameSeq > lost.c.frameSeq, "the room goes on with frames");
+    const moved = Math.max(...still.controls.map((p, i) => Math.hypot(...p.map((v, k) => v - lost.controls[i][k]))));
+    assert.ok(moved < 1e-6, `the held mesh moved ${moved}`);
+    const left = await frames({ left: poses[9] }, "left hand");
+    assert.deepEqual(left.c.camera.hands.map((h) => h.side), ["left"], "the left hand found");
+    assert.equal(left.c.heldControls, 0, "nothing held once a hand is back");
+    const markers = await page.evaluate(() => window.crease.cameraMarkers());
+    const map = parseToml(fs.readFileSync(path.join(root, MAPS.right), "utf8"));
+    const goal = mapTargets(map, MAPS.right, soloRoom.control_points, soloRoom.capture.markers, markers);
+    const follow = fittedDistances(goal, left.controls);
+    const rest = fittedDistances(goal, soloRoom.control_points.map((p) => p.rest));
+    const line = `lost: ${lost.c.heldControls} of ${soloRoom.control_points.length} control points held, the mesh moved ${moved.toExponential(1)}; the left hand (${poses[9].name}) mirrored: mesh max ${mm(Math.max(...follow))} mm, RMS ${mm(rms(follow))} mm (rest ${mm(rms(rest))})`;
+    assert.ok(rms(follow) <= MAX_FOLLOW_TO_REST * rms(rest), `${line}: no closer than ${MAX_FOLLOW_TO_REST} x the rest hand's`);
     return line;
   });
   await page.evaluate(() => window.crease.camera.stop());

@@ -6,7 +6,8 @@
 # /usr/bin/chromium) and tests/browser/webxr.test.mjs (WebXR hands in room `hands`, through
 # Meta's WebXR emulator iwer) against it, tests/browser/actors.test.mjs and webxr-hands.test.mjs
 # (rooms of actors, issue 38: two named hands, a drag of one, both tracked hands at once),
-# tests/browser/report.test.mjs (the --report pages of
+# tests/browser/camera.test.mjs (the webcam source, issue 46: MediaPipe Hands on our own
+# rendered hands), tests/browser/report.test.mjs (the --report pages of
 # crease eval and crease train, written here), and tests/browser/takes.test.mjs (a take of room
 # demo: the viewer's takes list and player, GLTFLoader on its skinned glTF export).
 # Called by .ci/run; runs alone from anywhere:
@@ -96,6 +97,18 @@ for encoding in "" vertices; do
     CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_SHOTS="$work${encoding:+/$encoding}" CHROMIUM="$chromium_bin" \
         CREASE_XR_ENCODING="$encoding" node tests/browser/webxr-hands.test.mjs || failed=1
 done
+
+# Issue 46: the webcam source closed through our own rendered hands (MediaPipe Hands in the
+# page): both hands in the demo's room `camera`, then one hand in a one-actor room opened here.
+echo "== the camera (MediaPipe Hands) in headless chromium"
+if ! solo_token="$("$bin/crease" room open --room camera-solo --model demo-hand --map bench/mocap/mediapipe-back.toml --mediapipe \
+    --server "http://$grpc_addr" --admin-token "$admin" 2>/dev/null)"; then
+    echo "FAIL: crease room open --room camera-solo --model demo-hand --map bench/mocap/mediapipe-back.toml --mediapipe"
+    failed=1
+    solo_token=""
+fi
+CREASE_HTTP="$http_addr" CREASE_TOKEN="$token" CREASE_BIN="$bin/crease" CREASE_CAMERA_SOLO_TOKEN="$solo_token" \
+    CREASE_SHOTS="$work" CHROMIUM="$chromium_bin" node tests/browser/camera.test.mjs || failed=1
 
 # Issue 22: the --report pages of crease eval (horse split, generated hand) and crease train,
 # each beside its --json output, opened by report.test.mjs (pictures load and are not blank,

@@ -57,7 +57,7 @@ pub struct OpenArgs {
     /// a TOML file of `[[actor]]` tables, each with `name`, `model` and optionally `side`
     /// (left/right), `mirror` (x, y, z or nx,ny,nz: a left hand on a right-hand model),
     /// `performer` and `map` (a marker map, relative to the file; needs --markers-from,
-    /// --markers or --webxr). --beta, --filter, --mocap, --refine and --skinning apply to
+    /// --markers, --webxr or --mediapipe). --beta, --filter, --mocap, --refine and --skinning apply to
     /// every actor. E.g. bench/mocap/art-hands-glove13.toml.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["map", "map_name"])]
     pub actors: Option<PathBuf>,
@@ -96,8 +96,13 @@ pub struct OpenArgs {
     /// The capture is WebXR hand tracking (the viewer's "track my hands"): its 75 markers
     /// (every joint's centre, `/dorsal` and `/palmar` points; crease_hand::joint_map) in
     /// metres. With a WebXR joint map, e.g. --map bench/mocap/webxr-back.toml.
-    #[arg(long, conflicts_with = "markers")]
+    #[arg(long, conflicts_with_all = ["markers", "mediapipe"])]
     pub webxr: bool,
+    /// The capture is the viewer's camera (MediaPipe Hands, "track my hands (camera)"): its 21
+    /// landmarks per hand (crease_hand::mediapipe_map) in metres. With a MediaPipe map, e.g.
+    /// --map bench/mocap/mediapipe-back.toml.
+    #[arg(long, conflicts_with_all = ["markers", "markers_from"])]
+    pub mediapipe: bool,
     /// Refine every frame's bone rotations against the control points, `ITERATIONS,STRENGTH`
     /// (issue 20; e.g. `4,0.01`), or `off` for the regression alone. Default: the server's
     /// (`crease-server --refine`, 8,0.01 unless set: issue 42). It pays where the performer
@@ -325,7 +330,7 @@ fn actors_spec(path: &std::path::Path, args: &OpenArgs) -> anyhow::Result<Vec<v1
             let retarget = match (&e.map, &capture) {
                 (None, _) => None,
                 (Some(map), None) => bail!(
-                    "--actors {}: actor {:?} retargets through {}: give the capture's markers (--markers-from RECORDING, --markers or --webxr)",
+                    "--actors {}: actor {:?} retargets through {}: give the capture's markers (--markers-from RECORDING, --markers, --webxr or --mediapipe)",
                     path.display(),
                     e.name,
                     map.display()
@@ -365,11 +370,15 @@ fn actors_spec(path: &std::path::Path, args: &OpenArgs) -> anyhow::Result<Vec<v1
         .collect()
 }
 
-/// The capture's marker names and units from `--markers` / `--markers-from` / `--webxr`, if
-/// given.
+/// The capture's marker names and units from `--markers` / `--markers-from` / `--webxr` /
+/// `--mediapipe`, if given.
 fn capture_markers(args: &OpenArgs) -> anyhow::Result<Option<(Vec<String>, String)>> {
     Ok(match (&args.markers, &args.markers_from) {
         _ if args.webxr => Some((crease_hand::joint_map::capture_markers(), "m".to_owned())),
+        _ if args.mediapipe => Some((
+            crease_hand::mediapipe_map::mediapipe_markers(),
+            "m".to_owned(),
+        )),
         (Some(m), _) => Some((m.clone(), args.units.clone())),
         (None, Some(path)) => {
             let r = crease_mocap::Recording::read(path)
@@ -383,13 +392,16 @@ fn capture_markers(args: &OpenArgs) -> anyhow::Result<Option<(Vec<String>, Strin
 /// The room's `Retarget` from `--map` / `--map-name` and `--markers` / `--markers-from`.
 fn retarget_spec(args: &OpenArgs) -> anyhow::Result<Option<v1::Retarget>> {
     let has_map = args.map.is_some() || args.map_name.is_some();
-    let has_markers = args.markers.is_some() || args.markers_from.is_some() || args.webxr;
+    let has_markers =
+        args.markers.is_some() || args.markers_from.is_some() || args.webxr || args.mediapipe;
     match (has_map, has_markers) {
         (false, false) => return Ok(None),
         (true, false) => bail!(
-            "--map needs the capture's marker names: --markers A,B,..., --markers-from RECORDING or --webxr"
+            "--map needs the capture's marker names: --markers A,B,..., --markers-from RECORDING, --webxr or --mediapipe"
         ),
-        (false, true) => bail!("--markers, --markers-from and --webxr need --map or --map-name"),
+        (false, true) => {
+            bail!("--markers, --markers-from, --webxr and --mediapipe need --map or --map-name")
+        }
         (true, true) => {}
     }
     let map_toml = match &args.map {
