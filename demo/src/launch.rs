@@ -130,9 +130,14 @@ impl Started {
     /// the operator chose it).
     pub fn banner(&self, token_chosen: bool) -> Vec<String> {
         let (grpc, http) = (self.running.grpc, self.running.http);
-        let mut lines = vec![format!(
-            "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /metrics /ws/rooms/ROOM)"
-        )];
+        let mut lines = vec![match self.running.metrics {
+            None => format!(
+                "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /metrics /ws/rooms/ROOM)"
+            ),
+            Some(metrics) => format!(
+                "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /ws/rooms/ROOM), metrics on {metrics} (/metrics)"
+            ),
+        }];
         let Some(token) = &self.demo_token else {
             return lines;
         };
@@ -449,10 +454,13 @@ fn vmc_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSp
 /// The camera room [`DEMO_CAMERA_ROOM`] on the demo model (issue 46): the viewer's "track my
 /// hands (camera)" publishes MediaPipe Hands' 21 world landmarks per hand (metres), the right
 /// hand onto the demo hand through [`MEDIAPIPE_MAP`], the left onto it mirrored across x
-/// through [`MEDIAPIPE_LEFT_MAP`], one performer, as [`DEMO_HANDS_ROOM`] otherwise.
+/// through [`MEDIAPIPE_LEFT_MAP`], one performer, as [`DEMO_HANDS_ROOM`] otherwise but for the
+/// One Euro filter (its defaults, for metres): MediaPipe estimates every frame afresh, and
+/// nothing smooths its landmarks before the room does (a headset's runtime and a VMC sender
+/// smooth their own).
 fn camera_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
     use crease_hand::mediapipe_map::mediapipe_markers;
-    two_hands_room(
+    let mut room = two_hands_room(
         model,
         token,
         DEMO_CAMERA_ROOM,
@@ -461,7 +469,11 @@ fn camera_room(model: &crease_server::registry::LoadedModel, token: &str) -> Roo
             (MEDIAPIPE_MAP, mediapipe_markers()),
             (MEDIAPIPE_LEFT_MAP, mediapipe_markers()),
         ],
-    )
+    );
+    for actor in &mut room.actors {
+        actor.options.filter = Some(crease_core::runtime::filter::OneEuroParams::default());
+    }
+    room
 }
 
 /// A room of two actors on the demo model driven by one performer's tracked hands (marker

@@ -73,9 +73,13 @@ struct Args {
     #[arg(long, default_value = DEFAULT_GRPC)]
     grpc: SocketAddr,
     /// HTTP listen address: the viewer (/), WebSocket (/ws/rooms/{id}), /healthz, /readyz,
-    /// /metrics.
+    /// /metrics (unless --metrics-addr).
     #[arg(long, default_value = DEFAULT_HTTP)]
     http: SocketAddr,
+    /// Serve /metrics (Prometheus) on this address instead, plain HTTP, so that the public
+    /// port does not expose it (e.g. 127.0.0.1:9090, or an address only the scraper reaches).
+    #[arg(long, value_name = "ADDR")]
+    metrics_addr: Option<SocketAddr>,
     /// Static files served at / (the browser viewer). Default: the web/ folder of the source
     /// tree this binary was built from, if it exists.
     #[arg(long, value_name = "DIR")]
@@ -223,6 +227,7 @@ impl From<Args> for Config {
             server: crease_server::Config {
                 grpc: args.grpc,
                 http: args.http,
+                metrics: args.metrics_addr,
                 admin_token: args.admin_token,
                 limits: Limits {
                     rooms: args.max_rooms,

@@ -94,6 +94,10 @@ pub struct Config {
     pub grpc: SocketAddr,
     /// HTTP listen address (port 0: any free port).
     pub http: SocketAddr,
+    /// Serve `GET /metrics` on this address (plain HTTP) instead of the HTTP one, so the
+    /// public port need not expose it (issue 47: `crease-server --metrics-addr`, the
+    /// Prometheus habit); `None`: on the HTTP address.
+    pub metrics: Option<SocketAddr>,
     /// Token required to open and close rooms (`None`: nobody can).
     pub admin_token: Option<String>,
     /// Limits.
@@ -172,6 +176,7 @@ impl Default for Config {
         Self {
             grpc: DEFAULT_GRPC.parse().expect("a valid address"),
             http: DEFAULT_HTTP.parse().expect("a valid address"),
+            metrics: None,
             admin_token: None,
             limits: Limits::default(),
             stream: crate::pipeline::StreamSettings::default(),

@@ -1,5 +1,6 @@
 //! The HTTP side: `GET /healthz` (the process is up), `GET /readyz` (models loaded and not
-//! shutting down: send traffic), `GET /metrics` (Prometheus), `/ws/rooms/{id}` (WebSocket,
+//! shutting down: send traffic), `GET /metrics` (Prometheus; on its own address instead with
+//! `Config::metrics`, [`metrics_router`]), `/ws/rooms/{id}` (WebSocket,
 //! [`crate::ws`]), the rooms (`/api/rooms`, `/api/rooms/{id}`), the takes (issue 22:
 //! `GET /api/takes[?room=ID]`, `GET /api/takes/{id}` the file, `.../frames` as JSON for the
 //! viewer's player, `.../glb` as a skinned glTF animation, `POST .../replay` opens a private
@@ -25,10 +26,13 @@ use crate::status;
 /// The HTTP router over shared state.
 pub fn router(state: Arc<AppState>) -> Router {
     let web = state.config().web.clone();
-    let router = Router::new()
+    let mut router = Router::new()
         .route("/healthz", get(|| async { "ok\n" }))
-        .route("/readyz", get(readyz))
-        .route("/metrics", get(metrics))
+        .route("/readyz", get(readyz));
+    if state.config().metrics.is_none() {
+        router = router.route("/metrics", get(metrics));
+    }
+    let router = router
         .route("/ws/rooms/{id}", get(crate::ws::room_socket))
         .route("/api/rooms", get(rooms))
         .route("/api/rooms/{id}", get(room_info))
@@ -44,6 +48,14 @@ pub fn router(state: Arc<AppState>) -> Router {
         Some(dir) => router.fallback_service(tower_http::services::ServeDir::new(dir)),
         None => router,
     }
+}
+
+/// The router of `Config::metrics`' own address: `GET /metrics` and `GET /healthz`.
+pub fn metrics_router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/healthz", get(|| async { "ok\n" }))
+        .route("/metrics", get(metrics))
+        .with_state(state)
 }
 
 async fn readyz(State(state): State<Arc<AppState>>) -> impl IntoResponse {

@@ -15,6 +15,8 @@ pub struct Running {
     pub grpc: SocketAddr,
     /// The HTTP address actually bound.
     pub http: SocketAddr,
+    /// The metrics address actually bound (`Config::metrics`), if any.
+    pub metrics: Option<SocketAddr>,
     shutdown: Option<tokio::sync::oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<Result<(), tonic::transport::Error>>,
     http_task: tokio::task::JoinHandle<std::io::Result<()>>,
@@ -67,6 +69,21 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     let grpc = listener.local_addr()?;
     let http_listener = tokio::net::TcpListener::bind(state.config().http).await?;
     let http = http_listener.local_addr()?;
+    // `/metrics` on its own address: plain HTTP, ended with the rest (a scrape is short).
+    let metrics = match state.config().metrics {
+        Some(addr) => {
+            let listener = tokio::net::TcpListener::bind(addr).await?;
+            let bound = listener.local_addr()?;
+            tokio::spawn(
+                axum::serve(listener, http::metrics_router(Arc::clone(&state)))
+                    .with_graceful_shutdown(state.closing())
+                    .into_future(),
+            );
+            tracing::info!(metrics = %bound, "metrics listening");
+            Some(bound)
+        }
+        None => None,
+    };
     let closing = state.closing();
     let app = http::router(Arc::clone(&state));
     let http_task = match &tls {
@@ -122,6 +139,7 @@ pub async fn serve(state: Arc<AppState>) -> std::io::Result<Running> {
     Ok(Running {
         grpc,
         http,
+        metrics,
         shutdown: Some(tx),
         task,
         http_task,

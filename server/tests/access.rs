@@ -413,3 +413,37 @@ async fn oversized_messages_are_refused_on_both_transports_and_the_room_goes_on(
     frame_at_least(&mut viewer, 3).await;
     running.shutdown(Duration::from_secs(2)).await.unwrap();
 }
+
+/// `Config::metrics` (`crease-server --metrics-addr`, issue 47): `/metrics` moves to its own
+/// address and the public port answers 404 for it, while the rest of the public port stays.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_on_their_own_address_leave_the_public_port() {
+    let model = model();
+    let running = serve_config(
+        [("tube", model)],
+        crease_server::Config {
+            admin_token: Some(ADMIN.into()),
+            metrics: Some(std::net::SocketAddr::from(([127, 0, 0, 1], 0))),
+            ..crease_server::Config::default()
+        },
+    )
+    .await;
+    let metrics = running.metrics.expect("a metrics address");
+    assert_ne!(metrics, running.http);
+    let (code, _) = http_get(running.http, "/metrics").await;
+    assert_eq!(code, 404, "the public port serves no /metrics");
+    let (code, _) = http_get(running.http, "/healthz").await;
+    assert_eq!(code, 200, "the public port's /healthz");
+    let (code, body) = http_get(metrics, "/metrics").await;
+    assert_eq!(code, 200, "{body}");
+    assert!(
+        body.lines().any(|l| l.starts_with("crease_rooms ")),
+        "no crease_rooms gauge in\n{body}"
+    );
+    let (code, _) = http_get(metrics, "/api/rooms").await;
+    assert_eq!(
+        code, 404,
+        "the metrics address serves only /metrics and /healthz"
+    );
+    running.shutdown(Duration::from_secs(2)).await.unwrap();
+}

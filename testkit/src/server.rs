@@ -24,6 +24,8 @@ pub struct Served {
     pub grpc: SocketAddr,
     /// The HTTP (and WebSocket) address bound.
     pub http: SocketAddr,
+    /// The metrics address bound, when the configuration asked for one.
+    pub metrics: Option<SocketAddr>,
     /// `Some` until [`Served::shutdown`] takes it.
     running: Option<Running>,
 }
@@ -90,7 +92,7 @@ pub async fn serve_models<'a>(
 }
 
 /// A server hosting each `(name, model)` with `config`, on free loopback ports whatever its
-/// addresses say. Call it inside a tokio runtime.
+/// addresses say (its metrics address too, when it has one). Call it inside a tokio runtime.
 ///
 /// # Panics
 /// If the loopback ports cannot be bound.
@@ -108,6 +110,7 @@ pub async fn serve_config<'a>(
         Config {
             grpc: loopback,
             http: loopback,
+            metrics: config.metrics.map(|_| loopback),
             ..config
         },
     );
@@ -117,6 +120,7 @@ pub async fn serve_config<'a>(
     Served {
         grpc: running.grpc,
         http: running.http,
+        metrics: running.metrics,
         running: Some(running),
     }
 }
