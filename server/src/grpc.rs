@@ -94,7 +94,7 @@ impl CreaseService {
             ));
         };
         match bearer(req) {
-            Some(t) if t == *admin => Ok(()),
+            Some(t) if crate::session::same_token(&t, admin) => Ok(()),
             Some(_) => Err(Status::permission_denied("wrong admin token")),
             None => Err(Status::unauthenticated(
                 "missing `authorization: Bearer <admin token>`",

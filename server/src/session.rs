@@ -69,6 +69,13 @@ pub fn token_sha256(token: &str) -> [u8; 32] {
 
 /// Compares without an early exit, so the time taken does not tell how much of a guessed token
 /// was right.
+/// Whether `presented` is `expected` (the admin token), compared by their SHA-256 digests in
+/// constant time: a string `==` returns at the first byte that differs, which a client can
+/// time to guess a token byte by byte.
+pub(crate) fn same_token(presented: &str, expected: &str) -> bool {
+    constant_time_eq(&token_sha256(presented), &token_sha256(expected))
+}
+
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
@@ -207,6 +214,10 @@ mod tests {
         assert!(constant_time_eq(a.as_bytes(), a.as_bytes()));
         assert!(!constant_time_eq(a.as_bytes(), b.as_bytes()));
         assert!(!constant_time_eq(b"ab", b"abc"));
+        assert!(same_token("admin-secret", "admin-secret"));
+        assert!(!same_token("admin-secreT", "admin-secret"));
+        assert!(!same_token("admin-secret ", "admin-secret"));
+        assert!(!same_token("", "admin-secret"));
     }
 
     #[test]
