@@ -54,14 +54,20 @@ export function createCamera(state, { connection, overlay, elements, token }) {
   const k = c.camera;
   let session = null; // {hands (MediaPipe), video, stream, targets, stop}
 
-  /** Where each side's hand goes: {right, left} of {actor, plan, mirror, markers}, or {error}. */
+  /** Where each side's hand goes: {right, left} of {actor, plan, mirror, markers}, or {error};
+   * a one-actor room's also what its lost hand sends (`lost`: the markers, all invalid). */
   function targets() {
     const actors = state.room?.actors ?? [];
     if (actors.length === 0) {
       const { plan, error } = landmarkPlan(state.room?.capture?.markers);
       if (error) return { error };
       const markers = new Float32Array(3 * plan.length);
-      return { right: { actor: null, plan, mirror: false, markers }, left: { actor: null, plan, mirror: true, markers }, single: true };
+      return {
+        right: { actor: null, plan, mirror: false, markers },
+        left: { actor: null, plan, mirror: true, markers },
+        lost: { actor: null, markers, lost: true },
+        single: true,
+      };
     }
     const out = {};
     for (const a of actors) {
@@ -124,7 +130,7 @@ export function createCamera(state, { connection, overlay, elements, token }) {
       if (target.mirror) for (let i = 0; i < target.markers.length; i += 3) target.markers[i] = -target.markers[i];
       parts.push(target);
     }
-    if (k.lost) parts.push({ actor: null, markers: to.right.markers, lost: true });
+    if (k.lost) parts.push(to.lost);
     k.convertMs = performance.now() - t0;
     drawPreview(results, width);
     if (!parts.length || !connection.ready() || connection.backedUp()) return;

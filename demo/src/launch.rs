@@ -130,14 +130,13 @@ impl Started {
     /// the operator chose it).
     pub fn banner(&self, token_chosen: bool) -> Vec<String> {
         let (grpc, http) = (self.running.grpc, self.running.http);
-        let mut lines = vec![match self.running.metrics {
-            None => format!(
-                "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /metrics /ws/rooms/ROOM)"
-            ),
-            Some(metrics) => format!(
-                "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz /ws/rooms/ROOM), metrics on {metrics} (/metrics)"
-            ),
-        }];
+        let (metrics_here, metrics_apart) = match self.running.metrics {
+            None => (" /metrics", String::new()),
+            Some(addr) => ("", format!(", metrics on {addr} (/metrics)")),
+        };
+        let mut lines = vec![format!(
+            "crease-server: gRPC on {grpc}, HTTP on {http} (/healthz /readyz{metrics_here} /ws/rooms/ROOM){metrics_apart}"
+        )];
         let Some(token) = &self.demo_token else {
             return lines;
         };
@@ -448,6 +447,7 @@ fn vmc_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSp
             (VMC_MAP, vmc_markers("Right")),
             (VMC_LEFT_MAP, vmc_markers("Left")),
         ],
+        hands_options(),
     )
 }
 
@@ -460,7 +460,7 @@ fn vmc_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSp
 /// smooth their own).
 fn camera_room(model: &crease_server::registry::LoadedModel, token: &str) -> RoomSpec {
     use crease_hand::mediapipe_map::mediapipe_markers;
-    let mut room = two_hands_room(
+    two_hands_room(
         model,
         token,
         DEMO_CAMERA_ROOM,
@@ -469,22 +469,24 @@ fn camera_room(model: &crease_server::registry::LoadedModel, token: &str) -> Roo
             (MEDIAPIPE_MAP, mediapipe_markers()),
             (MEDIAPIPE_LEFT_MAP, mediapipe_markers()),
         ],
-    );
-    for actor in &mut room.actors {
-        actor.options.filter = Some(crease_core::runtime::filter::OneEuroParams::default());
-    }
-    room
+        RoomOptions {
+            filter: Some(crease_core::runtime::filter::OneEuroParams::default()),
+            ..hands_options()
+        },
+    )
 }
 
 /// A room of two actors on the demo model driven by one performer's tracked hands (marker
 /// positions in metres): `right` as trained, `left` mirrored across x, each through its map
-/// of the markers named, with the hands rooms' options.
+/// of the markers named, with `options` (the hands rooms', [`hands_options`], or those with a
+/// filter).
 fn two_hands_room(
     model: &crease_server::registry::LoadedModel,
     token: &str,
     id: &str,
     performer: &str,
     [right, left]: [(&str, Vec<String>); 2],
+    options: RoomOptions,
 ) -> RoomSpec {
     let actor = |name: &str, side, mirror, (map, markers): (&str, Vec<String>)| ActorSpec {
         name: name.into(),
@@ -492,7 +494,7 @@ fn two_hands_room(
         side,
         mirror,
         performer: performer.into(),
-        options: hands_options(),
+        options,
         retarget: Some(crease_proto::room::retarget(
             map.to_owned(),
             markers,

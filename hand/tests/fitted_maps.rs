@@ -126,16 +126,21 @@ per landmark mean/max (mm): {}.",
                 layout.name(),
                 if side == "Left" { "-left" } else { "" }
             ));
-            if std::env::var_os("CREASE_WRITE_MAPS").is_some() {
-                std::fs::write(&path, &text).unwrap();
-            }
-            let committed = std::fs::read_to_string(&path).unwrap_or_default();
-            assert!(
-                committed == text,
-                "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --features crease-core/test-meshes --test all {}_map:: rewrites it); the fit:\n{text}",
-                path.display(),
-                maps.name
-            );
+            assert_committed(&path, &text, &format!("{}_map::", maps.name));
         }
     }
+}
+
+/// Checks that the committed map at `path` is `text` (what the fit writes); with
+/// `CREASE_WRITE_MAPS` set, writes it first. `tests` names the test filter that rewrites it.
+pub(crate) fn assert_committed(path: &Path, text: &str, tests: &str) {
+    if std::env::var_os("CREASE_WRITE_MAPS").is_some() {
+        std::fs::write(path, text).unwrap();
+    }
+    let committed = std::fs::read_to_string(path).unwrap_or_default();
+    assert!(
+        committed == text,
+        "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --features crease-core/test-meshes --test all {tests} rewrites it); the fit:\n{text}",
+        path.display()
+    );
 }

@@ -7,6 +7,7 @@
 
 use std::path::Path;
 
+use crate::fitted_maps::assert_committed;
 use crease_core::model::mirror_name;
 use crease_hand::dataset::{Layout, dataset_poses};
 use crease_hand::joint_map::{
@@ -94,15 +95,7 @@ fn fitted_maps_put_the_landmarks_on_the_joints_of_unseen_poses() {
         // The committed map is the fit's.
         let text = joint_map_toml(&mixes, &registration, 40, &map_header(layout));
         let path = root.join(format!("bench/mocap/webxr-{}.toml", layout.name()));
-        if std::env::var_os("CREASE_WRITE_MAPS").is_some() {
-            std::fs::write(&path, &text).unwrap();
-        }
-        let committed = std::fs::read_to_string(&path).unwrap_or_default();
-        assert!(
-            committed == text,
-            "{} is not what the fit writes (CREASE_WRITE_MAPS=1 cargo test -p crease-hand --test all joint_map:: rewrites it); the fit:\n{text}",
-            path.display()
-        );
+        assert_committed(&path, &text, "joint_map::");
 
         // The left hand on the model mirrored across x (issue 38: room `both-hands`): WebXR's
         // joints have no side, and a tracked left hand is the mirror image of a right one, so
@@ -120,15 +113,7 @@ fn fitted_maps_put_the_landmarks_on_the_joints_of_unseen_poses() {
             let points: Vec<&str> = points.iter().map(String::as_str).collect();
             let text = joint_map_toml(&left, &points, 40, &left_map_header());
             let path = root.join("bench/mocap/webxr-back-left.toml");
-            if std::env::var_os("CREASE_WRITE_MAPS").is_some() {
-                std::fs::write(&path, &text).unwrap();
-            }
-            let committed = std::fs::read_to_string(&path).unwrap_or_default();
-            assert!(
-                committed == text,
-                "{} is not what the fit writes (CREASE_WRITE_MAPS=1 rewrites it); the fit:\n{text}",
-                path.display()
-            );
+            assert_committed(&path, &text, "joint_map::");
         }
     }
 }

@@ -67,8 +67,6 @@ pub fn token_sha256(token: &str) -> [u8; 32] {
     sha2::Sha256::digest(token.as_bytes()).into()
 }
 
-/// Compares without an early exit, so the time taken does not tell how much of a guessed token
-/// was right.
 /// Whether `presented` is `expected` (the admin token), compared by their SHA-256 digests in
 /// constant time: a string `==` returns at the first byte that differs, which a client can
 /// time to guess a token byte by byte.
@@ -76,6 +74,8 @@ pub(crate) fn same_token(presented: &str, expected: &str) -> bool {
     constant_time_eq(&token_sha256(presented), &token_sha256(expected))
 }
 
+/// Compares without an early exit, so the time taken does not tell how much of a guessed token
+/// was right.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
